@@ -1,0 +1,125 @@
+"""The hopper wall as pure functions of ``(r, z)``: signed distance, normal, arc length.
+
+The wall is a rigid solid occupying ``{z >= 0, r >= r_wall(z)}``, with
+``r_wall(z) = R0 + z tan(theta)`` in the cone (``0 <= z <= h_c``) and ``R`` in the bin.  Its
+boundary is the polyline lip ``(R_far, 0) -> (R0, 0) -> (R, h_c) -> (R, z_far)``: the underside
+of the hopper (horizontal, at the outlet plane), the cone wall and the bin wall.  Below ``z = 0``
+lies the open free-fall zone.  Distances are exact (distance to the nearest segment).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .config import HopperGeometry
+
+
+def wall_polyline(geom: HopperGeometry, r_far: float, z_far: float) -> np.ndarray:
+    """Vertices (k, 2) of the wall boundary from the far underside, round the lip, to the top."""
+    R, R0, hc = geom.bin_radius, geom.outlet_radius, geom.cone_height
+    return np.array([[max(r_far, R), 0.0], [R0, 0.0], [R, hc], [R, max(z_far, hc)]])
+
+
+def _nearest_on_polyline(r, z, vertices):
+    """Nearest point (pr, pz) on the polyline and the index of its segment, vectorised."""
+    r = np.asarray(r, dtype=float)
+    z = np.asarray(z, dtype=float)
+    best_d2 = np.full(np.broadcast(r, z).shape, np.inf)
+    best_r = np.zeros_like(best_d2)
+    best_z = np.zeros_like(best_d2)
+    best_seg = np.zeros(best_d2.shape, dtype=int)
+    for k in range(len(vertices) - 1):
+        a, b = vertices[k], vertices[k + 1]
+        ab = b - a
+        t = ((r - a[0]) * ab[0] + (z - a[1]) * ab[1]) / (ab @ ab)
+        t = np.clip(t, 0.0, 1.0)
+        pr, pz = a[0] + t * ab[0], a[1] + t * ab[1]
+        d2 = (r - pr) ** 2 + (z - pz) ** 2
+        closer = d2 < best_d2
+        best_d2 = np.where(closer, d2, best_d2)
+        best_r = np.where(closer, pr, best_r)
+        best_z = np.where(closer, pz, best_z)
+        best_seg = np.where(closer, k, best_seg)
+    return best_r, best_z, best_seg
+
+
+def wall_radius(z, geom: HopperGeometry):
+    """Radius of the wall at height ``z >= 0`` (m)."""
+    z = np.asarray(z, dtype=float)
+    return np.minimum(geom.outlet_radius + z * np.tan(geom.half_angle), geom.bin_radius)
+
+
+def in_solid(r, z, geom: HopperGeometry):
+    """True where ``(r, z)`` lies inside the wall body."""
+    r = np.asarray(r, dtype=float)
+    z = np.asarray(z, dtype=float)
+    return (z >= 0.0) & (r >= wall_radius(np.maximum(z, 0.0), geom))
+
+
+def signed_distance(r, z, geom: HopperGeometry, r_far: float = 1e3, z_far: float = 1e3):
+    """Signed distance to the wall (m): positive in the open region, negative inside the wall."""
+    vertices = wall_polyline(geom, r_far, z_far)
+    pr, pz, _ = _nearest_on_polyline(r, z, vertices)
+    d = np.hypot(np.asarray(r, dtype=float) - pr, np.asarray(z, dtype=float) - pz)
+    return np.where(in_solid(r, z, geom), -d, d)
+
+
+def wall_normal(r, z, geom: HopperGeometry, r_far: float = 1e3, z_far: float = 1e3):
+    """Unit normal pointing from the open region into the wall, at the nearest wall point.
+
+    Returns ``(n_r, n_z)``; for points on a segment's interior this is the segment's normal; at the
+    lip it is the direction from the point to the lip (exact gradient of the distance).
+    """
+    vertices = wall_polyline(geom, r_far, z_far)
+    r = np.asarray(r, dtype=float)
+    z = np.asarray(z, dtype=float)
+    pr, pz, seg = _nearest_on_polyline(r, z, vertices)
+    seg_dir = vertices[1:] - vertices[:-1]
+    seg_dir = seg_dir / np.linalg.norm(seg_dir, axis=1)[:, None]
+    # a normal of each segment, then oriented into the solid by a probe point
+    normals = np.stack([seg_dir[:, 1], -seg_dir[:, 0]], axis=1)
+    # orient every segment normal into the solid: probe a point a little along it from the middle
+    mid = 0.5 * (vertices[1:] + vertices[:-1])
+    probe = mid + 1e-9 * normals
+    flip = ~in_solid(probe[:, 0], probe[:, 1], geom)
+    normals[flip] *= -1.0
+    nr, nz = normals[seg, 0], normals[seg, 1]
+    dr, dz = pr - r, pz - z
+    dist = np.hypot(dr, dz)
+    at_vertex = np.isclose(pr, vertices[seg, 0]) & np.isclose(pz, vertices[seg, 1]) | \
+        np.isclose(pr, vertices[seg + 1, 0]) & np.isclose(pz, vertices[seg + 1, 1])
+    use_direction = at_vertex & (dist > 1e-12)
+    sign = np.where(in_solid(r, z, geom), -1.0, 1.0)
+    safe = np.where(dist > 0, dist, 1.0)
+    nr = np.where(use_direction, sign * dr / safe, nr)
+    nz = np.where(use_direction, sign * dz / safe, nz)
+    return nr, nz
+
+
+def arc_length(z, geom: HopperGeometry):
+    """Arc length ``s`` (m) along the wall from the outlet lip up to the wall point at height ``z``."""
+    z = np.asarray(z, dtype=float)
+    hc = geom.cone_height
+    s_cone = np.minimum(z, hc) / np.cos(geom.half_angle)
+    return s_cone + np.maximum(z - hc, 0.0)
+
+
+def wall_point(s, geom: HopperGeometry):
+    """The wall point ``(r, z)`` at arc length ``s`` from the lip and the normal into the wall.
+
+    The normal ``(n_r, n_z)`` points from the material into the wall, so ``p_n = -n.sigma.n``.
+    """
+    s = np.asarray(s, dtype=float)
+    hc = geom.cone_height
+    s_t = hc / np.cos(geom.half_angle)
+    in_cone = s <= s_t
+    z = np.where(in_cone, s * np.cos(geom.half_angle), hc + (s - s_t))
+    r = wall_radius(z, geom)
+    nr = np.where(in_cone, np.cos(geom.half_angle), 1.0)
+    nz = np.where(in_cone, -np.sin(geom.half_angle), 0.0)
+    return r, z, nr, nz
+
+
+def transition_arc_length(geom: HopperGeometry) -> float:
+    """Arc length of the cone-cylinder transition from the outlet lip (m)."""
+    return geom.cone_height / np.cos(geom.half_angle)

@@ -1,0 +1,260 @@
+"""HopperModel: the state of the Eulerian hopper and one explicit time step (method.md, sec. 3).
+
+A step is an operator split:
+
+1. material step on the fixed grid's nodes: lumped mass ``m = sum rho alpha kappa V / 4``,
+   ``m dv/dt = -f_int(alpha sigma) + f_hourglass + m g``, wall contact, axis and outlet plate;
+   the cell strain rate ``D`` and spin drive a Jaumann stress rotation and the Mohr-Coulomb
+   update (elastic predictor + return mapping);
+2. transport, sub-cycled: the face velocities of the material steps are averaged and the cell
+   fields ``alpha``, ``alpha sigma``, ``alpha eps_p``, ``alpha layer`` are carried
+   conservatively (van Leer); nodal momentum is carried on the dual grid with the same mass
+   fluxes.  Transport runs when the material has moved ``transport_cfl`` of a cell.
+
+The model only steps; :mod:`fipy_hopper.simulation` owns the run (stages, stop rules, output).
+Masses are reported for the full 3D hopper (``2 pi`` times the per-radian values).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import momentum
+from .config import HopperConfig
+from .mesh import HopperGrid, build_grid
+
+GRAVITY = 9.81  # m/s^2
+
+TRANSPORTED = ("alpha", "s_rr", "s_zz", "s_tt", "s_rz", "eps_p", "layer")
+
+
+class InstabilityError(RuntimeError):
+    """The explicit solution went unstable (NaN or runaway velocity)."""
+
+
+@dataclass
+class State:
+    """Everything that evolves (enough to checkpoint and resume)."""
+
+    t: float
+    step: int
+    stage: str                      # "filling" or "discharge"
+    v: np.ndarray                   # (2, nz+1, nr+1) nodal velocity, m/s
+    alpha: np.ndarray               # (nz, nr) material fraction of the open cell volume
+    sigma: np.ndarray               # (nz, nr, 4) material stress (rr, zz, tt, rz), Pa
+    eps_p: np.ndarray               # (nz, nr) accumulated equivalent plastic strain
+    layer: np.ndarray               # (nz, nr) layer tracer (layer index, 0 = bottom)
+    discharged: float = 0.0         # kg through the outlet plane (3D)
+    lost: float = 0.0               # kg through the bottom of the free-fall zone (3D)
+    flux_time: float = 0.0          # time accumulated for the next transport
+    face_flux_sum: np.ndarray = None  # (n_faces,) integrated normal velocity * dt
+    plate_closed: bool = True
+    last_outlet_mass: float = 0.0   # kg that crossed the outlet in the last transport
+    last_transport_dt: float = 0.0
+
+    def copy(self) -> "State":
+        return State(**{k: (v.copy() if isinstance(v, np.ndarray) else v)
+                        for k, v in self.__dict__.items()})
+
+
+class HopperModel:
+    """The hopper on its grid, with material, wall and numerics from a :class:`HopperConfig`."""
+
+    def __init__(self, cfg: HopperConfig, grid: HopperGrid | None = None):
+        from .material import update as material_update
+        from .transport import Transport
+
+        self.cfg = cfg
+        self.grid = grid if grid is not None else build_grid(cfg)
+        self.material = cfg.material.mohr_coulomb()
+        self._material_update = material_update
+        g = self.grid
+        self.rho = cfg.material.density
+        self.c_p = cfg.material.p_wave_speed
+        self.dt = cfg.numerics.dt_safety * g.h / self.c_p
+        self.mu_wall = cfg.wall.friction_coefficient
+        self.r_c = g.r_cells
+        self.open_volume = g.kappa * g.cell_volume          # (nz, nr) m^3/rad
+        self.transport = Transport(g.mesh, g.kappa.ravel(), g.face_aperture,
+                                   g.outflow_faces, TRANSPORTED)
+        normals = np.asarray(g.mesh.faceNormals)
+        nzf = g.n_zfaces
+        self.face_sign = np.concatenate([normals[1, :nzf], normals[0, nzf:]])
+        self.face_area = np.asarray(g.mesh._faceAreas) * g.face_aperture
+        # wall contact nodes: inside the wall or within half a cell of it
+        self.contact_nodes = g.node_distance < 0.5 * g.h
+        RN, ZN = np.meshgrid(g.r_nodes, g.z_nodes)
+        self.plate_nodes = (np.abs(ZN) < 1e-12) & (RN <= cfg.hopper.outlet_radius + 1e-12)
+        self.hopper_cells = (g.z_cells[:, None] > 0.0) & np.ones((1, g.nr), bool)
+        self.hourglass_base = (cfg.numerics.hourglass_coefficient * self.rho * self.c_p
+                               * self.open_volume / g.h)
+        # mass-proportional damping during filling only: critical for the column's lowest mode
+        column = max(cfg.hopper.fill_level, g.h)
+        self.fill_damping = math.pi * self.c_p / (2.0 * column)
+        self._mass = None
+
+    # ------------------------------------------------------------------ state
+    def initial_state(self, n_layers: int = 8) -> State:
+        """The hopper filled to ``fill_level`` at rest, stress free, outlet plate closed."""
+        g, geom = self.grid, self.cfg.hopper
+        z_lo, z_hi = g.z_nodes[:-1], g.z_nodes[1:]
+        frac = np.clip((geom.fill_level - z_lo) / (z_hi - z_lo), 0.0, 1.0)
+        frac = np.where(z_lo >= 0.0, frac, 0.0)
+        alpha = np.repeat(frac[:, None], g.nr, axis=1) * (g.kappa > 0)
+        layer_index = np.floor(np.clip(g.z_cells / geom.fill_level, 0, 0.999999) * n_layers)
+        layer = np.repeat(layer_index[:, None], g.nr, axis=1)
+        return State(t=0.0, step=0, stage="filling",
+                     v=np.zeros((2, g.nz + 1, g.nr + 1)), alpha=alpha,
+                     sigma=np.zeros((g.nz, g.nr, 4)), eps_p=np.zeros((g.nz, g.nr)),
+                     layer=layer, face_flux_sum=np.zeros(len(g.face_aperture)))
+
+    def node_mass(self, state: State) -> np.ndarray:
+        if self._mass is None:
+            self._mass = momentum.node_mass(self.rho, state.alpha, self.open_volume)
+        return self._mass
+
+    def mass_in_hopper(self, state: State) -> float:
+        """Mass above the outlet plane (kg, 3D)."""
+        return 2 * math.pi * self.rho * float(np.sum((state.alpha * self.open_volume)
+                                                        [self.hopper_cells]))
+
+    def total_mass(self, state: State) -> float:
+        """Mass in the whole domain (kg, 3D)."""
+        return 2 * math.pi * self.rho * float(np.sum(state.alpha * self.open_volume))
+
+    def kinetic_energy(self, state: State) -> float:
+        """Kinetic energy of the nodal velocities (J, 3D)."""
+        m = self.node_mass(state)
+        return math.pi * float(np.sum(m * (state.v[0] ** 2 + state.v[1] ** 2)))
+
+    def gravity(self, state: State) -> float:
+        """Gravity (m/s^2, downward) at this time: ramped linearly during filling."""
+        ramp = self.cfg.numerics.gravity_ramp_time
+        if state.stage == "filling" and ramp > 0:
+            return GRAVITY * min(1.0, state.t / ramp)
+        return GRAVITY
+
+    def open_outlet(self, state: State) -> None:
+        """Remove the outlet plate: discharge starts."""
+        state.plate_closed = False
+        state.stage = "discharge"
+
+    # ------------------------------------------------------------------ step
+    def step(self, state: State) -> State:
+        """Advance ``state`` by one explicit step ``self.dt`` (in place) and return it."""
+        g, dt = self.grid, self.dt
+        alpha_min = self.cfg.numerics.alpha_min
+        m = self.node_mass(state)
+        mixture = state.alpha[..., None] * state.sigma
+        force = -momentum.internal_force(mixture, self.open_volume, self.r_c, g.h)
+        force += momentum.hourglass_force(state.v, self.hourglass_base * state.alpha)
+        force[1] -= m * self.gravity(state)
+        heavy = m > 1e-12 * self.rho * g.h ** 3
+        v = np.where(heavy[None], state.v + dt * force / np.where(heavy, m, 1.0)[None], 0.0)
+        if state.stage == "filling":
+            v *= 1.0 / (1.0 + self.fill_damping * dt)
+        momentum.apply_wall_contact(v, g.node_normal, self.contact_nodes, self.mu_wall)
+        if state.plate_closed:
+            plate_normal = np.array([0.0, -1.0])[:, None, None] * np.ones_like(v)
+            momentum.apply_wall_contact(v, plate_normal, self.plate_nodes, self.mu_wall)
+        v[0, :, 0] = 0.0
+        state.v = v
+
+        D, omega = momentum.strain_rate(v, self.r_c, g.h)
+        sigma = momentum.jaumann_rotate(state.sigma, omega, dt)
+        loaded = state.alpha >= alpha_min
+        sig_new, deps_p = self._material_update(sigma[loaded], D[loaded] * dt, self.material)
+        sigma[loaded] = sig_new
+        sigma[~loaded] = 0.0
+        state.sigma = sigma
+        state.eps_p[loaded] += _equivalent_strain(deps_p)
+
+        u_n = momentum.face_normal_velocity(v) * self.face_sign
+        state.face_flux_sum += u_n * dt
+        state.flux_time += dt
+        state.t += dt
+        state.step += 1
+        if self._transport_due(state, u_n):
+            self.transport_step(state)
+        return state
+
+    def _transport_due(self, state: State, u_n: np.ndarray) -> bool:
+        num = self.cfg.numerics
+        steps = round(state.flux_time / self.dt)
+        if steps >= num.max_transport_interval:
+            return True
+        speed = float(np.max(np.abs(u_n) * (self.face_area > 0))) if u_n.size else 0.0
+        return (speed + 1e-30) * (state.flux_time + self.dt) > num.transport_cfl * self.grid.h
+
+    def transport_step(self, state: State) -> None:
+        """Carry the cell fields and nodal momentum with the averaged face velocities."""
+        g = self.grid
+        if state.flux_time <= 0.0:
+            return
+        dt_T = state.flux_time
+        u_mean = state.face_flux_sum / dt_T
+        alpha = state.alpha
+        fields = {"alpha": alpha,
+                  "s_rr": alpha * state.sigma[..., 0], "s_zz": alpha * state.sigma[..., 1],
+                  "s_tt": alpha * state.sigma[..., 2], "s_rz": alpha * state.sigma[..., 3],
+                  "eps_p": alpha * state.eps_p, "layer": alpha * state.layer}
+        flat = {k: np.ascontiguousarray(f).ravel() for k, f in fields.items()}
+        new, face_flux = self.transport.step(flat, u_mean, dt_T)
+        shape = alpha.shape
+        new_alpha = new["alpha"].reshape(shape)
+        # overshoot above 1 (compaction) is moved to neighbours with room, conservatively
+        new_alpha_r, moved = self.transport.redistribute_overshoot(new_alpha.ravel())
+        scale = {k: None for k in TRANSPORTED}
+        del scale
+        alpha_flux = face_flux["alpha"] + moved.get("face_flux", 0.0) \
+            if isinstance(moved, dict) else face_flux["alpha"]
+        new_alpha = new_alpha_r.reshape(shape)
+        carried = {}
+        for k in TRANSPORTED[1:]:
+            carried[k] = self.transport.apply_redistribution(new[k], moved).reshape(shape) \
+                if hasattr(self.transport, "apply_redistribution") else new[k].reshape(shape)
+        safe = np.where(new_alpha >= 1e-12, new_alpha, 1.0)
+        present = new_alpha >= 1e-12
+        sigma = np.stack([carried[k] for k in ("s_rr", "s_zz", "s_tt", "s_rz")], axis=-1)
+        sigma = np.where(present[..., None], sigma / safe[..., None], 0.0)
+        sigma[new_alpha < self.cfg.numerics.alpha_min] = 0.0
+
+        # outlet and outflow bookkeeping with the same face values
+        nzf = g.n_zfaces
+        oriented = alpha_flux * self.face_sign          # transfer along +z / +r
+        through_outlet = -float(np.sum(oriented[g.outlet_faces]))
+        through_bottom = -float(np.sum(oriented[g.outflow_faces]))
+        to_kg = 2 * math.pi * self.rho
+        state.last_outlet_mass = to_kg * through_outlet
+        state.discharged += to_kg * through_outlet
+        state.lost += to_kg * through_bottom
+        state.last_transport_dt = dt_T
+
+        # momentum on the dual grid
+        mass_old = self.node_mass(state)
+        mass_new = momentum.node_mass(self.rho, new_alpha, self.open_volume)
+        flux_z = oriented[:nzf].reshape(g.nz + 1, g.nr)
+        flux_r = oriented[nzf:].reshape(g.nz, g.nr + 1)
+        state.v = momentum.dual_momentum_transport(state.v, mass_old, mass_new, flux_z, flux_r,
+                                                   self.rho)
+        state.alpha = new_alpha
+        state.sigma = sigma
+        state.eps_p = np.where(present, carried["eps_p"] / safe, 0.0)
+        state.layer = np.where(present, carried["layer"] / safe, 0.0)
+        self._mass = mass_new
+        state.face_flux_sum[:] = 0.0
+        state.flux_time = 0.0
+        if not np.all(np.isfinite(state.v)) or not np.all(np.isfinite(state.sigma)):
+            bad = np.argwhere(~np.isfinite(state.sigma).all(axis=-1))
+            raise InstabilityError(f"non-finite field at step {state.step}, t = {state.t:.6g} s,"
+                                   f" cell(s) {bad[:3].tolist()}")
+
+
+def _equivalent_strain(deps_p: np.ndarray) -> np.ndarray:
+    """Equivalent plastic strain increment ``sqrt(2/3 e:e)`` of tensor components (N, 4)."""
+    e = deps_p
+    sq = e[:, 0] ** 2 + e[:, 1] ** 2 + e[:, 2] ** 2 + 2.0 * e[:, 3] ** 2
+    return np.sqrt(2.0 / 3.0 * sq)

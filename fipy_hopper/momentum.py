@@ -1,0 +1,189 @@
+"""Axisymmetric Q1 Galerkin momentum on the grid's nodes (explicit, lumped mass).
+
+Cells are ``(nz, nr)`` arrays, nodes ``(nz + 1, nr + 1)`` arrays; velocities are
+``(2, nz + 1, nr + 1)`` with components ``(v_r, v_z)`` in m/s.  Every integral is per radian
+(the ``2 pi`` of the axisymmetric volume is dropped everywhere, as in FiPy's cylindrical
+grids), so nodal masses are kg/rad and forces N/rad.
+
+One-point (cell-centre) quadrature of the bilinear element with nodes ``SW, SE, NE, NW``:
+``dN/dr = (-1, 1, 1, -1) / (2 h)``, ``dN/dz = (-1, -1, 1, 1) / (2 h)``, ``N = 1/4``.  The
+internal force of node ``a`` is ``f_a = sum_c w_c [dN_a/dr s_rr + dN_a/dz s_rz + s_tt / (4 r_c),
+dN_a/dr s_rz + dN_a/dz s_zz]`` with ``w_c = kappa_c r_c h^2`` the open cell volume and
+``s = alpha sigma`` the mixture stress.  The discrete divergence of this element,
+``D_rr + D_tt + D_zz``, equals the finite-volume divergence of the face velocities that the
+transport uses (each face's normal velocity is the mean of its two nodes), so the volumetric
+strain of the stress update and the compression of ``alpha`` use one and the same divergence.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: node offsets (dj, di) of SW, SE, NE, NW and the shape-function gradient signs
+CORNERS = ((0, 0), (0, 1), (1, 1), (1, 0))
+SIGN_R = np.array([-1.0, 1.0, 1.0, -1.0])
+SIGN_Z = np.array([-1.0, -1.0, 1.0, 1.0])
+HOURGLASS = np.array([1.0, -1.0, 1.0, -1.0])
+
+
+def scatter_to_nodes(cell_values: np.ndarray) -> np.ndarray:
+    """Sum ``cell_values[..., c] / 4`` onto the four nodes of each cell (lumping)."""
+    nz, nr = cell_values.shape[-2:]
+    out = np.zeros(cell_values.shape[:-2] + (nz + 1, nr + 1))
+    q = 0.25 * cell_values
+    out[..., :-1, :-1] += q
+    out[..., :-1, 1:] += q
+    out[..., 1:, :-1] += q
+    out[..., 1:, 1:] += q
+    return out
+
+
+def node_mass(rho: float, alpha: np.ndarray, open_volume: np.ndarray) -> np.ndarray:
+    """Lumped nodal mass ``m_a = sum_c rho alpha_c w_c / 4`` (kg/rad)."""
+    return scatter_to_nodes(rho * alpha * open_volume)
+
+
+def internal_force(stress: np.ndarray, open_volume: np.ndarray, r_c: np.ndarray, h: float):
+    """Nodal internal force ``(2, nz+1, nr+1)`` of the mixture stress ``stress`` (nz, nr, 4).
+
+    ``stress`` is ``alpha sigma`` (Pa), tension positive; ``r_c`` the cell-centre radii (nr,).
+    """
+    s_rr, s_zz, s_tt, s_rz = (stress[..., k] * open_volume for k in range(4))
+    g = 1.0 / (2.0 * h)
+    hoop = s_tt / (4.0 * r_c[None, :])
+    nz, nr = open_volume.shape
+    f = np.zeros((2, nz + 1, nr + 1))
+    for (dj, di), sr, sz in zip(CORNERS, SIGN_R, SIGN_Z):
+        f[0, dj:dj + nz, di:di + nr] += g * (sr * s_rr + sz * s_rz) + hoop
+        f[1, dj:dj + nz, di:di + nr] += g * (sr * s_rz + sz * s_zz)
+    return f
+
+
+def hourglass_force(v: np.ndarray, coefficient: np.ndarray) -> np.ndarray:
+    """Viscous hourglass force: ``f_a = -C_c Gamma_a (Gamma . v_c)``, ``Gamma = (1,-1,1,-1)``.
+
+    ``coefficient`` (nz, nr) in kg/(s rad), typically ``kappa_hg rho c_p alpha w_c / h``.  It
+    acts only on the checkerboard mode of each cell (zero for rigid motion and linear fields).
+    """
+    nz, nr = coefficient.shape
+    mode = sum(gam * v[:, dj:dj + nz, di:di + nr] for (dj, di), gam in zip(CORNERS, HOURGLASS))
+    f = np.zeros_like(v)
+    for (dj, di), gam in zip(CORNERS, HOURGLASS):
+        f[:, dj:dj + nz, di:di + nr] -= coefficient * gam * mode
+    return f
+
+
+def strain_rate(v: np.ndarray, r_c: np.ndarray, h: float):
+    """Cell strain rate ``D`` (nz, nr, 4) as (rr, zz, tt, rz) tensor components, and spin.
+
+    ``D_rr = dv_r/dr``, ``D_zz = dv_z/dz``, ``D_tt = v_r / r`` (cell mean of ``v_r``),
+    ``D_rz = (dv_r/dz + dv_z/dr)/2``; spin ``omega = (dv_r/dz - dv_z/dr)/2`` (1/s).
+    """
+    vr_sw, vr_se, vr_ne, vr_nw = (v[0, dj:dj + v.shape[1] - 1, di:di + v.shape[2] - 1]
+                                  for dj, di in CORNERS)
+    vz_sw, vz_se, vz_ne, vz_nw = (v[1, dj:dj + v.shape[1] - 1, di:di + v.shape[2] - 1]
+                                  for dj, di in CORNERS)
+    g = 1.0 / (2.0 * h)
+    dvr_dr = g * (vr_se + vr_ne - vr_sw - vr_nw)
+    dvr_dz = g * (vr_nw + vr_ne - vr_sw - vr_se)
+    dvz_dr = g * (vz_se + vz_ne - vz_sw - vz_nw)
+    dvz_dz = g * (vz_nw + vz_ne - vz_sw - vz_se)
+    hoop = 0.25 * (vr_sw + vr_se + vr_ne + vr_nw) / r_c[None, :]
+    D = np.stack([dvr_dr, dvz_dz, hoop, 0.5 * (dvr_dz + dvz_dr)], axis=-1)
+    return D, 0.5 * (dvr_dz - dvz_dr)
+
+
+def jaumann_rotate(sigma: np.ndarray, omega: np.ndarray, dt: float) -> np.ndarray:
+    """Objective (Jaumann) rotation of the stress: ``sigma += (W sigma - sigma W) dt``.
+
+    With the in-plane spin ``omega = W_rz``: ``d s_rr = 2 omega s_rz dt``,
+    ``d s_zz = -2 omega s_rz dt``, ``d s_rz = omega (s_zz - s_rr) dt``; ``s_tt`` is unchanged.
+    """
+    out = sigma.copy()
+    w = omega * dt
+    out[..., 0] += 2.0 * w * sigma[..., 3]
+    out[..., 1] -= 2.0 * w * sigma[..., 3]
+    out[..., 3] += w * (sigma[..., 1] - sigma[..., 0])
+    return out
+
+
+def apply_wall_contact(v: np.ndarray, normal: np.ndarray, mask: np.ndarray, mu: float):
+    """Impulse Coulomb contact at the ``mask`` nodes against a rigid wall, in place.
+
+    ``normal`` (2, ...) points into the wall.  If ``v_n = v.n > 0`` the normal part is removed
+    and the tangential speed reduced by ``mu v_n`` (not below zero): the discrete form of
+    ``|impulse_t| <= mu impulse_n``.  Nodes moving away from the wall are left free.
+    """
+    vn = v[0] * normal[0] + v[1] * normal[1]
+    pressing = mask & (vn > 0.0)
+    vn_p = np.where(pressing, vn, 0.0)
+    vr = v[0] - vn_p * normal[0]
+    vz = v[1] - vn_p * normal[1]
+    vt_r = vr - (vr * normal[0] + vz * normal[1]) * normal[0]
+    vt_z = vz - (vr * normal[0] + vz * normal[1]) * normal[1]
+    speed_t = np.hypot(vt_r, vt_z)
+    scale = np.where(speed_t > 0.0, np.maximum(0.0, 1.0 - mu * vn_p / np.where(
+        speed_t > 0, speed_t, 1.0)), 0.0)
+    vn_r = vr - vt_r
+    vn_z = vz - vt_z
+    v[0] = np.where(pressing, vn_r + scale * vt_r, v[0])
+    v[1] = np.where(pressing, vn_z + scale * vt_z, v[1])
+    return v
+
+
+def face_normal_velocity(v: np.ndarray) -> np.ndarray:
+    """Normal velocity of every face in FiPy order: z-faces ``(nz+1, nr)`` then r-faces.
+
+    A face's velocity is the mean of its two end nodes (the Q1 edge average); z-faces carry
+    ``v_z`` (normal +z), r-faces ``v_r`` (normal +r).  Exterior faces of FiPy point outward: the
+    caller's sign convention (``mesh.faceNormals``) is applied by :func:`oriented`.
+    """
+    vz_faces = 0.5 * (v[1, :, :-1] + v[1, :, 1:])
+    vr_faces = 0.5 * (v[0, :-1, :] + v[0, 1:, :])
+    return np.concatenate([vz_faces.ravel(), vr_faces.ravel()])
+
+
+def dual_momentum_transport(v, mass_old, mass_new, flux_z, flux_r, rho, bottom_outflow=True):
+    """Conservative upwind transport of nodal momentum on the dual grid.
+
+    ``flux_z`` (nz+1, nr) and ``flux_r`` (nz, nr+1) are the time-integrated primal transfers of
+    ``alpha`` open volume across z-faces (+z) and r-faces (+r) (m^3/rad).  A primal transfer
+    ``F`` from cell c1 to c2 changes the lumped masses of the nodes exactly as the transfers
+    ``F/4`` across the two dual faces through the centres of c1 and c2, so the dual flux through
+    the centre of a cell, between its two nodes of one column, is ``(F_bottom + F_top)/4``
+    (summed over the two cells beside the dual face).  The bottom boundary's transfer is
+    ``F/2`` out of the bottom node row.  Momentum moves with the donor node's velocity; the new
+    velocity is ``P_new / m_new`` where ``m_new`` is the lumped mass of the new cell fields.
+    """
+    rho_fz = rho * flux_z
+    rho_fr = rho * flux_r
+    nz1, nr = rho_fz.shape
+    nz = nz1 - 1
+    # dual z-fluxes between node rows k and k+1 at node column a: (nz, nr+1)
+    per_cell = 0.25 * (rho_fz[:-1] + rho_fz[1:])              # (nz, nr)
+    gz = np.zeros((nz, nr + 1))
+    gz[:, :-1] += per_cell
+    gz[:, 1:] += per_cell
+    # dual r-fluxes between node columns a and a+1 at node row k: (nz+1, nr)
+    per_cell_r = 0.25 * (rho_fr[:, :-1] + rho_fr[:, 1:])      # (nz, nr)
+    gr = np.zeros((nz + 1, nr))
+    gr[:-1] += per_cell_r
+    gr[1:] += per_cell_r
+    P = mass_old[None] * v
+    # z transfers: positive gz moves momentum from row k to k+1 with the donor's velocity
+    donor_z = np.where(gz > 0, v[:, :-1, :], v[:, 1:, :])
+    dz = gz[None] * donor_z
+    P[:, :-1, :] -= dz
+    P[:, 1:, :] += dz
+    donor_r = np.where(gr > 0, v[:, :, :-1], v[:, :, 1:])
+    dr = gr[None] * donor_r
+    P[:, :, :-1] -= dr
+    P[:, :, 1:] += dr
+    if bottom_outflow:
+        out = 0.5 * rho_fz[0]                                   # (nr,), negative = leaving
+        node_out = np.zeros(nr + 1)
+        node_out[:-1] += out
+        node_out[1:] += out
+        P[:, 0, :] += node_out[None] * v[:, 0, :]
+    safe = np.where(mass_new > 0, mass_new, 1.0)
+    return np.where(mass_new[None] > 0, P / safe[None], 0.0)

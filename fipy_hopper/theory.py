@@ -1,0 +1,1068 @@
+"""Closed-form theory that simulations of silo and hopper discharge are compared with.
+
+Every function here is pure and vectorised: array arguments broadcast against each other
+with numpy's rules, and a call with scalar arguments returns a numpy scalar.  Units are SI
+(kg, m, s, Pa, kg/s).  **All angles at this public interface are in degrees.**  Friction
+*coefficients* (``mu``, ``mu_h``) are plain numbers (tan of a friction angle), not angles.
+
+Hopper half-angles (``theta`` in the flow-rate literature, ``beta`` in EN 1991-4) are measured
+from the vertical.  Pressures are positive in compression.
+
+What is verified
+----------------
+Each docstring carries the tag the project's physics reference (``shared/design/theory.md``,
+which this module never reads) gives the formula:
+
+* **[V]** checked against the source that is named;
+* **[D]** re-derived (slice equilibrium, a Mohr circle, or a numerical check);
+* **[M]** quoted from memory and not verified against a source; treat as provisional.
+
+Contents
+--------
+Discharge rate
+    :func:`beverloo_rate`, :func:`rose_tanaka_factor`, :func:`johanson_rate`,
+    :func:`brown_coefficient`, :func:`brown_rate`.
+Flow mode
+    :func:`jenike_critical_half_angle`, :func:`jenike_flow_mode`.
+Vertical-walled section (Janssen)
+    :func:`janssen_z0`, :func:`janssen_vertical_stress`, :func:`janssen_wall_pressure`,
+    :func:`janssen_wall_shear`, :func:`janssen_asymptotic_wall_pressure`.
+Lateral pressure ratios
+    :func:`k_jaky`, :func:`k_en1991`, :func:`k_rankine_active`, :func:`k_walker_wall`.
+Hopper slice method (Walker 1966 / Walters 1973 with distribution factor D = 1)
+    :func:`hopper_n`, :func:`hopper_vertical_stress`, :func:`walker_discharge_ratio`,
+    :func:`walker_hopper_wall_pressure`, :func:`walker_switch_pressure`.
+EN 1991-4:2006 (Eurocode 1, part 4)
+    :func:`en1991_filling_vertical_walls`, :func:`en1991_h0`, :func:`en1991_intermediate_n`,
+    :func:`en1991_intermediate_zV`, :func:`en1991_filling_intermediate`,
+    :func:`en1991_discharge_factors`, :func:`en1991_discharge_vertical_walls`,
+    :func:`en1991_hopper_class`, :func:`en1991_steep_filling_F`, :func:`en1991_steep_filling_n`,
+    :func:`en1991_steep_discharge_F`, :func:`en1991_steep_discharge_n`,
+    :func:`en1991_shallow_mu_heff`, :func:`en1991_shallow_F`, :func:`en1991_shallow_n`,
+    :func:`en1991_hopper_vertical_stress`, :func:`en1991_hopper_pressures`.
+
+References
+----------
+* W.A. Beverloo, H.A. Leniger, J. van de Velde (1961), Chem. Eng. Sci. 15:260-269.
+* C. Mankoc et al. (2007), Granular Matter 9:407, doi:10.1007/s10035-007-0062-2.
+* H.E. Rose, T. Tanaka (1956), as used by R.M. Nedderman et al. (1982), Chem. Eng. Sci. 37:1597.
+* J.R. Johanson (1965), mass-flow hopper discharge.
+* R.L. Brown (1961); R.L. Brown, J.C. Richards (1970), *Principles of Powder Mechanics*.
+* S.M. Leung et al. (2019), J. Pharm. Sci. 108:464, eqs. 5-6 (closed fit of Jenike's chart).
+* H.A. Janssen (1895); EN 1991-4:2006 eq. (5.75) for z0 = A/(U K mu).
+* J. Jaky (1944) for K0 = 1 - sin(phi).
+* D.M. Walker (1966), Chem. Eng. Sci. 21:975-997; J.K. Walters (1973).
+* EN 1991-4:2006, Eurocode 1: Actions on structures, Part 4: Silos and tanks; worked example
+  in the Dlubal knowledge base (cement silo).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+__all__ = [
+    "G",
+    "beverloo_rate",
+    "rose_tanaka_factor",
+    "johanson_rate",
+    "brown_coefficient",
+    "brown_rate",
+    "jenike_critical_half_angle",
+    "jenike_flow_mode",
+    "janssen_z0",
+    "janssen_vertical_stress",
+    "janssen_wall_pressure",
+    "janssen_wall_shear",
+    "janssen_asymptotic_wall_pressure",
+    "k_jaky",
+    "k_en1991",
+    "k_rankine_active",
+    "k_walker_wall",
+    "hopper_n",
+    "hopper_vertical_stress",
+    "walker_discharge_ratio",
+    "walker_hopper_wall_pressure",
+    "SwitchPressure",
+    "walker_switch_pressure",
+    "WallPressures",
+    "HopperPressures",
+    "EN1991_B",
+    "en1991_filling_vertical_walls",
+    "en1991_h0",
+    "en1991_intermediate_n",
+    "en1991_intermediate_zV",
+    "en1991_filling_intermediate",
+    "en1991_discharge_factors",
+    "en1991_discharge_vertical_walls",
+    "en1991_hopper_class",
+    "en1991_steep_filling_F",
+    "en1991_steep_filling_n",
+    "en1991_steep_discharge_F",
+    "en1991_steep_discharge_n",
+    "en1991_shallow_mu_heff",
+    "en1991_shallow_F",
+    "en1991_shallow_n",
+    "en1991_hopper_vertical_stress",
+    "en1991_hopper_pressures",
+]
+
+#: Standard gravity used as the default ``g`` (m/s^2).
+G = 9.81
+
+#: EN 1991-4 hopper wall-friction reduction constant ``b`` (used in F_f and F_s).
+EN1991_B = 0.2
+
+# Smallest effective angle of internal friction for which the Jenike fit is defined:
+# arccos((1 - sin d) / (2 sin d)) needs sin d >= 1/3.
+_JENIKE_DELTA_MIN_DEG = float(np.degrees(np.arcsin(1.0 / 3.0)))
+
+
+# ---------------------------------------------------------------------------------------
+# helpers: conversion and validation
+# ---------------------------------------------------------------------------------------
+
+
+def _arr(value) -> np.ndarray:
+    return np.asarray(value, dtype=float)
+
+
+def _out(value):
+    """Numpy scalar for 0-d results, the array otherwise."""
+    return np.asarray(value)[()]
+
+
+def _fmt(bad: np.ndarray) -> str:
+    bad = np.atleast_1d(bad)
+    if bad.size == 1:
+        return f"{bad[0]:g}"
+    return f"{bad.size} values, e.g. {bad[0]:g}"
+
+
+def _check(name: str, value, lo=None, hi=None, lo_open=False, hi_open=False, unit="") -> np.ndarray:
+    """Return ``value`` as a float array after checking it lies in [lo, hi] (or open ends).
+
+    NaN passes unchecked (it propagates to the result).  The error message names the
+    parameter, the allowed range and the offending value.
+    """
+    a = _arr(value)
+    bad = np.zeros(a.shape, dtype=bool)
+    if lo is not None:
+        bad |= (a <= lo) if lo_open else (a < lo)
+    if hi is not None:
+        bad |= (a >= hi) if hi_open else (a > hi)
+    if np.any(bad):
+        lb = "(" if (lo_open or lo is None) else "["
+        rb = ")" if (hi_open or hi is None) else "]"
+        lo_s = "-inf" if lo is None else f"{lo:g}"
+        hi_s = "inf" if hi is None else f"{hi:g}"
+        raise ValueError(
+            f"{name} must lie in {lb}{lo_s}, {hi_s}{rb}{unit}; got {_fmt(a[bad])}{unit}"
+        )
+    return a
+
+
+def _positive(name, value, unit=""):
+    return _check(name, value, lo=0.0, lo_open=True, unit=unit)
+
+
+def _nonneg(name, value, unit=""):
+    return _check(name, value, lo=0.0, unit=unit)
+
+
+def _deg(name, value, lo, hi, lo_open=False, hi_open=False):
+    return np.radians(_check(name, value, lo, hi, lo_open, hi_open, unit=" deg"))
+
+
+def _ratio_over_expm1(a, log_x):
+    """``expm1(a*log_x)/a``, continuous through ``a = 0`` (where it is ``log_x``)."""
+    a, log_x = np.broadcast_arrays(_arr(a), _arr(log_x))
+    small = np.abs(a) < 1e-12
+    safe_a = np.where(small, 1.0, a)
+    with np.errstate(invalid="ignore", over="ignore"):
+        general = np.expm1(a * log_x) / safe_a
+    return np.where(small, log_x, general)
+
+
+def _label(mask_values: np.ndarray, labels):
+    """Choose string labels by integer code; a str for 0-d input, a str array otherwise."""
+    code = np.asarray(mask_values)
+    if code.ndim == 0:
+        return str(labels[int(code)])
+    return np.asarray(labels)[code]
+
+
+# ---------------------------------------------------------------------------------------
+# b. discharge rate
+# ---------------------------------------------------------------------------------------
+
+
+def beverloo_rate(rho_b, D0, C=0.58, k=1.5, d=0.0, g=G):
+    """Beverloo mass discharge rate (kg/s) through a circular orifice in a flat bottom.
+
+    ``W = C rho_b sqrt(g) (D0 - k d)^(5/2)``.
+
+    Parameters
+    ----------
+    rho_b : bulk density (kg/m^3), > 0.
+    D0 : orifice diameter (m), > 0.
+    C : discharge coefficient, > 0; default 0.58 (literature range about 0.55-0.65).
+    k : particle-size correction, >= 0; default 1.5 (range about 1.3-2.9).
+    d : particle diameter (m), >= 0.  The continuum model has no particle size, so its
+        comparison uses the default ``d = 0``; a fitted ``k d`` then reflects mesh size.
+    g : gravitational acceleration (m/s^2), > 0.
+
+    No angles are involved.
+
+    Source: Beverloo, Leniger & van de Velde (1961), Chem. Eng. Sci. 15:260-269.
+    Tag: form [V: as quoted by Mankoc et al. 2007]; default C and k [M, standard values].
+    Valid for a bed deeper than about 1.2 silo diameters and silo diameter larger than
+    2.5 D0 and D0 + 30 d (Nedderman, quoted by Mankoc et al. 2007) [V].
+
+    Raises ValueError if ``D0 <= k d`` (the correlation has no meaning there).
+    """
+    rho_b = _positive("rho_b", rho_b, " kg/m^3")
+    D0 = _positive("D0", D0, " m")
+    C = _positive("C", C)
+    k = _nonneg("k", k)
+    d = _nonneg("d", d, " m")
+    g = _positive("g", g, " m/s^2")
+    D_eff = D0 - k * d
+    if np.any(D_eff <= 0):
+        raise ValueError("D0 must exceed k*d (effective orifice D0 - k d is not positive)")
+    return _out(C * rho_b * np.sqrt(g) * D_eff**2.5)
+
+
+def rose_tanaka_factor(theta_deg, beta_deg=45.0):
+    """Rose-Tanaka hopper factor F multiplying the flat-bottom (Beverloo) rate.
+
+    ``F = (tan(theta) tan(beta))^(-0.35)`` for ``theta < 90 - beta``, otherwise ``F = 1``.
+
+    Parameters
+    ----------
+    theta_deg : hopper half-angle from the vertical, **degrees**, in (0, 90]
+        (90 is a flat bottom).
+    beta_deg : angle to the *horizontal* of the stagnant-zone boundary that the same
+        material forms in a flat-bottomed bin, **degrees**, in (0, 90); default 45.
+
+    Source: Rose & Tanaka (1956) as used by Nedderman et al. (1982), Chem. Eng. Sci. 37:1597.
+    Tag: [M] - the exponent -0.35, the switch at ``theta = 90 - beta`` and the definition of
+    beta are unverified.  [D]: the two branches join continuously at ``theta = 90 - beta``
+    (``tan(theta) tan(beta) = 1`` there).
+    """
+    th_d = _check("theta_deg", theta_deg, 0.0, 90.0, lo_open=True, unit=" deg")
+    be_d = _check("beta_deg", beta_deg, 0.0, 90.0, lo_open=True, hi_open=True, unit=" deg")
+    th_d, be_d = np.broadcast_arrays(th_d, be_d)
+    hopper = th_d < 90.0 - be_d  # compared in degrees so the switch is exact
+    th, be = np.radians(th_d), np.radians(be_d)
+    with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
+        f = (np.tan(th) * np.tan(be)) ** -0.35
+    return _out(np.where(hopper, f, 1.0))
+
+
+def johanson_rate(rho_b, D0, theta_deg, g=G, m=1):
+    """Johanson mass-flow hopper discharge rate for a coarse, cohesionless solid.
+
+    ``W = rho_b A sqrt(B g / (2 (1 + m) tan(theta)))``.
+
+    * ``m = 1`` (default), conical hopper: ``B = D0`` the outlet diameter,
+      ``A = pi D0^2 / 4``; returns kg/s.  The often-quoted form
+      ``rho_b (pi D0^2/4) sqrt(D0 g / (4 tan(theta)))`` is the same equation [D].
+    * ``m = 0``, plane (wedge) hopper: ``D0`` is the slot width B, ``A = B`` per unit slot
+      length; returns kg/(s m).
+
+    Parameters
+    ----------
+    rho_b : bulk density (kg/m^3), > 0.
+    D0 : outlet diameter (cone) or slot width (plane), m, > 0.
+    theta_deg : hopper half-angle from the vertical, **degrees**, in (0, 90).  The formula
+        diverges as theta -> 0; use it only inside the mass-flow region.
+    g : gravitational acceleration (m/s^2).
+    m : 1 (cone) or 0 (plane).
+
+    Source: Johanson (1965).  Tag: [M] (general form, and the dropped cohesion factor
+    sqrt(1 - ff/ff_a)); the m = 1 identity is [D].  No air effects.
+    """
+    if m not in (0, 1):
+        raise ValueError(f"m must be 1 (conical) or 0 (plane); got {m!r}")
+    rho_b = _positive("rho_b", rho_b, " kg/m^3")
+    B = _positive("D0", D0, " m")
+    th = _deg("theta_deg", theta_deg, 0.0, 90.0, lo_open=True, hi_open=True)
+    g = _positive("g", g, " m/s^2")
+    area = np.pi * B**2 / 4.0 if m == 1 else B
+    return _out(rho_b * area * np.sqrt(B * g / (2.0 * (1.0 + m) * np.tan(th))))
+
+
+def brown_coefficient(alpha_deg):
+    """Dimensionless Brown minimum-energy coefficient ``W / (rho_b sqrt(g) D0^(5/2))``.
+
+    ``(pi/4) sqrt((1 - cos(alpha)^(3/2)) / (2 sin(alpha)^(5/2)))``.
+
+    ``alpha_deg`` is the cone (or flow-channel) half-angle from the vertical in **degrees**,
+    in (0, 90]; at 90 (flat bottom) the coefficient is ``pi/(4 sqrt 2) = 0.555`` [D], close
+    to Beverloo's C = 0.58.  Note that this closed form is not monotone: it falls to a
+    minimum of about 0.534 near alpha = 61 deg and rises again to 0.555 at 90 deg.
+
+    Source: Brown (1961); Brown & Richards (1970).  Tag: [M] closed form (only the
+    minimum-energy origin is confirmed, by Nguyen, Brennen & Sabersky 1979).
+    """
+    a = _deg("alpha_deg", alpha_deg, 0.0, 90.0, lo_open=True)
+    return _out(np.pi / 4.0 * np.sqrt((1.0 - np.cos(a) ** 1.5) / (2.0 * np.sin(a) ** 2.5)))
+
+
+def brown_rate(rho_b, D0, alpha_deg, g=G):
+    """Brown / Brown & Richards minimum-energy discharge rate (kg/s) of a conical hopper.
+
+    ``W = (pi/4) rho_b sqrt(g) D0^(5/2) sqrt((1 - cos(alpha)^(3/2)) / (2 sin(alpha)^(5/2)))``.
+
+    Parameters
+    ----------
+    rho_b : bulk density (kg/m^3), > 0.
+    D0 : outlet diameter (m), > 0.
+    alpha_deg : cone or flow-channel half-angle from the vertical, **degrees**, in (0, 90].
+    g : gravitational acceleration (m/s^2).
+
+    Source: Brown (1961); Brown & Richards (1970).  Tag: [M] (see :func:`brown_coefficient`).
+    """
+    rho_b = _positive("rho_b", rho_b, " kg/m^3")
+    D0 = _positive("D0", D0, " m")
+    g = _positive("g", g, " m/s^2")
+    return _out(brown_coefficient(alpha_deg) * rho_b * np.sqrt(g) * D0**2.5)
+
+
+# ---------------------------------------------------------------------------------------
+# c. flow mode
+# ---------------------------------------------------------------------------------------
+
+
+def jenike_critical_half_angle(delta_deg, phi_w_deg):
+    """Critical conical-hopper half-angle theta_c (degrees) of Jenike's mass-flow boundary.
+
+    ``theta_c = 90 - arccos((1 - sin delta) / (2 sin delta)) / 2 - beta_w`` with
+    ``beta_w = (phi_w + arcsin(sin phi_w / sin delta)) / 2``.  Mass flow for
+    ``theta < theta_c``; designers subtract a margin of 3-5 deg [M].
+
+    Parameters
+    ----------
+    delta_deg : effective angle of internal friction, **degrees**, in [19.47, 90)
+        (the fit needs sin(delta) >= 1/3).  For a cohesionless Mohr-Coulomb material use
+        delta = phi, and the steady-flow phi rather than a peak value.
+    phi_w_deg : wall friction angle, **degrees**, in [0, 90).
+
+    Returns NaN where ``phi_w >= delta``: no mass flow by this criterion.
+
+    Source: closed fit of Jenike's chart, Leung et al. (2019), J. Pharm. Sci. 108:464,
+    eqs. 5-6.  Tag: [V] for the fit (as implemented in Tornado128/hoppers_performance_checking);
+    its accuracy against Jenike's chart is **not verified**.
+    """
+    de = _deg("delta_deg", delta_deg, _JENIKE_DELTA_MIN_DEG, 90.0, hi_open=True)
+    pw = _deg("phi_w_deg", phi_w_deg, 0.0, 90.0, hi_open=True)
+    de, pw = np.broadcast_arrays(de, pw)
+    no_mass = pw >= de
+    s = np.sin(de)
+    with np.errstate(invalid="ignore"):
+        beta_w = 0.5 * (pw + np.arcsin(np.sin(pw) / s))
+        theta_c = np.pi / 2 - 0.5 * np.arccos((1.0 - s) / (2.0 * s)) - beta_w
+    return _out(np.where(no_mass, np.nan, np.degrees(theta_c)))
+
+
+def jenike_flow_mode(theta_deg, delta_deg, phi_w_deg, margin_deg=0.0):
+    """Classify a conical hopper as ``"mass"`` or ``"funnel"`` flow by Jenike's boundary.
+
+    ``"mass"`` where ``theta < theta_c - margin``, ``"funnel"`` otherwise (including where
+    theta_c is NaN, i.e. ``phi_w >= delta``).  See :func:`jenike_critical_half_angle`.
+
+    Parameters
+    ----------
+    theta_deg : hopper half-angle from the vertical, **degrees**, in (0, 90].
+    delta_deg, phi_w_deg : as in :func:`jenike_critical_half_angle`, **degrees**.
+    margin_deg : design margin subtracted from theta_c, **degrees**, >= 0 (default 0).
+
+    Returns a str for scalar input, an array of str otherwise.
+
+    Source and tag as :func:`jenike_critical_half_angle` ([V] fit, accuracy not verified).
+    """
+    th = _check("theta_deg", theta_deg, 0.0, 90.0, lo_open=True, unit=" deg")
+    margin = _nonneg("margin_deg", margin_deg, " deg")
+    tc = _arr(jenike_critical_half_angle(delta_deg, phi_w_deg))
+    with np.errstate(invalid="ignore"):
+        mass = th < tc - margin  # NaN compares False -> funnel
+    return _label(np.where(mass, 0, 1), ["mass", "funnel"])
+
+
+# ---------------------------------------------------------------------------------------
+# d. wall pressure: vertical section (Janssen)
+# ---------------------------------------------------------------------------------------
+
+
+def janssen_z0(D, K, mu):
+    """Janssen characteristic depth ``z0 = A/(U K mu) = D/(4 K mu)`` (m), circular section.
+
+    Parameters
+    ----------
+    D : cylinder diameter (m), > 0.
+    K : lateral pressure ratio (wall-normal / vertical stress), > 0.
+    mu : wall friction coefficient ``tan(phi_w)`` (a number, not an angle), > 0.
+
+    Source: Janssen (1895); the A/(U K mu) form is EN 1991-4:2006 eq. (5.75).
+    Tag: [V: EN 1991-4 eq. (5.75), quoted by Dlubal].
+    """
+    D = _positive("D", D, " m")
+    K = _positive("K", K)
+    mu = _positive("mu", mu)
+    return _out(D / (4.0 * K * mu))
+
+
+def janssen_vertical_stress(z, rho_b, D, K, mu, q0=0.0, g=G):
+    """Janssen mean vertical stress (Pa) at depth z below a levelled surface.
+
+    ``sigma_v = rho_b g z0 (1 - exp(-z/z0)) + q0 exp(-z/z0)``, ``z0 = D/(4 K mu)``.
+
+    Parameters
+    ----------
+    z : depth below the levelled surface (m), >= 0.
+    rho_b : bulk density (kg/m^3), > 0.
+    D : cylinder diameter (m), > 0.
+    K : lateral pressure ratio, > 0.
+    mu : wall friction coefficient tan(phi_w) (not an angle), > 0.
+    q0 : surcharge on the surface (Pa), >= 0.
+    g : gravitational acceleration (m/s^2).
+
+    No angles are involved.  For z << z0 it tends to the hydrostatic ``rho_b g z + q0``.
+
+    Source: Janssen (1895).  Tag: [V form; D: slice equilibrium].
+    """
+    z = _nonneg("z", z, " m")
+    rho_b = _positive("rho_b", rho_b, " kg/m^3")
+    q0 = _nonneg("q0", q0, " Pa")
+    g = _positive("g", g, " m/s^2")
+    z0 = _arr(janssen_z0(D, K, mu))
+    x = z / z0
+    return _out(-rho_b * g * z0 * np.expm1(-x) + q0 * np.exp(-x))
+
+
+def janssen_wall_pressure(z, rho_b, D, K, mu, q0=0.0, g=G):
+    """Janssen normal wall pressure ``p_n = K sigma_v`` (Pa).
+
+    Arguments as :func:`janssen_vertical_stress` (no angles; ``mu`` is a coefficient).
+    Tends to ``rho_b g D / (4 mu)`` at depth, independent of K
+    (:func:`janssen_asymptotic_wall_pressure`).
+
+    Source: Janssen (1895).  Tag: [V form; D].
+    """
+    return _out(_arr(K) * _arr(janssen_vertical_stress(z, rho_b, D, K, mu, q0, g)))
+
+
+def janssen_wall_shear(z, rho_b, D, K, mu, q0=0.0, g=G):
+    """Janssen wall shear (friction) stress ``tau_w = mu K sigma_v`` (Pa).
+
+    Arguments as :func:`janssen_vertical_stress`.  Source: Janssen (1895).  Tag: [V form; D].
+    """
+    return _out(_arr(mu) * _arr(janssen_wall_pressure(z, rho_b, D, K, mu, q0, g)))
+
+
+def janssen_asymptotic_wall_pressure(rho_b, D, mu, g=G):
+    """Deep-bed Janssen wall pressure ``rho_b g D / (4 mu)`` (Pa); does not depend on K.
+
+    Parameters: bulk density rho_b (kg/m^3), diameter D (m), wall friction coefficient
+    mu = tan(phi_w) (not an angle), g (m/s^2).
+
+    Source: limit z -> infinity of Janssen (1895).  Tag: [D] (test invariant).
+    """
+    rho_b = _positive("rho_b", rho_b, " kg/m^3")
+    D = _positive("D", D, " m")
+    mu = _positive("mu", mu)
+    g = _positive("g", g, " m/s^2")
+    return _out(rho_b * g * D / (4.0 * mu))
+
+
+# ---------------------------------------------------------------------------------------
+# lateral pressure ratios
+# ---------------------------------------------------------------------------------------
+
+
+def k_jaky(phi):
+    """At-rest lateral pressure ratio ``K0 = 1 - sin(phi)``.
+
+    ``phi``: internal friction angle in **degrees**, in [0, 90).
+
+    Source: Jaky (1944).  Tag: standard.
+    """
+    ph = _deg("phi", phi, 0.0, 90.0, hi_open=True)
+    return _out(1.0 - np.sin(ph))
+
+
+def k_en1991(phi_im):
+    """EN 1991-4 mean lateral pressure ratio ``K_m = 1.1 (1 - sin(phi_im))``.
+
+    ``phi_im``: mean angle of internal friction in **degrees**, in [0, 90).  The code's
+    characteristic values are ``K_m a_K`` (upper) and ``K_m / a_K`` (lower).
+
+    Source: EN 1991-4:2006.  Tag: formula text [M]; [D: reproduces the Table E.1 K_m column
+    from its phi_im column within +-0.02 for 24 of 25 solids].
+    """
+    ph = _deg("phi_im", phi_im, 0.0, 90.0, hi_open=True)
+    return _out(1.1 * (1.0 - np.sin(ph)))
+
+
+def k_rankine_active(phi):
+    """Rankine active lateral pressure ratio ``(1 - sin phi) / (1 + sin phi)``.
+
+    ``phi``: internal friction angle in **degrees**, in [0, 90).  Source: Rankine.
+    Tag: standard.
+    """
+    ph = _deg("phi", phi, 0.0, 90.0, hi_open=True)
+    s = np.sin(ph)
+    return _out((1.0 - s) / (1.0 + s))
+
+
+def k_walker_wall(phi, phi_w):
+    """Walker/Walters wall value of K for an actively yielding solid with wall friction.
+
+    ``K = (1 + sin^2 phi - 2 sqrt(sin^2 phi - mu^2 cos^2 phi)) / (4 mu^2 + cos^2 phi)``,
+    ``mu = tan(phi_w)``.
+
+    Parameters
+    ----------
+    phi : internal friction angle, **degrees**, in (0, 90).
+    phi_w : wall friction angle, **degrees**, in [0, phi] (the square root needs
+        ``phi_w <= phi``).  At ``phi_w = 0`` this is the Rankine active ratio.
+
+    Source: Walker (1966); Walters (1973).  Tag: closed form [M]; value [D: brute-force
+    Mohr circle].
+    """
+    ph = _deg("phi", phi, 0.0, 90.0, lo_open=True, hi_open=True)
+    pw = _deg("phi_w", phi_w, 0.0, 90.0, hi_open=True)
+    if np.any(pw > ph):
+        raise ValueError("phi_w must not exceed phi (the wall would be rougher than the solid)")
+    s2 = np.sin(ph) ** 2
+    c2 = np.cos(ph) ** 2
+    mu2 = np.tan(pw) ** 2
+    root = np.sqrt(np.maximum(s2 - mu2 * c2, 0.0))
+    return _out((1.0 + s2 - 2.0 * root) / (4.0 * mu2 + c2))
+
+
+# ---------------------------------------------------------------------------------------
+# hopper slice method (Walker 1966 / Walters 1973, D = 1; EN 1991-4)
+# ---------------------------------------------------------------------------------------
+
+
+def hopper_n(F, mu, beta_deg, S=2):
+    """Exponent of the hopper slice solution ``n = S (F mu cot(beta) + F) - 2``.
+
+    Parameters
+    ----------
+    F : wall-normal / mean vertical stress ratio (p_n / sigma_v), > 0.
+    mu : wall friction coefficient (not an angle), >= 0.
+    beta_deg : hopper half-angle from the vertical, **degrees**, in (0, 90).
+    S : 2 for a cone, 1 for a wedge (plane) hopper.
+
+    Source: vertical equilibrium of a slice, Walker (1966) with distribution factor D = 1 as
+    in EN 1991-4 (general hopper n); the same ODE as the Motzkus/Schulze form in
+    Tornado128/hoppers_performance_checking.  Tag: [D].
+    """
+    F = _positive("F", F)
+    mu = _nonneg("mu", mu)
+    be = _deg("beta_deg", beta_deg, 0.0, 90.0, lo_open=True, hi_open=True)
+    S = _positive("S", S)
+    return _out(S * (F * mu / np.tan(be) + F) - 2.0)
+
+
+def hopper_vertical_stress(x, h, gamma, n, sigma_vt):
+    """Mean vertical stress in a hopper by the slice method (Pa).
+
+    Solves ``d sigma_v/dx = -gamma + n sigma_v / x`` with ``sigma_v(h) = sigma_vt``:
+    ``sigma_v = gamma h/(n-1) [(x/h) - (x/h)^n] + sigma_vt (x/h)^n``, continuous through
+    n = 1 (where the bracket term becomes ``-gamma x ln(x/h)``).
+
+    Parameters
+    ----------
+    x : height above the (virtual) cone apex (m), in [0, h].
+    h : apex-to-transition height (m), > 0.
+    gamma : unit weight rho_b g (N/m^3), >= 0.
+    n : exponent, e.g. from :func:`hopper_n`.  For ``n <= 0`` the stress is unbounded at
+        the apex (returned as inf at x = 0 for n < 0).
+    sigma_vt : mean vertical stress at the transition x = h (Pa), >= 0.
+
+    No angles are involved.
+
+    Source: Walker (1966) slice method, D = 1; EN 1991-4 hopper p_v.  Tag: [D].
+    """
+    h = _positive("h", h, " m")
+    x = _arr(x)
+    if np.any((x < 0) | (x > h)):
+        raise ValueError("x must lie in [0, h] (height above the cone apex)")
+    gamma = _nonneg("gamma", gamma, " N/m^3")
+    sigma_vt = _nonneg("sigma_vt", sigma_vt, " Pa")
+    n = _arr(n)
+    xi, n, h, gamma, sigma_vt = np.broadcast_arrays(x / h, n, h, gamma, sigma_vt)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        xin = np.where(xi > 0, xi**n, np.where(n > 0, 0.0, np.where(n == 0, 1.0, np.inf)))
+        log_xi = np.log(np.where(xi > 0, xi, 1.0))
+        # (xi - xi^n)/(n - 1) = -xi * expm1((n-1) ln xi)/(n-1); stable through n = 1.
+        bracket_pos = -xi * _ratio_over_expm1(n - 1.0, log_xi)
+        bracket = np.where(xi > 0, bracket_pos, -xin / (n - 1.0))
+        # xi = 0 and n == 1: bracket -> 0
+        bracket = np.where((xi == 0) & (n == 1.0), 0.0, bracket)
+        sv = gamma * h * bracket + sigma_vt * xin
+    return _out(sv)
+
+
+def walker_discharge_ratio(phi, phi_w, beta_deg):
+    """Passive (discharge) wall ratio F_e = p_n / sigma_v of a Walker-type hopper, D = 1.
+
+    ``F_e = (1 + sin(phi) cos(eps)) / (1 - sin(phi) cos(2 beta + eps))``,
+    ``eps = phi_w + arcsin(sin(phi_w) / sin(phi))``.
+
+    Parameters
+    ----------
+    phi : (effective) internal friction angle, **degrees**, in (0, 90).
+    phi_w : wall friction angle, **degrees**, in [0, phi].
+    beta_deg : hopper half-angle from the vertical, **degrees**, in [0, 90).
+
+    At ``phi_w = 0`` and ``beta = 0`` this is the Rankine passive ratio.
+
+    Source: Walker (1966); EN 1991-4 steep-hopper discharge F_e (as transcribed in
+    kei-mp/blog silo.md, which uses cos(2 beta + eps); the arturopala/encalmo cos(beta + eps)
+    disagrees with the Mohr circle).  Tag: [D: brute-force Mohr circle at yield with wall
+    friction acting up the wall].
+    """
+    ph = _deg("phi", phi, 0.0, 90.0, lo_open=True, hi_open=True)
+    pw = _deg("phi_w", phi_w, 0.0, 90.0, hi_open=True)
+    be = _deg("beta_deg", beta_deg, 0.0, 90.0, hi_open=True)
+    if np.any(pw > ph):
+        raise ValueError("phi_w must not exceed phi (the wall would be rougher than the solid)")
+    s = np.sin(ph)
+    eps = pw + np.arcsin(np.minimum(np.sin(pw) / s, 1.0))
+    return _out((1.0 + s * np.cos(eps)) / (1.0 - s * np.cos(2.0 * be + eps)))
+
+
+def walker_hopper_wall_pressure(
+    x, h, beta_deg, rho_b, phi, phi_w, sigma_vt, mode="filling", g=G, S=2, b=EN1991_B
+):
+    """Normal wall pressure p_n (Pa) in a hopper by the slice method (Walker, D = 1).
+
+    ``p_n = F sigma_v(x)`` with ``sigma_v`` from :func:`hopper_vertical_stress`,
+    ``n = S (F mu cot(beta) + F) - 2``, ``mu = tan(phi_w)``, ``gamma = rho_b g`` and
+
+    * ``mode="filling"``: ``F = F_f = 1 - b / (1 + tan(beta)/mu)`` (EN 1991-4, b = 0.2);
+    * ``mode="discharge"``: ``F = F_e`` from :func:`walker_discharge_ratio`.
+
+    Parameters
+    ----------
+    x : height above the cone apex (m), in [0, h].
+    h : apex-to-transition height (m), > 0; for a cone running to its apex from a cylinder
+        of diameter D, ``h = D / (2 tan(beta))``.
+    beta_deg : hopper half-angle from the vertical, **degrees**, in (0, 90).
+    rho_b : bulk density (kg/m^3).
+    phi : internal friction angle, **degrees** (used by the discharge ratio).
+    phi_w : wall friction angle, **degrees**.
+    sigma_vt : mean vertical stress at the transition (Pa), e.g. from Janssen.
+    mode : "filling" or "discharge".
+    g : gravitational acceleration (m/s^2).
+    S : 2 cone, 1 wedge.
+    b : EN wall-friction reduction constant for F_f (default 0.2).
+
+    Sources: Walker (1966); EN 1991-4:2006 (F_f [V: kei-mp/blog silo.md, arturopala/encalmo];
+    F_e [D]).  Tag: [D] slice solution.
+    """
+    if mode not in ("filling", "discharge"):
+        raise ValueError(f"mode must be 'filling' or 'discharge'; got {mode!r}")
+    _check("phi", phi, 0.0, 90.0, lo_open=True, hi_open=True, unit=" deg")
+    pw = _deg("phi_w", phi_w, 0.0, 90.0, hi_open=True)
+    mu = np.tan(pw)
+    rho_b = _positive("rho_b", rho_b, " kg/m^3")
+    g = _positive("g", g, " m/s^2")
+    if mode == "filling":
+        F = _arr(en1991_steep_filling_F(beta_deg, mu, b=b))
+    else:
+        F = _arr(walker_discharge_ratio(phi, phi_w, beta_deg))
+    n = hopper_n(F, mu, beta_deg, S=S)
+    sv = _arr(hopper_vertical_stress(x, h, rho_b * g, n, sigma_vt))
+    return _out(F * sv)
+
+
+class SwitchPressure(NamedTuple):
+    """Wall pressure just above (cylinder, active) and just below (hopper, passive) the
+    transition during mass-flow discharge, and their ratio."""
+
+    cylinder: np.ndarray
+    hopper: np.ndarray
+    ratio: np.ndarray
+
+
+def walker_switch_pressure(sigma_vt, K, phi, phi_w, beta_deg):
+    """Simple switch-pressure estimate at the cylinder/hopper transition during discharge.
+
+    Above the transition the wall pressure is active, ``K sigma_vt``; just below it, passive,
+    ``F_e sigma_vt`` (:func:`walker_discharge_ratio`).  Returns
+    ``SwitchPressure(cylinder, hopper, ratio=F_e/K)``; the ratio is typically about 2.
+
+    Parameters
+    ----------
+    sigma_vt : mean vertical stress at the transition (Pa), >= 0, e.g. Janssen.
+    K : lateral pressure ratio in the cylinder, > 0.
+    phi, phi_w : internal and wall friction angles, **degrees**.
+    beta_deg : hopper half-angle from the vertical, **degrees**.
+
+    Source: Walker (1966) / Walters (1973) (Walters derives the true peak with a distribution
+    factor D != 1, not implemented).  Tag: [D] simple estimate.
+    """
+    svt = _nonneg("sigma_vt", sigma_vt, " Pa")
+    K = _positive("K", K)
+    Fe = _arr(walker_discharge_ratio(phi, phi_w, beta_deg))
+    return SwitchPressure(_out(K * svt), _out(Fe * svt), _out(Fe / K))
+
+
+# ---------------------------------------------------------------------------------------
+# EN 1991-4:2006
+# ---------------------------------------------------------------------------------------
+
+
+class WallPressures(NamedTuple):
+    """Vertical-wall loads (Pa): horizontal (normal) p_h, wall friction p_w, vertical p_v."""
+
+    p_h: np.ndarray
+    p_w: np.ndarray
+    p_v: np.ndarray
+
+
+class HopperPressures(NamedTuple):
+    """Hopper loads (Pa): normal p_n, friction p_t, mean vertical p_v; and the hopper class."""
+
+    p_n: np.ndarray
+    p_t: np.ndarray
+    p_v: np.ndarray
+    hopper_class: object
+
+
+def en1991_filling_vertical_walls(z, gamma, d_c, K, mu):
+    """EN 1991-4 filling loads on the vertical walls of a *slender* circular silo.
+
+    ``p_hf = p_ho Y_J(z)``, ``p_ho = gamma K z0``, ``Y_J = 1 - exp(-z/z0)``,
+    ``p_wf = mu p_hf``, ``p_vf = p_hf / K``, ``z0 = d_c / (4 K mu)``.
+
+    Parameters
+    ----------
+    z : depth below the equivalent surface (m), >= 0.
+    gamma : unit weight (N/m^3), > 0.
+    d_c : silo inner diameter (m), > 0.
+    K, mu : lateral pressure ratio and wall friction coefficient (not an angle), > 0; the
+        code's characteristic combination for the load case in question.
+
+    No angles are involved.  Returns ``WallPressures(p_h, p_w, p_v)``.
+
+    Source: EN 1991-4:2006 §5.2.1.  Tag: z0 [V]; the rest [M] (it is Janssen's solution).
+    """
+    z = _nonneg("z", z, " m")
+    gamma = _positive("gamma", gamma, " N/m^3")
+    z0 = _arr(janssen_z0(d_c, K, mu))
+    K = _arr(K)
+    mu = _arr(mu)
+    p_h = gamma * K * z0 * (-np.expm1(-z / z0))
+    return WallPressures(_out(p_h), _out(mu * p_h), _out(p_h / K))
+
+
+def en1991_h0(d_c, phi_r):
+    """EN 1991-4 depth h0 (m) of the highest solid-wall contact below the equivalent surface,
+    circular silo with symmetric filling: ``h0 = d_c tan(phi_r) / 6``.
+
+    ``d_c``: silo diameter (m), > 0.  ``phi_r``: angle of repose, **degrees**, in [0, 90).
+
+    Source: EN 1991-4:2006 §5.3 (intermediate slenderness).  Tag: [V: Dlubal].
+    """
+    d_c = _positive("d_c", d_c, " m")
+    pr = _deg("phi_r", phi_r, 0.0, 90.0, hi_open=True)
+    return _out(d_c * np.tan(pr) / 6.0)
+
+
+def en1991_intermediate_n(d_c, K, mu, phi_r):
+    """EN 1991-4 exponent ``n = -(1 + tan(phi_r)) (1 - h0/z0)`` (intermediate slenderness).
+
+    Parameters: d_c (m), K, mu (coefficient), phi_r the angle of repose in **degrees**.
+
+    Source: EN 1991-4:2006 §5.3.  Tag: [V: Dlubal].
+    """
+    z0 = _arr(janssen_z0(d_c, K, mu))
+    h0 = _arr(en1991_h0(d_c, phi_r))
+    tr = np.tan(np.radians(_arr(phi_r)))
+    return _out(-(1.0 + tr) * (1.0 - h0 / z0))
+
+
+def en1991_intermediate_zV(z, d_c, K, mu, phi_r):
+    """EN 1991-4 equivalent depth z_V (m) for silos of intermediate slenderness.
+
+    ``z_V = h0 - [z0 - h0 - (z + z0 - 2 h0)^(n+1) / (z0 - h0)^n] / (n + 1)`` for z >= h0,
+    evaluated stably through ``n = -1``; for ``0 <= z < h0`` (above the highest wall contact)
+    ``z_V = z`` (no wall friction) [D], which is continuous at ``z = h0``.
+
+    Parameters
+    ----------
+    z : depth below the equivalent surface (m), >= 0.
+    d_c : silo diameter (m).  K, mu : ratio and wall friction coefficient (not an angle).
+    phi_r : angle of repose, **degrees**, in [0, 90); requires ``h0 < z0``.
+
+    Source: EN 1991-4:2006 §5.3.  Tag: [M] (reproduces the Dlubal cement-silo example:
+    p_vf(z = 8 m) = 69.24 kN/m^2 against the published 69.27).
+    """
+    z = _nonneg("z", z, " m")
+    z0 = _arr(janssen_z0(d_c, K, mu))
+    h0 = _arr(en1991_h0(d_c, phi_r))
+    if np.any(h0 >= z0):
+        raise ValueError("phi_r too large for this silo: h0 = d_c tan(phi_r)/6 must be below z0")
+    n = _arr(en1991_intermediate_n(d_c, K, mu, phi_r))
+    c = z0 - h0
+    u = np.maximum(z + z0 - 2.0 * h0, 0.0) / c  # > 0 for z >= h0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        # [c - u^(n+1) c] / (n+1) = -c expm1((n+1) ln u)/(n+1)
+        bracket = -c * _ratio_over_expm1(n + 1.0, np.log(np.where(u > 0, u, 1.0)))
+    zV = np.where(z >= h0, h0 - bracket, z)
+    return _out(zV)
+
+
+def en1991_filling_intermediate(z, gamma, d_c, K, mu, phi_r):
+    """EN 1991-4 filling loads for a circular silo of intermediate slenderness.
+
+    ``p_vf = gamma z_V`` (:func:`en1991_intermediate_zV`);
+    ``p_hf = gamma K z0 Y_R`` with ``Y_R = 1 - ((z - h0)/(z0 - h0) + 1)^n`` for z >= h0
+    and 0 above; ``p_wf = mu p_hf``.  Y_R follows from z_V by vertical equilibrium of a slice
+    (``dp_v/dz = gamma - (4 mu / d_c) p_h``) [D].
+
+    Parameters: z (m) below the equivalent surface, gamma (N/m^3), d_c (m), K, mu (not an
+    angle), phi_r angle of repose in **degrees**.  Returns ``WallPressures(p_h, p_w, p_v)``.
+
+    Source: EN 1991-4:2006 §5.3.  Tag: h0, n [V: Dlubal]; z_V [M]; Y_R [D] from z_V.
+    """
+    z = _nonneg("z", z, " m")
+    gamma = _positive("gamma", gamma, " N/m^3")
+    zV = _arr(en1991_intermediate_zV(z, d_c, K, mu, phi_r))
+    z0 = _arr(janssen_z0(d_c, K, mu))
+    h0 = _arr(en1991_h0(d_c, phi_r))
+    n = _arr(en1991_intermediate_n(d_c, K, mu, phi_r))
+    K = _arr(K)
+    mu = _arr(mu)
+    base = np.maximum((z - h0) / (z0 - h0) + 1.0, 1.0)
+    Y_R = np.where(z >= h0, 1.0 - base**n, 0.0)
+    p_h = gamma * K * z0 * Y_R
+    return WallPressures(_out(p_h), _out(mu * p_h), _out(gamma * zV))
+
+
+def en1991_discharge_factors(top_emptied=False):
+    """EN 1991-4 discharge factors ``(C_h, C_w)`` for the vertical walls of slender silos.
+
+    ``(1.15, 1.10)`` in general; ``(1.0, 1.0)`` for silos emptied from the top.
+    Patch loads are not included.
+
+    Source: EN 1991-4:2006 eqs. (5.21)/(5.22).  Tag: 1.15 / 1.10 [V: kei-mp/blog silo.md;
+    arturopala/encalmo CircularSilos.scala]; the top-emptied 1.0 [M].
+    """
+    return (1.0, 1.0) if top_emptied else (1.15, 1.10)
+
+
+def en1991_discharge_vertical_walls(p_hf, p_wf, top_emptied=False):
+    """EN 1991-4 discharge loads on vertical walls: ``p_he = C_h p_hf``, ``p_we = C_w p_wf``.
+
+    ``p_hf``, ``p_wf``: filling loads (Pa), >= 0.  No angles.  Returns ``(p_he, p_we)``.
+
+    Source and tag: see :func:`en1991_discharge_factors`.
+    """
+    p_hf = _nonneg("p_hf", p_hf, " Pa")
+    p_wf = _nonneg("p_wf", p_wf, " Pa")
+    C_h, C_w = en1991_discharge_factors(top_emptied)
+    return _out(C_h * p_hf), _out(C_w * p_wf)
+
+
+def en1991_hopper_class(beta_deg, K, mu_h):
+    """EN 1991-4 hopper class: ``"flat"``, ``"steep"`` or ``"shallow"``.
+
+    * flat if the bottom is inclined less than 5 deg to the horizontal (``beta > 85``);
+    * steep if ``tan(beta) < (1 - K) / (2 mu_h)``;
+    * shallow otherwise.
+
+    Parameters
+    ----------
+    beta_deg : hopper half-angle from the vertical, **degrees**, in (0, 90].
+    K : lower characteristic lateral pressure ratio, > 0.
+    mu_h : lower characteristic hopper wall friction coefficient (not an angle), > 0.
+
+    Returns a str for scalar input, an array of str otherwise.
+
+    Source: EN 1991-4:2006 §6.1.  Tag: [V: Dlubal].
+    """
+    be = _deg("beta_deg", beta_deg, 0.0, 90.0, lo_open=True)
+    K = _positive("K", K)
+    mu_h = _positive("mu_h", mu_h)
+    flat = be > np.radians(85.0)
+    with np.errstate(over="ignore"):
+        steep = np.tan(be) < (1.0 - K) / (2.0 * mu_h)
+    code = np.where(flat, 0, np.where(steep, 1, 2))
+    return _label(code, ["flat", "steep", "shallow"])
+
+
+def en1991_steep_filling_F(beta_deg, mu_h, b=EN1991_B):
+    """EN 1991-4 steep-hopper filling ratio ``F_f = 1 - b / (1 + tan(beta)/mu_h)``.
+
+    ``beta_deg`` half-angle from the vertical in **degrees**, in (0, 90); ``mu_h`` hopper wall
+    friction coefficient (not an angle), > 0; ``b`` = 0.2 by default.
+
+    Source: EN 1991-4:2006 §6.3.2.  Tag: [V: kei-mp/blog silo.md; arturopala/encalmo].
+    """
+    be = _deg("beta_deg", beta_deg, 0.0, 90.0, lo_open=True, hi_open=True)
+    mu_h = _positive("mu_h", mu_h)
+    b = _nonneg("b", b)
+    return _out(1.0 - b / (1.0 + np.tan(be) / mu_h))
+
+
+def en1991_steep_filling_n(beta_deg, mu_h, b=EN1991_B, S=2):
+    """EN 1991-4 steep-hopper filling exponent ``n = S (1 - b) mu_h cot(beta)``.
+
+    With ``F = F_f`` the general ``S (F mu_h cot(beta) + F) - 2`` equals
+    ``S (1 - b) mu_h cot(beta) + S - 2`` [D]: identical for a cone (S = 2), lower by 1 for
+    a wedge (S = 1).  This function returns the code's form.
+
+    ``beta_deg`` in **degrees**, in (0, 90); ``mu_h`` coefficient; ``S`` 2 cone / 1 wedge.
+
+    Source: EN 1991-4:2006 §6.3.2.  Tag: [V: kei-mp/blog silo.md; arturopala/encalmo].
+    """
+    be = _deg("beta_deg", beta_deg, 0.0, 90.0, lo_open=True, hi_open=True)
+    mu_h = _positive("mu_h", mu_h)
+    b = _nonneg("b", b)
+    S = _positive("S", S)
+    return _out(S * (1.0 - b) * mu_h / np.tan(be))
+
+
+def en1991_steep_discharge_F(beta_deg, mu_h, phi_i):
+    """EN 1991-4 steep-hopper discharge ratio F_e, with ``phi_wh = arctan(mu_h)``.
+
+    ``F_e = (1 + sin(phi_i) cos(eps)) / (1 - sin(phi_i) cos(2 beta + eps))``,
+    ``eps = phi_wh + arcsin(sin(phi_wh) / sin(phi_i))``; see :func:`walker_discharge_ratio`.
+
+    ``beta_deg`` and ``phi_i`` (the solid's angle of internal friction) in **degrees**;
+    ``mu_h`` a coefficient (not an angle) with ``arctan(mu_h) <= phi_i``.
+
+    Source: EN 1991-4:2006 §6.3.3.  Tag: [V: kei-mp/blog silo.md; D: brute-force Mohr circle].
+    """
+    mu_h = _nonneg("mu_h", mu_h)
+    return walker_discharge_ratio(phi_i, np.degrees(np.arctan(mu_h)), beta_deg)
+
+
+def en1991_steep_discharge_n(beta_deg, mu_h, phi_i, S=2):
+    """EN 1991-4 steep-hopper discharge exponent ``n = S (F_e mu_h cot(beta) + F_e) - 2``.
+
+    Angles in **degrees**; ``mu_h`` a coefficient.  Source: EN 1991-4:2006 §6.3.3.
+    Tag: [V: kei-mp/blog silo.md].
+    """
+    Fe = en1991_steep_discharge_F(beta_deg, mu_h, phi_i)
+    return hopper_n(Fe, mu_h, beta_deg, S=S)
+
+
+def en1991_shallow_mu_heff(beta_deg, K):
+    """EN 1991-4 mobilised wall friction of a shallow hopper ``mu_heff = (1 - K)/(2 tan beta)``.
+
+    ``beta_deg`` half-angle from the vertical in **degrees**, in (0, 90); ``K`` lower
+    characteristic lateral pressure ratio, in (0, 1].
+
+    Source: EN 1991-4:2006 eq. (6.28).  Tag: [V: Dlubal] (friction not fully mobilised).
+    """
+    be = _deg("beta_deg", beta_deg, 0.0, 90.0, lo_open=True, hi_open=True)
+    K = _check("K", K, 0.0, 1.0, lo_open=True)
+    return _out((1.0 - K) / (2.0 * np.tan(be)))
+
+
+def en1991_shallow_F(beta_deg, K, b=EN1991_B):
+    """EN 1991-4 shallow-hopper ratio ``F_s = 1 - b / (1 + tan(beta)/mu_heff)``.
+
+    Angles in **degrees**; K as in :func:`en1991_shallow_mu_heff`; b = 0.2.
+    Discharge loads in a shallow hopper equal the filling loads.
+
+    Source: EN 1991-4:2006 §6.3.  Tag: [M].
+    """
+    be = _deg("beta_deg", beta_deg, 0.0, 90.0, lo_open=True, hi_open=True)
+    b = _nonneg("b", b)
+    mue = _arr(en1991_shallow_mu_heff(beta_deg, K))
+    with np.errstate(divide="ignore"):
+        return _out(1.0 - b / (1.0 + np.tan(be) / mue))
+
+
+def en1991_shallow_n(beta_deg, K, b=EN1991_B, S=2):
+    """EN 1991-4 shallow-hopper exponent ``n = S (1 - b) mu_heff cot(beta)``.
+
+    Angles in **degrees**; K the lower characteristic ratio; S 2 cone / 1 wedge.
+
+    Source: EN 1991-4:2006 §6.3.  Tag: [M].
+    """
+    be = _deg("beta_deg", beta_deg, 0.0, 90.0, lo_open=True, hi_open=True)
+    b = _nonneg("b", b)
+    S = _positive("S", S)
+    mue = _arr(en1991_shallow_mu_heff(beta_deg, K))
+    return _out(S * (1.0 - b) * mue / np.tan(be))
+
+
+def en1991_hopper_vertical_stress(x, h_h, gamma, n, p_vft):
+    """EN 1991-4 mean vertical stress in a hopper (every hopper class), Pa.
+
+    ``p_v = gamma h_h/(n-1) [(x/h_h) - (x/h_h)^n] + p_vft (x/h_h)^n``.
+
+    x (m) above the apex in [0, h_h]; h_h hopper height (m); gamma (N/m^3); n from the class
+    functions; ``p_vft = C_b p_vf(h_c)`` the transition vertical stress (C_b = 1.0 for Action
+    Assessment Class 2 without dynamic solids [V: Dlubal]).  No angles.
+
+    Source: EN 1991-4:2006 §6.3.  Tag: [D] (same as :func:`hopper_vertical_stress`).
+    """
+    return hopper_vertical_stress(x, h_h, gamma, n, p_vft)
+
+
+def en1991_hopper_pressures(
+    x, h_h, beta_deg, gamma, K, mu_h, p_vft, mode="filling", phi_i=None, b=EN1991_B, S=2
+):
+    """EN 1991-4 hopper wall loads ``HopperPressures(p_n, p_t, p_v, hopper_class)`` (Pa).
+
+    The class (:func:`en1991_hopper_class`) picks the formulas:
+
+    * steep, filling: ``F = F_f``, ``n = S (1 - b) mu_h cot(beta)``, ``p_t = mu_h p_n``;
+    * steep, discharge: ``F = F_e`` (needs ``phi_i``), ``n = S (F_e mu_h cot beta + F_e) - 2``,
+      ``p_t = mu_h p_n``;
+    * shallow (filling and discharge alike): ``F = F_s``, ``n = S (1 - b) mu_heff cot(beta)``,
+      ``p_t = mu_heff p_n`` [M];
+    * flat bottoms (beta > 85 deg) are not implemented (ValueError).
+
+    Parameters
+    ----------
+    x : height above the apex (m), in [0, h_h].
+    h_h : hopper height (m), > 0.
+    beta_deg : hopper half-angle from the vertical, **degrees** (scalar or array).
+    gamma : unit weight (N/m^3).
+    K, mu_h : lower characteristic K and hopper wall friction coefficient (not an angle).
+    p_vft : vertical stress at the transition, ``C_b p_vf(h_c)`` (Pa).
+    mode : "filling" or "discharge".
+    phi_i : the solid's angle of internal friction, **degrees**; required for steep discharge.
+    b : 0.2.  S : 2 cone, 1 wedge.
+
+    Source: EN 1991-4:2006 §6.  Tags as the component functions.
+    """
+    if mode not in ("filling", "discharge"):
+        raise ValueError(f"mode must be 'filling' or 'discharge'; got {mode!r}")
+    cls = en1991_hopper_class(beta_deg, K, mu_h)
+    cls_arr = np.asarray(cls)
+    if np.any(cls_arr == "flat"):
+        raise ValueError("beta_deg > 85: flat-bottom loads are not implemented")
+    steep = cls_arr == "steep"
+    mu_h_a = _arr(mu_h)
+    if mode == "discharge" and np.any(steep):
+        if phi_i is None:
+            raise ValueError("phi_i is required for steep-hopper discharge loads")
+        F_steep = _arr(en1991_steep_discharge_F(beta_deg, mu_h, phi_i))
+        n_steep = _arr(hopper_n(F_steep, mu_h, beta_deg, S=S))
+    else:
+        F_steep = _arr(en1991_steep_filling_F(beta_deg, mu_h, b=b))
+        n_steep = _arr(en1991_steep_filling_n(beta_deg, mu_h, b=b, S=S))
+    K_sh = np.minimum(_arr(K), 1.0)  # K > 1 is always steep; keep the unused branch finite
+    F_shallow = _arr(en1991_shallow_F(beta_deg, K_sh, b=b))
+    n_shallow = _arr(en1991_shallow_n(beta_deg, K_sh, b=b, S=S))
+    mu_eff = np.where(steep, mu_h_a, _arr(en1991_shallow_mu_heff(beta_deg, K_sh)))
+    F = np.where(steep, F_steep, F_shallow)
+    n = np.where(steep, n_steep, n_shallow)
+    p_v = _arr(hopper_vertical_stress(x, h_h, gamma, n, p_vft))
+    p_n = F * p_v
+    return HopperPressures(_out(p_n), _out(mu_eff * p_n), _out(p_v), cls)
