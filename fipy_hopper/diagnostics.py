@@ -1,0 +1,163 @@
+"""What is measured from a run (method.md, sec. 4).  Diagnostics read the state, never change it.
+
+- discharge rate ``W`` from the mass booked through the outlet faces (the same face values the
+  transport uses, so ``M(t) + discharged(t) = M(0)`` to round-off), and its steady value;
+- the mass-flow index and stagnant fraction of the cone, and the ``mass``/``funnel`` call;
+- the normal wall pressure ``p_n = -n.sigma.n`` and shear ``tau = t.sigma.n`` along the wall.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import geometry
+
+
+# ---------------------------------------------------------------- discharge rate
+def steady_rate(t, mass_in_hopper, discharge_rate, t_open=0.0, upper=0.9, lower=0.2,
+                settle_time=0.1):
+    """Steady discharge rate (kg/s) and the spread of ``W`` over the plateau.
+
+    Plateau rule: the samples taken at least ``settle_time`` s after the outlet opened while the
+    hopper still held between ``lower`` and ``upper`` of its initial mass (the start transient
+    and the final emptying of the cone are excluded).  The steady rate is the median of ``W``
+    over the plateau, the spread its interquartile range relative to the median.  When no sample
+    qualifies (a short run), the samples of the last 75% of the run are used.  Returns
+    ``(rate, spread, n_samples)``; ``rate`` is NaN when there is nothing to measure.
+    """
+    t = np.asarray(t, float)
+    m = np.asarray(mass_in_hopper, float)
+    w = np.asarray(discharge_rate, float)
+    if len(t) == 0:
+        return math.nan, math.nan, 0
+    m0 = m[0] if len(m) else 0.0
+    sel = (t >= t_open + settle_time) & (m <= upper * m0) & (m >= lower * m0)
+    if sel.sum() < 3:
+        sel = t >= t_open + 0.25 * (t[-1] - t_open)
+    if sel.sum() == 0:
+        return math.nan, math.nan, 0
+    ws = w[sel]
+    med = float(np.median(ws))
+    q75, q25 = np.percentile(ws, [75, 25])
+    spread = float((q75 - q25) / med) if med > 0 else math.nan
+    return med, spread, int(sel.sum())
+
+
+def fit_power_law(x, y):
+    """Least-squares fit of ``y = a x^n`` in log space; returns ``(a, n)``."""
+    n, log_a = np.polyfit(np.log(np.asarray(x, float)), np.log(np.asarray(y, float)), 1)
+    return float(math.exp(log_a)), float(n)
+
+
+# ---------------------------------------------------------------- flow mode
+@dataclass(frozen=True)
+class FlowModeRule:
+    """Mass/funnel classification (stated rule).
+
+    At heights ``z/h_c`` in ``heights`` within the cone, the mass-flow index is the mean ratio of
+    the downward speed next to the wall (cells whose centre is 1 to 2.5 cells from the wall) to
+    the downward speed at the axis (first two cell columns).  The stagnant fraction is the share
+    of the cone's material (``alpha > 1/2``) moving slower than ``stagnant_speed`` times the mean
+    downward speed of the cone's material.  Mass flow when ``index >= index_threshold`` and
+    ``stagnant <= stagnant_threshold``; funnel flow otherwise.
+    """
+
+    heights: tuple = (0.3, 0.5, 0.7)
+    index_threshold: float = 0.2
+    stagnant_speed: float = 0.05
+    stagnant_threshold: float = 0.15
+
+
+def flow_mode_measures(model, state, rule: FlowModeRule = FlowModeRule()):
+    """Mass-flow index and stagnant fraction of the cone from the current velocity field."""
+    g = model.grid
+    geom = model.cfg.hopper
+    vz_cell = 0.25 * (state.v[1, :-1, :-1] + state.v[1, :-1, 1:] + state.v[1, 1:, :-1]
+                      + state.v[1, 1:, 1:])
+    down = -vz_cell
+    R, Z = np.meshgrid(g.r_cells, g.z_cells)
+    d = geometry.signed_distance(R, Z, geom)
+    full = state.alpha > 0.5
+    ratios = []
+    for frac in rule.heights:
+        zc = frac * geom.cone_height
+        row = int(np.argmin(np.abs(g.z_cells - zc)))
+        near_wall = (d[row] >= 1.0 * g.h) & (d[row] <= 2.5 * g.h) & full[row]
+        axis = (np.arange(g.nr) < 2) & full[row]
+        if near_wall.any() and axis.any():
+            v_axis = float(np.mean(down[row, axis]))
+            if v_axis > 1e-9:
+                ratios.append(float(np.mean(down[row, near_wall])) / v_axis)
+    index = float(np.mean(ratios)) if ratios else math.nan
+    cone = full & (Z > 0) & (Z < geom.cone_height) & (g.kappa > 0)
+    if cone.any():
+        weights = (state.alpha * model.open_volume)[cone]
+        mean_down = float(np.sum(down[cone] * weights) / np.sum(weights))
+        slow = down[cone] < rule.stagnant_speed * max(mean_down, 1e-12)
+        stagnant = float(np.sum(weights[slow]) / np.sum(weights))
+    else:
+        stagnant = math.nan
+    return index, stagnant
+
+
+def classify_flow_mode(index, stagnant, rule: FlowModeRule = FlowModeRule()) -> str:
+    """``"mass"`` or ``"funnel"`` by :class:`FlowModeRule`."""
+    if not np.isfinite(index):
+        return "funnel"
+    mass = index >= rule.index_threshold and (
+        not np.isfinite(stagnant) or stagnant <= rule.stagnant_threshold)
+    return "mass" if mass else "funnel"
+
+
+# ---------------------------------------------------------------- wall pressure
+class WallSampler:
+    """Normal pressure and shear on the wall, binned along the arc length ``s``.
+
+    The cells whose centres lie between ``0.5`` and ``2.5`` cells from the wall (inside the
+    material, off the cut cells) are assigned to the wall point nearest to them; each bin of
+    ``bin_cells`` cells of arc length averages their stress weighted by ``alpha kappa V``, and
+    ``p_n = -n.sigma.n``, ``tau = t.sigma.n`` with the wall normal ``n`` (into the wall) and
+    the tangent ``t`` pointing up the wall.  Pressures are positive in compression (Pa).
+    """
+
+    def __init__(self, model, bin_cells: float = 3.0):
+        g, geom = model.grid, model.cfg.hopper
+        self.model = model
+        R, Z = np.meshgrid(g.r_cells, g.z_cells)
+        d = geometry.signed_distance(R, Z, geom)
+        vertices = geometry.wall_polyline(geom, 1e3, 1e3)
+        pr, pz, seg = geometry._nearest_on_polyline(R, Z, vertices)
+        band = (d >= 0.5 * g.h) & (d <= 2.5 * g.h) & (seg >= 1) & (pz > 0) & (
+            pz < geom.fill_level)
+        s = geometry.arc_length(pz, geom)
+        width = bin_cells * g.h
+        s_max = geometry.arc_length(geom.fill_level, geom)
+        self.edges = np.arange(0.0, s_max + width, width)
+        self.centres = 0.5 * (self.edges[1:] + self.edges[:-1])
+        self.cells = np.flatnonzero(band.ravel())
+        self.bins = np.clip(np.digitize(s.ravel()[self.cells], self.edges) - 1, 0,
+                            len(self.centres) - 1)
+        r_w, z_w, nr, nz = geometry.wall_point(self.centres, geom)
+        self.r, self.z, self.nr, self.nz = r_w, z_w, nr, nz
+
+    def profile(self, state):
+        """``(s, r, z, p_n, tau)`` arrays for the bins that hold material (Pa)."""
+        m = self.model
+        w = (state.alpha * m.open_volume).ravel()[self.cells]
+        w = np.where(state.alpha.ravel()[self.cells] > 0.5, w, 0.0)
+        sig = state.sigma.reshape(-1, 4)[self.cells]
+        nb = len(self.centres)
+        wsum = np.bincount(self.bins, w, nb)
+        mean = np.stack([np.bincount(self.bins, w * sig[:, k], nb) for k in range(4)], axis=1)
+        ok = wsum > 0
+        mean[ok] /= wsum[ok, None]
+        n_r, n_z = self.nr, self.nz
+        t_r, t_z = -n_z, n_r          # tangent pointing up the wall
+        trac_r = mean[:, 0] * n_r + mean[:, 3] * n_z
+        trac_z = mean[:, 3] * n_r + mean[:, 1] * n_z
+        p_n = -(trac_r * n_r + trac_z * n_z)
+        tau = trac_r * t_r + trac_z * t_z
+        return self.centres[ok], self.r[ok], self.z[ok], p_n[ok], tau[ok]
