@@ -78,8 +78,15 @@ class HopperModel:
         self.mu_wall = cfg.wall.friction_coefficient
         self.r_c = g.r_cells
         self.open_volume = g.kappa * g.cell_volume          # (nz, nr) m^3/rad
-        self.transport = Transport(g.mesh, g.kappa.ravel(), g.face_aperture,
-                                   g.outflow_faces, TRANSPORTED)
+        # "axisymmetric": FiPy's van Leer update with the reconstruction distances of the
+        # cylindrical cells corrected; FiPy's own geometry over/undershoots on cylindrical
+        # grids (see fipy_hopper.transport), this one stays within [0, 1]
+        self.transport_open = Transport(g.mesh, g.kappa.ravel(), g.face_aperture,
+                                        g.outflow_faces, TRANSPORTED, scheme="axisymmetric")
+        # with the outlet plate closed, no transfer (flux or redistribution) crosses the outlet
+        plate_aperture = np.where(g.outlet_faces, 0.0, g.face_aperture)
+        self.transport_closed = Transport(g.mesh, g.kappa.ravel(), plate_aperture,
+                                          g.outflow_faces, TRANSPORTED, scheme="axisymmetric")
         normals = np.asarray(g.mesh.faceNormals)
         nzf = g.n_zfaces
         self.face_sign = np.concatenate([normals[1, :nzf], normals[0, nzf:]])
@@ -201,21 +208,19 @@ class HopperModel:
                   "s_rr": alpha * state.sigma[..., 0], "s_zz": alpha * state.sigma[..., 1],
                   "s_tt": alpha * state.sigma[..., 2], "s_rz": alpha * state.sigma[..., 3],
                   "eps_p": alpha * state.eps_p, "layer": alpha * state.layer}
-        flat = {k: np.ascontiguousarray(f).ravel() for k, f in fields.items()}
-        new, face_flux = self.transport.step(flat, u_mean, dt_T)
+        stacked = np.stack([np.ascontiguousarray(fields[k]).ravel() for k in TRANSPORTED])
+        transport = self.transport_closed if state.plate_closed else self.transport_open
+        new, face_flux = transport.step_stacked(stacked, u_mean, dt_T)
+        # compaction above alpha = 1 (and round-off below 0) is moved to face neighbours with
+        # room, conservatively; the alpha-weighted fields move with the same fractions
+        new_alpha_flat, moved = transport.redistribute_overshoot(new[0])
+        if moved.moved:
+            new = transport.apply_redistribution(new, moved)
+            new[0] = new_alpha_flat
+        alpha_flux = face_flux[0] + (moved.face_flux if moved.face_flux is not None else 0.0)
         shape = alpha.shape
-        new_alpha = new["alpha"].reshape(shape)
-        # overshoot above 1 (compaction) is moved to neighbours with room, conservatively
-        new_alpha_r, moved = self.transport.redistribute_overshoot(new_alpha.ravel())
-        scale = {k: None for k in TRANSPORTED}
-        del scale
-        alpha_flux = face_flux["alpha"] + moved.get("face_flux", 0.0) \
-            if isinstance(moved, dict) else face_flux["alpha"]
-        new_alpha = new_alpha_r.reshape(shape)
-        carried = {}
-        for k in TRANSPORTED[1:]:
-            carried[k] = self.transport.apply_redistribution(new[k], moved).reshape(shape) \
-                if hasattr(self.transport, "apply_redistribution") else new[k].reshape(shape)
+        new_alpha = new[0].reshape(shape)
+        carried = {k: new[i].reshape(shape) for i, k in enumerate(TRANSPORTED)}
         safe = np.where(new_alpha >= 1e-12, new_alpha, 1.0)
         present = new_alpha >= 1e-12
         sigma = np.stack([carried[k] for k in ("s_rr", "s_zz", "s_tt", "s_rz")], axis=-1)
