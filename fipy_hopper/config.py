@@ -65,7 +65,8 @@ class HopperGeometry:
     """Conical hopper below a cylindrical bin; the outlet plane is ``z = 0``, ``z`` upward.
 
     ``fill_height`` and ``bin_height`` are measured above the cone-cylinder transition.
-    ``half_angle_deg`` is the cone half-angle from the vertical.
+    ``half_angle_deg`` is the cone half-angle from the vertical, in ``(0, 90]``; 90 is a
+    flat-bottomed bin.
     """
 
     bin_diameter: float = 0.3
@@ -76,7 +77,8 @@ class HopperGeometry:
 
     def __post_init__(self):
         _check_range("hopper.bin_diameter", self.bin_diameter, 0, None, low_open=True, unit=" m")
-        _check_range("hopper.half_angle_deg", self.half_angle_deg, 0, 90, True, True, " deg")
+        _check_range("hopper.half_angle_deg", self.half_angle_deg, 0, 90, low_open=True,
+                     unit=" deg")
         _check_range("hopper.outlet_diameter", self.outlet_diameter, 0, None, low_open=True,
                      unit=" m")
         _check_range("hopper.bin_height", self.bin_height, 0, None, low_open=True, unit=" m")
@@ -105,7 +107,10 @@ class HopperGeometry:
 
     @property
     def cone_height(self) -> float:
-        """Height of the cone-cylinder transition above the outlet, ``(R - R0) / tan(theta)``."""
+        """Height of the cone-cylinder transition above the outlet, ``(R - R0) / tan(theta)``
+        (zero for a flat-bottomed bin)."""
+        if self.half_angle_deg >= 90.0:
+            return 0.0
         return (self.bin_radius - self.outlet_radius) / math.tan(self.half_angle)
 
     @property

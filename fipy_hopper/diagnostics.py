@@ -130,9 +130,9 @@ class WallSampler:
         d = geometry.signed_distance(R, Z, geom)
         vertices = geometry.wall_polyline(geom, 1e3, 1e3)
         pr, pz, seg = geometry._nearest_on_polyline(R, Z, vertices)
-        band = (d >= 0.5 * g.h) & (d <= 2.5 * g.h) & (seg >= 1) & (pz > 0) & (
+        band = (d >= 0.5 * g.h) & (d <= 2.5 * g.h) & (seg >= 1) & (pz >= 0) & (
             pz < geom.fill_level)
-        s = geometry.arc_length(pz, geom)
+        s = geometry.arc_length_of_point(pr, pz, geom)
         width = bin_cells * g.h
         s_max = geometry.arc_length(geom.fill_level, geom)
         self.edges = np.arange(0.0, s_max + width, width)

@@ -1,10 +1,11 @@
 """The hopper wall as pure functions of ``(r, z)``: signed distance, normal, arc length.
 
-The wall is a rigid solid occupying ``{z >= 0, r >= r_wall(z)}``, with
-``r_wall(z) = R0 + z tan(theta)`` in the cone (``0 <= z <= h_c``) and ``R`` in the bin.  Its
-boundary is the polyline lip ``(R_far, 0) -> (R0, 0) -> (R, h_c) -> (R, z_far)``: the underside
-of the hopper (horizontal, at the outlet plane), the cone wall and the bin wall.  Below ``z = 0``
-lies the open free-fall zone.  Distances are exact (distance to the nearest segment).
+The wall is a rigid solid occupying ``{r >= r_wall(z)}`` with ``r_wall(z) = R0`` below the
+outlet (``z < 0``: the free-fall zone is a frictionless tube of the outlet's radius, which the
+contracting jet does not touch), ``R0 + z tan(theta)`` in the cone (``0 <= z <= h_c``) and ``R``
+in the bin.  Its boundary is the polyline ``(R0, -far) -> (R0, 0) -> (R, h_c) -> (R, far)``.
+A half-angle of 90 degrees is a flat-bottomed bin (``h_c = 0``, the cone segment is the floor).
+Distances are exact (distance to the nearest segment).
 """
 
 from __future__ import annotations
@@ -15,9 +16,12 @@ from .config import HopperGeometry
 
 
 def wall_polyline(geom: HopperGeometry, r_far: float, z_far: float) -> np.ndarray:
-    """Vertices (k, 2) of the wall boundary from the far underside, round the lip, to the top."""
+    """Vertices (k, 2) of the wall boundary: free-fall tube, lip, cone (or floor), bin, top.
+
+    Segment 0 is the free-fall tube, 1 the cone (the floor of a flat bin), 2 the bin wall.
+    """
     R, R0, hc = geom.bin_radius, geom.outlet_radius, geom.cone_height
-    return np.array([[max(r_far, R), 0.0], [R0, 0.0], [R, hc], [R, max(z_far, hc)]])
+    return np.array([[R0, -abs(z_far)], [R0, 0.0], [R, hc], [R, max(z_far, hc)]])
 
 
 def _nearest_on_polyline(r, z, vertices):
@@ -44,16 +48,18 @@ def _nearest_on_polyline(r, z, vertices):
 
 
 def wall_radius(z, geom: HopperGeometry):
-    """Radius of the wall at height ``z >= 0`` (m)."""
+    """Radius of the wall at height ``z`` (m): ``R0`` below the outlet, cone, then bin."""
     z = np.asarray(z, dtype=float)
-    return np.minimum(geom.outlet_radius + z * np.tan(geom.half_angle), geom.bin_radius)
+    if geom.cone_height == 0.0:
+        cone = np.where(z > 0.0, geom.bin_radius, geom.outlet_radius)
+    else:
+        cone = geom.outlet_radius + np.maximum(z, 0.0) * np.tan(geom.half_angle)
+    return np.minimum(cone, geom.bin_radius)
 
 
 def in_solid(r, z, geom: HopperGeometry):
     """True where ``(r, z)`` lies inside the wall body."""
-    r = np.asarray(r, dtype=float)
-    z = np.asarray(z, dtype=float)
-    return (z >= 0.0) & (r >= wall_radius(np.maximum(z, 0.0), geom))
+    return np.asarray(r, dtype=float) >= wall_radius(z, geom)
 
 
 def signed_distance(r, z, geom: HopperGeometry, r_far: float = 1e3, z_far: float = 1e3):
@@ -97,11 +103,23 @@ def wall_normal(r, z, geom: HopperGeometry, r_far: float = 1e3, z_far: float = 1
 
 
 def arc_length(z, geom: HopperGeometry):
-    """Arc length ``s`` (m) along the wall from the outlet lip up to the wall point at height ``z``."""
+    """Arc length ``s`` (m) along the wall from the outlet lip up to the bin-wall or cone point
+    at height ``z`` (for a flat bin, heights above the floor are on the bin wall)."""
     z = np.asarray(z, dtype=float)
     hc = geom.cone_height
-    s_cone = np.minimum(z, hc) / np.cos(geom.half_angle)
-    return s_cone + np.maximum(z - hc, 0.0)
+    s_cone = np.minimum(z, hc) / np.cos(geom.half_angle) if hc > 0 else 0.0 * z
+    return s_cone + (transition_arc_length(geom) if hc == 0 else 0.0) + np.maximum(z - hc, 0.0)
+
+
+def arc_length_of_point(r, z, geom: HopperGeometry):
+    """Arc length (m) of a wall point ``(r, z)`` on the cone/floor or the bin wall."""
+    r = np.asarray(r, dtype=float)
+    z = np.asarray(z, dtype=float)
+    s_t = transition_arc_length(geom)
+    on_cone = (z <= geom.cone_height) & (r < geom.bin_radius - 1e-12) if geom.cone_height > 0 \
+        else (z <= 0.0)
+    s_cone = np.clip(r - geom.outlet_radius, 0.0, None) / np.sin(geom.half_angle)
+    return np.where(on_cone, s_cone, s_t + (z - geom.cone_height))
 
 
 def wall_point(s, geom: HopperGeometry):
@@ -111,15 +129,50 @@ def wall_point(s, geom: HopperGeometry):
     """
     s = np.asarray(s, dtype=float)
     hc = geom.cone_height
-    s_t = hc / np.cos(geom.half_angle)
+    s_t = transition_arc_length(geom)
     in_cone = s <= s_t
-    z = np.where(in_cone, s * np.cos(geom.half_angle), hc + (s - s_t))
-    r = wall_radius(z, geom)
-    nr = np.where(in_cone, np.cos(geom.half_angle), 1.0)
-    nz = np.where(in_cone, -np.sin(geom.half_angle), 0.0)
+    th = geom.half_angle
+    z = np.where(in_cone, s * np.cos(th) if hc > 0 else 0.0 * s, hc + (s - s_t))
+    r = np.where(in_cone, geom.outlet_radius + s * np.sin(th), geom.bin_radius)
+    nr = np.where(in_cone, np.cos(th) if hc > 0 else 0.0, 1.0)
+    nz = np.where(in_cone, -np.sin(th), 0.0)
     return r, z, nr, nz
 
 
 def transition_arc_length(geom: HopperGeometry) -> float:
-    """Arc length of the cone-cylinder transition from the outlet lip (m)."""
-    return geom.cone_height / np.cos(geom.half_angle)
+    """Arc length of the cone-cylinder transition from the outlet lip (m): the cone's slant
+    length ``(R - R0) / sin(theta)`` (the floor's width for a flat bin)."""
+    return (geom.bin_radius - geom.outlet_radius) / np.sin(geom.half_angle)
+
+
+def segment_contacts(r, z, geom: HopperGeometry, reach: float, r_far: float = 1e3,
+                     z_far: float = 1e3):
+    """Contact sets of the wall segments: ``[(index, mask, n_r, n_z), ...]``.
+
+    A point is in contact with segment ``k`` when its projection falls on the segment
+    (``0 <= t <= 1``) and it lies less than ``reach`` in front of the segment or anywhere behind
+    it (inside the wall).  A point near a concave corner (the floor and the bin wall, the cone
+    and the bin) is in contact with both segments, so both normals constrain it; points near
+    the convex lip that project beyond both segments belong to none (see
+    :func:`wall_normal` for their nearest-point normal).  ``n`` points into the wall.
+    """
+    vertices = wall_polyline(geom, r_far, z_far)
+    r = np.asarray(r, dtype=float)
+    z = np.asarray(z, dtype=float)
+    out = []
+    for k in range(len(vertices) - 1):
+        a, b = vertices[k], vertices[k + 1]
+        ab = b - a
+        length = float(np.hypot(*ab))
+        if length == 0.0:
+            continue
+        t = ((r - a[0]) * ab[0] + (z - a[1]) * ab[1]) / length ** 2
+        normal = np.array([ab[1], -ab[0]]) / length
+        mid = 0.5 * (a + b)
+        if not in_solid(mid[0] + 1e-9 * normal[0], mid[1] + 1e-9 * normal[1], geom):
+            normal = -normal
+        # signed distance in front of the segment (positive on the material side)
+        front = -((r - a[0]) * normal[0] + (z - a[1]) * normal[1])
+        mask = (t >= -1e-12) & (t <= 1 + 1e-12) & (front < reach)
+        out.append((k, mask, float(normal[0]), float(normal[1])))
+    return out

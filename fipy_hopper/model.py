@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import momentum
+from . import geometry, momentum
 from .config import HopperConfig
 from .mesh import HopperGrid, build_grid
 
@@ -91,9 +91,19 @@ class HopperModel:
         nzf = g.n_zfaces
         self.face_sign = np.concatenate([normals[1, :nzf], normals[0, nzf:]])
         self.face_area = np.asarray(g.mesh._faceAreas) * g.face_aperture
-        # wall contact nodes: inside the wall or within half a cell of it
-        self.contact_nodes = g.node_distance < 0.5 * g.h
+        # wall contact: every node within half a cell in front of a wall segment (or behind
+        # it) is constrained by that segment's normal; nodes round the convex lip by the
+        # normal towards the nearest wall point.  The free-fall tube (segment 0) is frictionless.
         RN, ZN = np.meshgrid(g.r_nodes, g.z_nodes)
+        reach = 0.5 * g.h
+        self.contact_passes = []
+        covered = np.zeros_like(RN, dtype=bool)
+        for k, mask, n_r, n_z in geometry.segment_contacts(RN, ZN, cfg.hopper, reach):
+            normal = np.array([n_r, n_z])[:, None, None] * np.ones((2,) + RN.shape)
+            self.contact_passes.append((mask, normal, 0.0 if k == 0 else self.mu_wall))
+            covered |= mask
+        lip = (g.node_distance < reach) & ~covered
+        self.contact_passes.append((lip, g.node_normal, self.mu_wall))
         self.plate_nodes = (np.abs(ZN) < 1e-12) & (RN <= cfg.hopper.outlet_radius + 1e-12)
         self.hopper_cells = (g.z_cells[:, None] > 0.0) & np.ones((1, g.nr), bool)
         self.hourglass_base = (cfg.numerics.hourglass_coefficient * self.rho * self.c_p
@@ -163,7 +173,8 @@ class HopperModel:
         v = np.where(heavy[None], state.v + dt * force / np.where(heavy, m, 1.0)[None], 0.0)
         if state.stage == "filling":
             v *= 1.0 / (1.0 + self.fill_damping * dt)
-        momentum.apply_wall_contact(v, g.node_normal, self.contact_nodes, self.mu_wall)
+        for mask, normal, mu in self.contact_passes:
+            momentum.apply_wall_contact(v, normal, mask, mu)
         if state.plate_closed:
             plate_normal = np.array([0.0, -1.0])[:, None, None] * np.ones_like(v)
             momentum.apply_wall_contact(v, plate_normal, self.plate_nodes, self.mu_wall)

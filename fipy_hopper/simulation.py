@@ -18,8 +18,11 @@ Stages:
 
 from __future__ import annotations
 
+import json
 import math
+import os
 import sys
+import tempfile
 import time
 from dataclasses import dataclass, field
 from typing import Callable, Optional
@@ -79,6 +82,20 @@ class Simulation:
         self._started = None
         self._last_progress = 0.0
         self.t_open = math.nan
+        self.next_sample = math.nan
+        self.wall_schedules: list = []   # [fn, wall-time interval, last call]
+
+    def add_wall_time_callback(self, fn: Callable, interval: float):
+        """Call ``fn(sim, state)`` every ``interval`` seconds of wall time (e.g. checkpoints)."""
+        self.wall_schedules.append([fn, interval, time.perf_counter()])
+
+    def _call_wall_schedules(self):
+        now = time.perf_counter()
+        for entry in self.wall_schedules:
+            fn, interval, last = entry
+            if now - last >= interval:
+                fn(self, self.state)
+                entry[2] = time.perf_counter()
 
     # -------------------------------------------------------------- callbacks
     def add_callback(self, fn: Callable, interval: float, stages=("filling", "discharge")):
@@ -124,6 +141,7 @@ class Simulation:
             if st.step % check_every == 0:
                 self._check_stable()
                 self._call_schedules()
+                self._call_wall_schedules()
                 if st.t >= num.gravity_ramp_time and m.kinetic_energy(st) < threshold:
                     self.record.fill_at_rest = True
                     break
@@ -146,9 +164,9 @@ class Simulation:
             self.t_open = st.t
             rec.initial_mass = m.mass_in_hopper(st)
             self._log_sample(force=True)
+            self.next_sample = st.t + run.output_interval
         m0 = rec.initial_mass
         check_every = max(1, int(0.002 / m.dt))
-        next_sample = st.t + run.output_interval
         stage_marks = {"early_discharge": 0.9, "mid_discharge": 0.5}
         reason = ""
         while not reason:
@@ -157,9 +175,10 @@ class Simulation:
                 continue
             self._check_stable()
             self._call_schedules()
-            if st.t >= next_sample - 1e-12:
+            self._call_wall_schedules()
+            if st.t >= self.next_sample - 1e-12:
                 self._log_sample()
-                next_sample += run.output_interval
+                self.next_sample += run.output_interval
             t_dis = st.t - self.t_open
             mass = m.mass_in_hopper(st)
             for name, frac in stage_marks.items():
@@ -252,6 +271,56 @@ class Simulation:
         self._last_progress = now
         sys.stderr.write(f"\r{text}  wall {now - self._started:.0f} s   ")
         sys.stderr.flush()
+
+    # -------------------------------------------------------------- checkpoints
+    def checkpoint(self, path) -> None:
+        """Write everything needed to resume to ``path`` (``.npz``), atomically.
+
+        The file is written to a temporary name in the same directory and renamed over
+        ``path``, so a run killed at any moment leaves either the old or the new checkpoint.
+        """
+        st = self.state
+        arrays = {k: v for k, v in st.__dict__.items() if isinstance(v, np.ndarray)}
+        scalars = {k: v for k, v in st.__dict__.items() if not isinstance(v, np.ndarray)}
+        rec = dict(self.record.__dict__)
+        wall = rec.pop("wall")
+        for stage, values in wall.items():
+            for k, arr in enumerate(values[1:]):
+                arrays[f"wall__{stage}__{k}"] = np.asarray(arr)
+        meta = {"state": scalars, "record": rec,
+                "wall_times": {stage: values[0] for stage, values in wall.items()},
+                "t_open": self.t_open, "next_sample": self.next_sample,
+                "schedules": [s.next_time for s in self.schedules]}
+        path = os.fspath(path)
+        folder = os.path.dirname(os.path.abspath(path))
+        fd, tmp = tempfile.mkstemp(prefix=".checkpoint-", suffix=".npz", dir=folder)
+        try:
+            with os.fdopen(fd, "wb") as fh:
+                np.savez(fh, __meta__=np.array(json.dumps(meta)), **arrays)
+                fh.flush()
+                os.fsync(fh.fileno())
+            os.replace(tmp, path)
+        except BaseException:
+            if os.path.exists(tmp):
+                os.unlink(tmp)
+            raise
+
+    def restore(self, path) -> None:
+        """Continue from a checkpoint written by :meth:`checkpoint` (same configuration)."""
+        with np.load(path, allow_pickle=False) as data:
+            meta = json.loads(str(data["__meta__"]))
+            arrays = {k: data[k].copy() for k in data.files if k != "__meta__"}
+        wall = {}
+        for stage, t_stage in meta["wall_times"].items():
+            wall[stage] = (t_stage,) + tuple(arrays.pop(f"wall__{stage}__{k}") for k in range(5))
+        self.state = State(**meta["state"], **{k: v for k, v in arrays.items()
+                                                if not k.startswith("wall__")})
+        self.record = RunRecord(**meta["record"], wall=wall)
+        self.t_open = meta["t_open"]
+        self.next_sample = meta["next_sample"]
+        for s, t_next in zip(self.schedules, meta["schedules"]):
+            s.next_time = t_next
+        self.model._mass = None
 
     # -------------------------------------------------------------- results
     def summary(self) -> dict:

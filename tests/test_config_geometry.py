@@ -23,7 +23,7 @@ def test_reference_defaults():
 @pytest.mark.parametrize("section, key, value, words", [
     ("hopper", "outlet_diameter", 0.4, ["hopper.outlet_diameter", "bin"]),
     ("hopper", "fill_height", 0.5, ["hopper.fill_height", "top of the bin"]),
-    ("hopper", "half_angle_deg", 95, ["hopper.half_angle_deg", "(0, 90)"]),
+    ("hopper", "half_angle_deg", 95, ["hopper.half_angle_deg", "(0, 90]"]),
     ("hopper", "bin_diameter", -1, ["hopper.bin_diameter", "allowed range"]),
     ("material", "poisson_ratio", 0.5, ["material.poisson_ratio", "(-1, 0.5)"]),
     ("material", "dilation_angle_deg", 40, ["material.dilation_angle_deg", "[0, 30]"]),
@@ -75,8 +75,9 @@ def test_signed_distance_is_exact_distance():
     # bin wall and axis
     assert geometry.signed_distance(0.0, 0.5, geom) == pytest.approx(0.15)
     assert geometry.signed_distance(0.16, 0.5, geom) == pytest.approx(-0.01)
-    # below the lip: distance to the corner
-    assert geometry.signed_distance(0.03, -0.02, geom) == pytest.approx(0.02)
+    # below the outlet: the free-fall tube of the outlet's radius
+    assert geometry.signed_distance(0.02, -0.02, geom) == pytest.approx(0.01)
+    assert geometry.signed_distance(0.04, -0.02, geom) == pytest.approx(-0.01)
     assert geometry.arc_length(geom.cone_height, geom) == pytest.approx(
         geometry.transition_arc_length(geom))
 
