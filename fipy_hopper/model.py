@@ -63,10 +63,14 @@ class State:
 class HopperModel:
     """The hopper on its grid, with material, wall and numerics from a :class:`HopperConfig`."""
 
-    def __init__(self, cfg: HopperConfig, grid: HopperGrid | None = None):
+    def __init__(self, cfg: HopperConfig, grid: HopperGrid | None = None,
+                 kernels: str = "numba"):
         from .material import update as material_update
         from .transport import Transport
 
+        if kernels not in ("numba", "numpy"):
+            raise ValueError(f"kernels must be 'numba' or 'numpy', not {kernels!r}")
+        self.kernels = kernels
         self.cfg = cfg
         self.grid = grid if grid is not None else build_grid(cfg)
         self.material = cfg.material.mohr_coulomb()
@@ -105,6 +109,13 @@ class HopperModel:
         lip = (g.node_distance < reach) & ~covered
         self.contact_passes.append((lip, g.node_normal, self.mu_wall))
         self.plate_nodes = (np.abs(ZN) < 1e-12) & (RN <= cfg.hopper.outlet_radius + 1e-12)
+        self.plate_normal = np.array([0.0, -1.0])[:, None, None] * np.ones((2,) + RN.shape)
+        self.contact_list = _contact_list(self.contact_passes)
+        self.plate_list = _contact_list([(self.plate_nodes, self.plate_normal, self.mu_wall)])
+        self.light_mass = 1e-12 * self.rho * g.h ** 3
+        self.open_faces = self.face_area > 0
+        self._scratch = (np.empty((2, g.nz + 1, g.nr + 1)), np.empty((g.nz, g.nr, 4)),
+                         np.empty((g.nz, g.nr, 4)))
         self.hopper_cells = (g.z_cells[:, None] > 0.0) & np.ones((1, g.nr), bool)
         self.hourglass_base = (cfg.numerics.hourglass_coefficient * self.rho * self.c_p
                                * self.open_volume / g.h)
@@ -165,30 +176,34 @@ class HopperModel:
         g, dt = self.grid, self.dt
         alpha_min = self.cfg.numerics.alpha_min
         m = self.node_mass(state)
-        mixture = state.alpha[..., None] * state.sigma
-        force = -momentum.internal_force(mixture, self.open_volume, self.r_c, g.h)
-        force += momentum.hourglass_force(state.v, self.hourglass_base * state.alpha)
-        force[1] -= m * self.gravity(state)
-        heavy = m > 1e-12 * self.rho * g.h ** 3
-        v = np.where(heavy[None], state.v + dt * force / np.where(heavy, m, 1.0)[None], 0.0)
-        if state.stage == "filling":
-            v *= 1.0 / (1.0 + self.fill_damping * dt)
-        for mask, normal, mu in self.contact_passes:
-            momentum.apply_wall_contact(v, normal, mask, mu)
-        if state.plate_closed:
-            plate_normal = np.array([0.0, -1.0])[:, None, None] * np.ones_like(v)
-            momentum.apply_wall_contact(v, plate_normal, self.plate_nodes, self.mu_wall)
-        v[0, :, 0] = 0.0
-        state.v = v
-
-        D, omega = momentum.strain_rate(v, self.r_c, g.h)
-        sigma = momentum.jaumann_rotate(state.sigma, omega, dt)
-        loaded = state.alpha >= alpha_min
-        sig_new, deps_p = self._material_update(sigma[loaded], D[loaded] * dt, self.material)
-        sigma[loaded] = sig_new
-        sigma[~loaded] = 0.0
-        state.sigma = sigma
-        state.eps_p[loaded] += _equivalent_strain(deps_p)
+        damping = self.fill_damping if state.stage == "filling" else 0.0
+        if self.kernels == "numba":
+            force, d_eps, sigma = self._scratch
+            v = state.v
+            momentum.nodal_update_kernel(v, m, state.alpha[..., None] * state.sigma,
+                                         self.open_volume, self.r_c, g.h,
+                                         self.hourglass_base * state.alpha,
+                                         self.gravity(state), dt, damping, self.light_mass,
+                                         force)
+            momentum.contact_kernel(v, *self.contact_list)
+            if state.plate_closed:
+                momentum.contact_kernel(v, *self.plate_list)
+            v[0, :, 0] = 0.0
+            momentum.strain_rate_jaumann_kernel(v, state.sigma, self.r_c, g.h, dt, d_eps,
+                                                sigma)
+        else:
+            v = self._nodal_update_numpy(state, m, damping)
+            state.v = v
+            D, omega = momentum.strain_rate(v, self.r_c, g.h)
+            sigma = momentum.jaumann_rotate(state.sigma, omega, dt)
+            d_eps = D * dt
+        sig_new, deps_p = self._material_update(sigma.reshape(-1, 4), d_eps.reshape(-1, 4),
+                                                self.material)
+        loaded = (state.alpha >= alpha_min).ravel()
+        sig_new[~loaded] = 0.0
+        state.sigma = sig_new.reshape(state.sigma.shape)
+        state.eps_p += np.where(loaded, _equivalent_strain(deps_p), 0.0).reshape(
+            state.eps_p.shape)
 
         u_n = momentum.face_normal_velocity(v) * self.face_sign
         state.face_flux_sum += u_n * dt
@@ -199,12 +214,29 @@ class HopperModel:
             self.transport_step(state)
         return state
 
+    def _nodal_update_numpy(self, state: State, m: np.ndarray, damping: float) -> np.ndarray:
+        """Reference (numpy) nodal update: forces, velocity, damping, contact, axis."""
+        g, dt = self.grid, self.dt
+        mixture = state.alpha[..., None] * state.sigma
+        force = -momentum.internal_force(mixture, self.open_volume, self.r_c, g.h)
+        force += momentum.hourglass_force(state.v, self.hourglass_base * state.alpha)
+        force[1] -= m * self.gravity(state)
+        heavy = m > self.light_mass
+        v = np.where(heavy[None], state.v + dt * force / np.where(heavy, m, 1.0)[None], 0.0)
+        v *= 1.0 / (1.0 + damping * dt)
+        for mask, normal, mu in self.contact_passes:
+            momentum.apply_wall_contact(v, normal, mask, mu)
+        if state.plate_closed:
+            momentum.apply_wall_contact(v, self.plate_normal, self.plate_nodes, self.mu_wall)
+        v[0, :, 0] = 0.0
+        return v
+
     def _transport_due(self, state: State, u_n: np.ndarray) -> bool:
         num = self.cfg.numerics
         steps = round(state.flux_time / self.dt)
         if steps >= num.max_transport_interval:
             return True
-        speed = float(np.max(np.abs(u_n) * (self.face_area > 0))) if u_n.size else 0.0
+        speed = float(np.max(np.abs(u_n[self.open_faces]))) if self.open_faces.any() else 0.0
         return (speed + 1e-30) * (state.flux_time + self.dt) > num.transport_cfl * self.grid.h
 
     def transport_step(self, state: State) -> None:
@@ -267,6 +299,19 @@ class HopperModel:
             bad = np.argwhere(~np.isfinite(state.sigma).all(axis=-1))
             raise InstabilityError(f"non-finite field at step {state.step}, t = {state.t:.6g} s,"
                                    f" cell(s) {bad[:3].tolist()}")
+
+
+def _contact_list(passes):
+    """Flatten contact passes into ordered arrays ``(j, i, normals (K, 2), mu (K,))``."""
+    js, is_, normals, mus = [], [], [], []
+    for mask, normal, mu in passes:
+        j, i = np.nonzero(mask)
+        js.append(j)
+        is_.append(i)
+        normals.append(np.stack([normal[0][j, i], normal[1][j, i]], axis=1))
+        mus.append(np.full(len(j), mu))
+    return (np.concatenate(js).astype(np.int64), np.concatenate(is_).astype(np.int64),
+            np.ascontiguousarray(np.concatenate(normals)), np.concatenate(mus))
 
 
 def _equivalent_strain(deps_p: np.ndarray) -> np.ndarray:

@@ -187,3 +187,114 @@ def dual_momentum_transport(v, mass_old, mass_new, flux_z, flux_r, rho, bottom_o
         P[:, 0, :] += node_out[None] * v[:, 0, :]
     safe = np.where(mass_new > 0, mass_new, 1.0)
     return np.where(mass_new[None] > 0, P / safe[None], 0.0)
+
+
+# ----------------------------------------------------------------------------------------------
+# Compiled kernels (numba): the same arithmetic as the numpy functions above, fused per step.
+# tests/test_momentum.py holds them to the numpy reference.
+# ----------------------------------------------------------------------------------------------
+from numba import njit  # noqa: E402
+
+
+@njit(cache=True, error_model="numpy")
+def nodal_update_kernel(v, mass, stress, open_volume, r_c, h, hourglass_coefficient, gravity,
+                        dt, damping, light_mass, force):
+    """In place: ``v += dt (-f_int + f_hg + m g) / m`` then ``v /= (1 + damping dt)``.
+
+    ``stress`` (nz, nr, 4) is the mixture stress ``alpha sigma``; ``hourglass_coefficient``
+    (nz, nr) the per-cell viscous hourglass coefficient; nodes lighter than ``light_mass`` get
+    zero velocity.  ``force`` (2, nz+1, nr+1) is scratch.
+    """
+    nz, nr = open_volume.shape
+    g = 1.0 / (2.0 * h)
+    force[:] = 0.0
+    for j in range(nz):
+        for i in range(nr):
+            w = open_volume[j, i]
+            s_rr = stress[j, i, 0] * w
+            s_zz = stress[j, i, 1] * w
+            s_tt = stress[j, i, 2] * w
+            s_rz = stress[j, i, 3] * w
+            hoop = s_tt / (4.0 * r_c[i])
+            c = hourglass_coefficient[j, i]
+            mode_r = v[0, j, i] - v[0, j, i + 1] + v[0, j + 1, i + 1] - v[0, j + 1, i]
+            mode_z = v[1, j, i] - v[1, j, i + 1] + v[1, j + 1, i + 1] - v[1, j + 1, i]
+            # SW (-,-,+1), SE (+,-,-1), NE (+,+,+1), NW (-,+,-1): -f_int + f_hg
+            force[0, j, i] += -(g * (-s_rr - s_rz) + hoop) - c * mode_r
+            force[1, j, i] += -(g * (-s_rz - s_zz)) - c * mode_z
+            force[0, j, i + 1] += -(g * (s_rr - s_rz) + hoop) + c * mode_r
+            force[1, j, i + 1] += -(g * (s_rz - s_zz)) + c * mode_z
+            force[0, j + 1, i + 1] += -(g * (s_rr + s_rz) + hoop) - c * mode_r
+            force[1, j + 1, i + 1] += -(g * (s_rz + s_zz)) - c * mode_z
+            force[0, j + 1, i] += -(g * (-s_rr + s_rz) + hoop) + c * mode_r
+            force[1, j + 1, i] += -(g * (-s_rz + s_zz)) + c * mode_z
+    scale = 1.0 / (1.0 + damping * dt)
+    for j in range(nz + 1):
+        for i in range(nr + 1):
+            m = mass[j, i]
+            if m > light_mass:
+                v[0, j, i] = (v[0, j, i] + dt * force[0, j, i] / m) * scale
+                v[1, j, i] = (v[1, j, i] + dt * (force[1, j, i] / m - gravity)) * scale
+            else:
+                v[0, j, i] = 0.0
+                v[1, j, i] = 0.0
+
+
+@njit(cache=True, error_model="numpy")
+def contact_kernel(v, nodes_j, nodes_i, normals, mu):
+    """Impulse Coulomb contact applied node by node in list order (see apply_wall_contact)."""
+    for k in range(nodes_j.shape[0]):
+        j = nodes_j[k]
+        i = nodes_i[k]
+        n_r = normals[k, 0]
+        n_z = normals[k, 1]
+        vr = v[0, j, i]
+        vz = v[1, j, i]
+        vn = vr * n_r + vz * n_z
+        if vn > 0.0:
+            vr -= vn * n_r
+            vz -= vn * n_z
+            tn = vr * n_r + vz * n_z
+            t_r = vr - tn * n_r
+            t_z = vz - tn * n_z
+            speed = np.sqrt(t_r * t_r + t_z * t_z)
+            scale = 0.0
+            if speed > 0.0:
+                scale = max(0.0, 1.0 - mu[k] * vn / speed)
+            v[0, j, i] = (vr - t_r) + scale * t_r
+            v[1, j, i] = (vz - t_z) + scale * t_z
+
+
+@njit(cache=True, error_model="numpy")
+def strain_rate_jaumann_kernel(v, sigma, r_c, h, dt, d_eps, sigma_rot):
+    """Strain increment ``D dt`` (nz, nr, 4) and the Jaumann-rotated stress, as
+    :func:`strain_rate` and :func:`jaumann_rotate`."""
+    nz, nr = sigma.shape[0], sigma.shape[1]
+    g = 1.0 / (2.0 * h)
+    for j in range(nz):
+        for i in range(nr):
+            vr_sw = v[0, j, i]
+            vr_se = v[0, j, i + 1]
+            vr_ne = v[0, j + 1, i + 1]
+            vr_nw = v[0, j + 1, i]
+            vz_sw = v[1, j, i]
+            vz_se = v[1, j, i + 1]
+            vz_ne = v[1, j + 1, i + 1]
+            vz_nw = v[1, j + 1, i]
+            dvr_dr = g * (vr_se + vr_ne - vr_sw - vr_nw)
+            dvr_dz = g * (vr_nw + vr_ne - vr_sw - vr_se)
+            dvz_dr = g * (vz_se + vz_ne - vz_sw - vz_nw)
+            dvz_dz = g * (vz_nw + vz_ne - vz_sw - vz_se)
+            hoop = 0.25 * (vr_sw + vr_se + vr_ne + vr_nw) / r_c[i]
+            d_eps[j, i, 0] = dvr_dr * dt
+            d_eps[j, i, 1] = dvz_dz * dt
+            d_eps[j, i, 2] = hoop * dt
+            d_eps[j, i, 3] = 0.5 * (dvr_dz + dvz_dr) * dt
+            w = 0.5 * (dvr_dz - dvz_dr) * dt
+            s_rr = sigma[j, i, 0]
+            s_zz = sigma[j, i, 1]
+            s_rz = sigma[j, i, 3]
+            sigma_rot[j, i, 0] = s_rr + 2.0 * w * s_rz
+            sigma_rot[j, i, 1] = s_zz - 2.0 * w * s_rz
+            sigma_rot[j, i, 2] = sigma[j, i, 2]
+            sigma_rot[j, i, 3] = s_rz + w * (s_zz - s_rr)
