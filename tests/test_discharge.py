@@ -1,0 +1,140 @@
+"""Discharge (issue 4): mass balance, the hourglass property, flow modes, the switch peak.
+
+Coarse grids (1 cm cells, a 0.2 m bin), about a second of discharge each.  The slower
+validation (outlet-size scaling, the reference hopper emptying) is marked ``slow``.
+"""
+
+import math
+import warnings
+
+import numpy as np
+import pytest
+
+from fipy_hopper import geometry
+from fipy_hopper.config import HopperConfig
+from fipy_hopper.diagnostics import fit_power_law
+from fipy_hopper.model import HopperModel
+from fipy_hopper.simulation import Simulation
+
+
+def discharge(half_angle, wall_deg, fill=0.15, outlet=0.06, bin_diameter=0.2, cell=0.01,
+              end_time=0.8, **run):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        cfg = HopperConfig.from_dict({
+            "hopper": {"bin_diameter": bin_diameter, "outlet_diameter": outlet,
+                       "half_angle_deg": half_angle, "bin_height": fill + 0.02,
+                       "fill_height": fill},
+            "wall": {"friction_angle_deg": wall_deg},
+            "numerics": {"cell_size": cell, "gravity_ramp_time": 0.1},
+            "run": {"end_time": end_time, "output_interval": 0.02, **run}})
+    model = HopperModel(cfg)
+    sim = Simulation(model, progress=False)
+    initial_layers = model.initial_state().layer
+    sim.run()
+    return model, sim, sim.summary(), initial_layers
+
+
+@pytest.fixture(scope="module")
+def mass_flow():
+    """Steep, smooth: half-angle 15 deg, wall friction 12 deg, phi 30 deg."""
+    return discharge(15.0, 12.0)
+
+
+@pytest.fixture(scope="module")
+def funnel_flow():
+    """Wide, rough: half-angle 60 deg, wall friction 25 deg."""
+    return discharge(60.0, 25.0)
+
+
+def test_mass_balance_over_discharge(mass_flow, funnel_flow):
+    for model, sim, summary, _ in (mass_flow, funnel_flow):
+        assert summary["discharged_kg"] > 0.1 * summary["initial_mass_kg"]
+        assert summary["mass_balance_error"] < 1e-6
+        assert sim.state.alpha.min() >= -1e-9 and sim.state.alpha.max() <= 1 + 1e-9
+
+
+def test_steep_smooth_hopper_discharges_in_mass_flow(mass_flow):
+    model, sim, summary, layers0 = mass_flow
+    assert summary["flow_mode"] == "mass"
+    assert summary["mass_flow_index"] > 0.5 and summary["stagnant_fraction"] < 0.05
+    # the layers next to the cone wall have moved down: material from higher layers is there
+    st, g = sim.state, model.grid
+    R, Z = np.meshgrid(g.r_cells, g.z_cells)
+    d = geometry.signed_distance(R, Z, model.cfg.hopper)
+    wall_band = (d > 0.5 * g.h) & (d < 2.5 * g.h) & (Z > 0.2 * model.cfg.hopper.cone_height) \
+        & (Z < 0.8 * model.cfg.hopper.cone_height) & (st.alpha > 0.5)
+    assert np.mean(st.layer[wall_band] - layers0[wall_band]) > 0.5
+    unchanged = np.abs(st.layer[wall_band] - layers0[wall_band]) < 0.25
+    assert unchanged.mean() < 0.1
+
+
+def test_wide_rough_hopper_discharges_in_funnel_flow(funnel_flow):
+    model, sim, summary, layers0 = funnel_flow
+    assert summary["flow_mode"] == "funnel"
+    assert summary["stagnant_fraction"] > 0.2
+    # a stagnant zone on the outer half of the cone wall keeps its original (bottom) layers
+    st, g = sim.state, model.grid
+    geom = model.cfg.hopper
+    R, Z = np.meshgrid(g.r_cells, g.z_cells)
+    d = geometry.signed_distance(R, Z, geom)
+    outer = R > 0.5 * (geom.outlet_radius + geom.bin_radius)
+    wall_band = (d > 0.5 * g.h) & (d < 2.5 * g.h) & (Z > 0) & outer & \
+        (Z < geom.cone_height + g.h) & (st.alpha > 0.5)
+    assert wall_band.sum() >= 3
+    unchanged = np.abs(st.layer[wall_band] - layers0[wall_band]) < 0.25
+    assert unchanged.mean() > 0.5, (st.layer[wall_band], layers0[wall_band])
+
+
+def test_switch_peak_at_the_transition_in_mass_flow(mass_flow):
+    model, sim, summary, _ = mass_flow
+    _, s_f, r_f, z_f, p_fill, _ = sim.record.wall["filling"]
+    _, s_d, r_d, z_d, p_dis, _ = sim.record.wall["early_discharge"]
+    s_t = geometry.transition_arc_length(model.cfg.hopper)
+    near = lambda s: (s > s_t - 4 * model.grid.h) & (s < s_t + 1 * model.grid.h)  # noqa: E731
+    peak_discharge = p_dis[near(s_d)].max()
+    assert peak_discharge > 1.1 * p_fill[near(s_f)].max()
+    # the discharge pressure peaks near the transition, above the cone's lower part
+    lower_cone = (s_d > 0.2 * s_t) & (s_d < 0.5 * s_t)
+    assert peak_discharge > 1.3 * p_dis[lower_cone].max()
+
+
+def test_hourglass_rate_independent_of_fill_height():
+    rates, heads = [], []
+    for fill in (0.1, 0.25):
+        model, sim, summary, _ = discharge(20.0, 15.0, fill=fill, end_time=0.6)
+        rates.append(summary["steady_discharge_rate_kg_s"])
+        heads.append(model.cfg.hopper.fill_level)
+    assert abs(rates[1] / rates[0] - 1) < 0.10
+    # a fluid through the same outlet (Torricelli, W ~ sqrt(head)) would change by over 20%
+    assert math.sqrt(heads[1] / heads[0]) - 1 > 0.2
+
+
+def test_small_hopper_empties_completely():
+    model, sim, summary, _ = discharge(20.0, 15.0, fill=0.04, end_time="empty", max_time=10.0)
+    assert summary["stop_reason"] == "empty", summary["stop_reason"]
+    assert summary["remaining_mass_kg"] < 0.005 * summary["initial_mass_kg"]
+    assert summary["mass_balance_error"] < 1e-6
+
+
+@pytest.mark.slow
+def test_outlet_scaling_exponent():
+    """W ~ D0^n over three outlets with n = 2.5 +- 0.25 (no length scale but the geometry)."""
+    outlets = (0.04, 0.06, 0.08)
+    rates = [discharge(30.0, 15.0, fill=0.1, outlet=d0, bin_diameter=0.24, cell=0.0066,
+                       end_time=0.6)[2]["steady_discharge_rate_kg_s"] for d0 in outlets]
+    _, n = fit_power_law(outlets, rates)
+    assert 2.25 <= n <= 2.75, (rates, n)
+
+
+@pytest.mark.slow
+def test_reference_hopper_empties():
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        cfg = HopperConfig.from_dict({"numerics": {"cell_size": 0.01}})
+    sim = Simulation(HopperModel(cfg), progress=False)
+    sim.run()
+    summary = sim.summary()
+    assert summary["stop_reason"] == "empty"
+    assert summary["mass_balance_error"] < 1e-9
+    assert summary["flow_mode"] == "mass"
