@@ -117,7 +117,8 @@ class HopperModel:
         self._scratch = (np.empty((2, g.nz + 1, g.nr + 1)), np.empty((g.nz, g.nr, 4)),
                          np.empty((g.nz, g.nr, 4)))
         self.hopper_cells = (g.z_cells[:, None] > 0.0) & np.ones((1, g.nr), bool)
-        self.hourglass_base = (cfg.numerics.hourglass_coefficient * self.rho * self.c_p
+        self.hourglass_base = (cfg.numerics.hourglass_coefficient * self.rho
+                               * math.sqrt(GRAVITY * g.h)
                                * self.open_volume / g.h)
         # mass-proportional damping during filling only: critical for the column's lowest mode
         column = max(cfg.hopper.fill_level, g.h)
