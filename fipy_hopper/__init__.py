@@ -6,3 +6,6 @@ boundary and used in radians inside.  Stress arrays have shape ``(..., 4)`` in t
 """
 
 __version__ = "0.1.0"
+
+from .config import ConfigError, HopperConfig, ResolutionWarning  # noqa: E402
+from .api import Results, load_config, read_results, run  # noqa: E402

@@ -81,12 +81,20 @@ class Simulation:
         self._wall_avg: dict = {}
         self._started = None
         self._last_progress = 0.0
+        self._eta_mark = None            # (wall time, discharge time) when the ETA clock started
         self.t_open = math.nan
         self.next_sample = math.nan
         self.wall_schedules: list = []   # [fn, wall-time interval, last call]
 
     def add_wall_time_callback(self, fn: Callable, interval: float):
-        """Call ``fn(sim, state)`` every ``interval`` seconds of wall time (e.g. checkpoints)."""
+        """Call ``fn(sim, state)`` every ``interval`` seconds of wall time (e.g. checkpoints).
+
+        They are called last in a check, after the samples and the stop rules, and only when
+        the run goes on: a checkpoint written there holds the state at the top of the loop,
+        where :meth:`restore` continues, so a resumed run repeats the uninterrupted one step
+        for step (a checkpoint written from a simulated-time callback would skip the rest of
+        its check on resume).
+        """
         self.wall_schedules.append([fn, interval, time.perf_counter()])
 
     def _call_wall_schedules(self):
@@ -141,12 +149,13 @@ class Simulation:
             if st.step % check_every == 0:
                 self._check_stable()
                 self._call_schedules()
-                self._call_wall_schedules()
                 if st.t >= num.gravity_ramp_time and m.kinetic_energy(st) < threshold:
                     self.record.fill_at_rest = True
                     break
                 if st.t >= num.max_fill_time or self._out_of_wall_time():
                     break
+                # last: a checkpoint here resumes exactly (see add_wall_time_callback)
+                self._call_wall_schedules()
                 self._progress(f"filling t={st.t:.3f} s  KE/MgL={m.kinetic_energy(st) / (mass * GRAVITY * depth):.2e}")
         m.transport_step(st)
         self.record.fill_time = st.t
@@ -175,7 +184,6 @@ class Simulation:
                 continue
             self._check_stable()
             self._call_schedules()
-            self._call_wall_schedules()
             if st.t >= self.next_sample - 1e-12:
                 self._log_sample()
                 self.next_sample += run.output_interval
@@ -194,8 +202,13 @@ class Simulation:
                 reason = "max_time"
             elif self._out_of_wall_time():
                 reason = "wall_time_limit"
-            self._progress(f"discharge t={t_dis:.3f} s  step {st.step}  "
-                           f"left {mass:.3g} kg  W={rec.rate[-1] if rec.rate else 0:.3g} kg/s")
+            if not reason:
+                # last: a checkpoint here resumes exactly (see add_wall_time_callback)
+                self._call_wall_schedules()
+            if self.progress:
+                self._progress(f"discharge t={t_dis:.3f} s  step {st.step}  "
+                               f"left {mass:.3g} kg  W={rec.rate[-1] if rec.rate else 0:.3g} kg/s"
+                               + self._eta(t_dis, mass))
         self._log_sample(force=True)
         rec.stop_reason = reason
         return reason
@@ -261,6 +274,30 @@ class Simulation:
             p, tau = acc_p / count, acc_t / count
         self.record.wall[stage] = (st.t - (self.t_open if np.isfinite(self.t_open) else st.t),
                                    s, r, z, p, tau)
+
+    def _eta(self, t_dis: float, mass: float) -> str:
+        """``ETA`` of the discharge in wall time: simulated time left / recent simulated speed.
+
+        The simulated time left is ``end_time - t`` or, for ``"empty"``, the mass left above
+        ``empty_fraction`` over the last sampled rate (capped at ``max_time``).
+        """
+        now = time.perf_counter()
+        if self._eta_mark is None:
+            self._eta_mark = (now, t_dis)
+            return ""
+        wall, t0 = now - self._eta_mark[0], t_dis - self._eta_mark[1]
+        if wall <= 0 or t0 <= 0:
+            return ""
+        run = self.model.cfg.run
+        if self.end_time != "empty":
+            left = float(self.end_time) - t_dis
+        else:
+            rate = self.record.rate[-1] if self.record.rate else 0.0
+            if rate <= 0:
+                return ""
+            left = (mass - run.empty_fraction * self.record.initial_mass) / rate
+        left = max(0.0, min(left, run.max_time - t_dis))
+        return f"  ETA {left * wall / t0:.0f} s"
 
     def _progress(self, text: str):
         if not self.progress:

@@ -1,0 +1,290 @@
+"""The Python API, mirroring the command line: load a configuration, run it, read the results.
+
+::
+
+    import fipy_hopper as fh
+    cfg = fh.load_config("studies/configs/reference.toml")
+    summary = fh.run(cfg, "hopper_run")            # like: fipy-hopper run ... --out hopper_run
+    res = fh.read_results("hopper_run")
+    res.summary["steady_discharge_rate_kg_s"], res.timeseries["discharge_rate_kg_s"]
+
+:func:`run` writes the run directory described in :mod:`fipy_hopper.io` and the pictures of
+:mod:`fipy_hopper.plotting`.  The solver modules are imported when a run starts, so importing
+this module is cheap.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import sys
+import time
+import traceback
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Optional, Union
+
+import numpy as np
+
+from .config import ConfigError, HopperConfig
+from . import io as fio
+
+__all__ = ["load_config", "run", "read_results", "Results", "expected_quantities"]
+
+
+def load_config(path: Union[str, os.PathLike]) -> HopperConfig:
+    """Read and validate a TOML configuration (raises :class:`ConfigError` naming the key)."""
+    if Path(path).is_dir():
+        raise ConfigError(f"{path} is a directory, not a configuration file")
+    try:
+        return HopperConfig.from_toml(path)
+    except UnicodeDecodeError as exc:     # a binary file: from_toml decodes before parsing
+        raise ConfigError(f"{path} is not valid TOML: not UTF-8 text (byte {exc.start})") \
+            from None
+
+
+def _resolve(config_or_path) -> tuple:
+    if isinstance(config_or_path, HopperConfig):
+        return config_or_path, "<HopperConfig>"
+    if isinstance(config_or_path, dict):
+        return HopperConfig.from_dict(config_or_path), "<dict>"
+    if isinstance(config_or_path, (str, os.PathLike)):
+        return load_config(config_or_path), str(Path(config_or_path).resolve())
+    raise ConfigError(f"expected a HopperConfig, a dict or a path to a TOML file, "
+                      f"got {type(config_or_path).__name__}")
+
+
+def expected_quantities(cfg: HopperConfig) -> dict:
+    """What theory and the numerics say about a configuration before it runs.
+
+    ``beverloo_rate_kg_s`` is Beverloo's flat-bottom rate (C = 0.58, k d = 0) times the
+    Rose-Tanaka hopper factor of the cone; ``jenike_critical_half_angle_deg`` uses the internal
+    friction angle as the effective angle of internal friction; ``fill_mass_kg`` is the density
+    times the filled volume (3D).
+    """
+    from . import theory
+
+    geom, mat, wall = cfg.hopper, cfg.material, cfg.wall
+    out = {"fill_mass_kg": mat.density * geom.fill_volume(),
+           "p_wave_speed_m_s": mat.p_wave_speed,
+           "cone_height_m": geom.cone_height}
+    flat = float(theory.beverloo_rate(mat.density, geom.outlet_diameter))
+    factor = float(theory.rose_tanaka_factor(geom.half_angle_deg))
+    out.update(beverloo_flat_rate_kg_s=flat, rose_tanaka_factor=factor,
+               beverloo_rate_kg_s=flat * factor)
+    try:
+        out["jenike_critical_half_angle_deg"] = float(theory.jenike_critical_half_angle(
+            mat.friction_angle_deg, wall.friction_angle_deg))
+        out["jenike_flow_mode"] = str(theory.jenike_flow_mode(
+            geom.half_angle_deg, mat.friction_angle_deg, wall.friction_angle_deg))
+    except ValueError:   # friction angle below the range of Jenike's fit
+        out["jenike_critical_half_angle_deg"] = math.nan
+        out["jenike_flow_mode"] = "unknown"
+    out["expected_discharge_time_s"] = out["fill_mass_kg"] / out["beverloo_rate_kg_s"]
+    return out
+
+
+def run(config_or_path, out, force: bool = False, resume: bool = False, quiet: bool = True,
+        checkpoint_interval: float = 60.0, plots: bool = True,
+        setup: Optional[Callable] = None, command: Optional[str] = None,
+        config_source: Optional[str] = None) -> dict:
+    """Run a hopper into the directory ``out`` and return its summary (``summary.json``).
+
+    Parameters
+    ----------
+    config_or_path : a :class:`HopperConfig`, a dict of sections or a path to a TOML file.
+    out : the run directory; refused if it exists and is not empty, unless ``force``.
+    force : overwrite the outputs of a previous run in ``out``.
+    resume : continue the interrupted run in ``out`` from its checkpoint; the configuration
+        must equal the one the run started with.  The outputs equal an uninterrupted run's.
+    quiet : no progress line (it is only ever shown on a terminal).
+    checkpoint_interval : wall-clock seconds between checkpoints (0: none).
+    plots : draw the pictures when the run ends.
+    setup : optional ``setup(sim)`` called with the :class:`~fipy_hopper.simulation.Simulation`
+        before it runs, to attach more callbacks (``sim.add_callback``).
+    command, config_source : recorded in the manifest (the command line and the configuration
+        file, when called from the command line).
+
+    Raises :class:`ConfigError` or :class:`~fipy_hopper.io.RunDirectoryError` before anything
+    runs; :class:`~fipy_hopper.model.InstabilityError` (and any other error) after writing
+    everything measured so far with ``stop_reason`` ``"unstable: ..."`` (``"failed: ..."``);
+    ``KeyboardInterrupt`` after writing the outputs so far with ``stop_reason``
+    ``"interrupted"`` (continue with ``resume=True``).  A run stopped by
+    ``run.wall_time_limit`` returns normally with ``stop_reason`` ``"wall_time_limit"``; its
+    last checkpoint is kept, so ``resume=True`` continues it.
+    """
+    cfg, source = _resolve(config_or_path)
+    source = config_source or source
+    command = command or "fipy_hopper.run (Python API)"
+    rundir = fio.RunDirectory(out, force=force, resume=resume)
+    if resume:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            saved = load_config(rundir / rundir.CONFIG)
+        if saved != cfg:
+            raise ConfigError(f"the configuration differs from the one the run in {rundir.path} "
+                              f"started with ({rundir / rundir.CONFIG}); resume with that one")
+        if (rundir / rundir.MANIFEST).is_file():
+            manifest = fio.Manifest.load(rundir / rundir.MANIFEST)
+        else:
+            manifest = fio.Manifest.new(rundir / rundir.MANIFEST, source, command)
+    else:
+        fio.atomic_write_text(rundir / rundir.CONFIG, cfg.to_toml())
+        manifest = fio.Manifest.new(rundir / rundir.MANIFEST, source, command)
+
+    from .model import HopperModel, InstabilityError
+    from .simulation import Simulation
+
+    model = HopperModel(cfg)
+    progress = (not quiet) and sys.stderr.isatty()
+    sim = Simulation(model, progress=progress)
+    fields = fio.FieldWriter(rundir.fields, model.grid)
+
+    def snapshot(sim_, state):
+        fields(sim_, state)
+        _write_tables(rundir, sim_.record)
+
+    interval = cfg.run.field_interval
+    sim.add_callback(snapshot, interval, stages=("filling",))
+    sim.add_callback(snapshot, interval, stages=("discharge",))
+    if checkpoint_interval and checkpoint_interval > 0:
+        def checkpoint(sim_, state):
+            sim_.checkpoint(rundir.checkpoint)
+            manifest.checkpoint_written(state.t, state.step)
+        sim.add_wall_time_callback(checkpoint, checkpoint_interval)
+    if setup is not None:
+        setup(sim)
+
+    if resume:
+        sim.restore(rundir.checkpoint)
+        fields.resume(sim.state.step)
+        manifest.begin_session(command, sim.state.step, sim.state.t)
+    else:
+        manifest.begin_session(command)
+
+    started = time.perf_counter()
+    status, reason, error = "finished", "", None
+    try:
+        sim.run()
+        reason = sim.record.stop_reason
+        if reason == "wall_time_limit":      # not the end of the run: it can be resumed
+            status = "stopped"
+    except InstabilityError as exc:
+        status, reason, error = "failed", f"unstable: {exc}", exc
+    except KeyboardInterrupt as exc:
+        status, reason, error = "interrupted", "interrupted", exc
+    except Exception as exc:  # keep what was measured, then report
+        status, reason, error = "failed", f"failed: {type(exc).__name__}: {exc}", exc
+        fio.atomic_write_text(rundir / rundir.ERROR_LOG, traceback.format_exc())
+    wall = time.perf_counter() - started
+
+    # everything measured so far; after an interrupt the state may be half a step old, so no
+    # snapshot of it is taken (the resumed run continues from the last checkpoint)
+    if status != "interrupted" and fields.last_step != sim.state.step:
+        try:
+            fields.write(sim.state, sim.t_open)
+        except Exception:  # pragma: no cover - never hide the run's own error
+            pass
+    _write_tables(rundir, sim.record)
+    summary = _summary(sim, cfg, reason)
+    manifest.end_session(status, reason, wall)
+    summary["wall_time_s"] = manifest.total_wall_time()
+    fio.write_json(rundir / rundir.SUMMARY, summary)
+    if status == "finished":
+        rundir.checkpoint.unlink(missing_ok=True)
+    if plots and status != "interrupted":
+        try:
+            from . import plotting
+            plotting.plot_run(rundir.path)
+        except Exception as exc:  # pictures are a convenience; the data are written
+            warnings.warn(f"the pictures could not be drawn: {exc}", RuntimeWarning)
+    if error is not None:
+        raise error
+    return fio._jsonable(summary)
+
+
+def _write_tables(rundir, record) -> None:
+    fio.write_timeseries(rundir / rundir.TIMESERIES, record)
+    fio.write_wall_pressure(rundir / rundir.WALL_PRESSURE, record)
+
+
+def _summary(sim, cfg, reason: str) -> dict:
+    try:
+        summary = dict(sim.summary())
+    except Exception:  # a run that failed before it measured anything
+        rec = sim.record
+        summary = {"steady_discharge_rate_kg_s": math.nan, "flow_mode": "unknown",
+                   "mass_flow_index": math.nan, "initial_mass_kg": rec.initial_mass,
+                   "remaining_mass_kg": math.nan, "mass_balance_error": math.nan,
+                   "discharge_time_s": rec.t[-1] if rec.t else 0.0,
+                   "cells": sim.model.grid.n_cells, "steps": sim.state.step,
+                   "wall_time_s": math.nan,
+                   "youngs_modulus_used": cfg.material.youngs_modulus}
+    summary["stop_reason"] = reason
+    expected = expected_quantities(cfg)
+    summary["beverloo_rate_kg_s"] = expected["beverloo_rate_kg_s"]
+    summary["jenike_critical_half_angle_deg"] = expected["jenike_critical_half_angle_deg"]
+    summary["jenike_flow_mode"] = expected["jenike_flow_mode"]
+    return summary
+
+
+# ---------------------------------------------------------------- reading results
+@dataclass
+class Results:
+    """The results in a run directory (read by :func:`read_results`).
+
+    ``summary`` and ``manifest`` are the JSON dictionaries; ``timeseries`` maps each column of
+    ``timeseries.csv`` to an array; ``wall_pressure`` each column of ``wall_pressure.csv`` to an
+    array (``stage`` as strings); ``snapshots`` lists the field snapshots (``file``, ``step``,
+    ``t_s``, ``discharge_time_s``, ``stage``); :meth:`field` reads one with meshio.
+    """
+
+    path: Path
+    summary: dict
+    manifest: dict
+    config: HopperConfig
+    timeseries: dict
+    wall_pressure: dict
+    snapshots: list = field(default_factory=list)
+
+    def field(self, index: int = -1):
+        """The ``meshio.Mesh`` of snapshot ``index`` (cell data ``alpha``, ``layer``, ...)."""
+        import meshio
+        return meshio.read(self.path / fio.RunDirectory.FIELDS / self.snapshots[index]["file"])
+
+    def wall_stage(self, stage: str) -> dict:
+        """The wall pressure rows of one stage (``filling``, ``early_discharge``, ...)."""
+        sel = self.wall_pressure["stage"] == stage
+        return {k: v[sel] for k, v in self.wall_pressure.items()}
+
+
+def read_results(out) -> Results:
+    """Read a run directory written by :func:`run` or ``fipy-hopper run``."""
+    import json
+
+    path = Path(out)
+    names = fio.RunDirectory
+    missing = [n for n in (names.SUMMARY, names.TIMESERIES, names.CONFIG)
+               if not (path / n).is_file()]
+    if missing:
+        raise FileNotFoundError(f"{path} is not a finished run directory (no {', '.join(missing)})")
+    with open(path / names.SUMMARY, encoding="utf-8") as fh:
+        summary = json.load(fh)
+    manifest = {}
+    if (path / names.MANIFEST).is_file():
+        with open(path / names.MANIFEST, encoding="utf-8") as fh:
+            manifest = json.load(fh)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        cfg = load_config(path / names.CONFIG)
+    wall = (fio.read_csv(path / names.WALL_PRESSURE) if (path / names.WALL_PRESSURE).is_file()
+            else {c: np.array([]) for c in fio.WALL_PRESSURE_COLUMNS})
+    if "stage" in wall:
+        wall["stage"] = np.asarray(wall["stage"], dtype=str)
+    snapshots = []
+    if (path / names.FIELDS / fio.FieldWriter.INDEX).is_file():
+        snapshots = fio.read_snapshot_index(path / names.FIELDS)
+    return Results(path=path, summary=summary, manifest=manifest, config=cfg,
+                   timeseries=fio.read_csv(path / names.TIMESERIES), wall_pressure=wall,
+                   snapshots=snapshots)

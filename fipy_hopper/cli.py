@@ -1,0 +1,261 @@
+"""The ``fipy-hopper`` command line.
+
+::
+
+    fipy-hopper run CONFIG.toml --out DIR [--force] [--resume] [--quiet] [--checkpoint-interval S]
+    fipy-hopper demo [--out DIR] [--force] [--resume] [--quiet] [--checkpoint-interval S]
+    fipy-hopper plot DIR
+    fipy-hopper validate CONFIG.toml
+
+Exit codes: 0 success; 2 bad input (a configuration error, a missing or non-TOML file, an
+output directory that would be overwritten), reported in one line on stderr; 1 a run that
+failed (unstable, or an internal error), with the reason, after writing everything measured so
+far; 130 a run interrupted with Ctrl-C or SIGTERM (continue it with ``--resume``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import shlex
+import signal
+import sys
+import threading
+import warnings
+from pathlib import Path
+
+from . import __version__
+from .config import ConfigError, HopperConfig, ResolutionWarning
+
+EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
+PROG = "fipy-hopper"
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse that reports usage errors in the same one-line style (exit code 2)."""
+
+    def error(self, message):
+        self.print_usage(sys.stderr)
+        self.exit(EXIT_BAD_INPUT, f"{PROG}: error: {message}\n")
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = _Parser(prog=PROG, description=(
+        "Eulerian Mohr-Coulomb simulation of granular discharge from a conical hopper "
+        "(axisymmetric, on FiPy): flow rate, flow mode and wall pressures, compared with "
+        "Beverloo, Jenike, Janssen and Walker."),
+        epilog="Exit codes: 0 success, 1 the run failed, 2 bad input, 130 interrupted.")
+    p.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
+    sub = p.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+
+    def run_options(q, out_required):
+        q.add_argument("--out", metavar="DIR", required=out_required,
+                       default=None if out_required else "hopper_run",
+                       help="run directory" + ("" if out_required else " (default: hopper_run)"))
+        q.add_argument("--force", action="store_true",
+                       help="overwrite the outputs of a previous run in DIR")
+        q.add_argument("--resume", action="store_true",
+                       help="continue the interrupted run in DIR from its checkpoint")
+        q.add_argument("--quiet", action="store_true",
+                       help="no progress line and no summary (errors are still reported)")
+        q.add_argument("--checkpoint-interval", metavar="SECONDS", type=float, default=60.0,
+                       help="wall-clock seconds between checkpoints (default 60; 0: none)")
+
+    q = sub.add_parser("run", help="run a hopper described by a TOML configuration",
+                       description="Run the hopper of CONFIG.toml: fill, discharge, and write "
+                       "results, fields for ParaView and pictures into --out DIR.")
+    q.add_argument("config", metavar="CONFIG.toml", help="configuration file (TOML)")
+    run_options(q, out_required=True)
+
+    q = sub.add_parser("demo", help="run the reference hopper from filling to empty",
+                       description="Run the reference hopper (D = 0.3 m, 20 deg cone, "
+                       "D0 = 0.06 m, 0.3 m of dry sand; the defaults of HopperConfig) from "
+                       "filling to empty.  This takes a while: about half an hour on a laptop.")
+    run_options(q, out_required=False)
+
+    q = sub.add_parser("plot", help="draw the pictures of a run directory",
+                       description="Draw flow_pattern.png, discharge.png, wall_pressure.png "
+                       "and discharge.gif from the files in DIR.")
+    q.add_argument("dir", metavar="DIR", help="run directory")
+
+    q = sub.add_parser("validate", help="check a configuration and print derived quantities",
+                       description="Check CONFIG.toml and print the grid, the time step, the "
+                       "wave speed, the fill mass, Beverloo's rate and Jenike's critical angle.")
+    q.add_argument("config", metavar="CONFIG.toml", help="configuration file (TOML)")
+    return p
+
+
+def _error(message: str, code: int) -> int:
+    text = " ".join(str(message).split())
+    sys.stderr.write(f"{PROG}: error: {text}\n")
+    return code
+
+
+def _load(path: str) -> HopperConfig:
+    from .api import load_config
+    return load_config(path)
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None):
+    """Warnings as one line on stderr, without the source line."""
+    sys.stderr.write(f"{PROG}: warning: {message}\n")
+
+
+def _validate(args) -> int:
+    from .api import expected_quantities
+    from .model import HopperModel
+
+    cfg = _load(args.config)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model = HopperModel(cfg)
+    e = expected_quantities(cfg)
+    g, geom, run = model.grid, cfg.hopper, cfg.run
+    theta_c = e["jenike_critical_half_angle_deg"]
+    if e["jenike_flow_mode"] == "unknown":
+        theta_c_text = "n/a (friction angle below the 19.5 deg range of the fit)"
+    elif theta_c != theta_c:
+        theta_c_text = "none: the wall is as rough as the material (phi_w >= phi)"
+    else:
+        theta_c_text = f"{theta_c:.1f} deg"
+    end = run.end_time if isinstance(run.end_time, str) else f"{run.end_time:g} s"
+    lines = [
+        f"{args.config}: valid",
+        f"  grid               {g.nr} x {g.nz} = {g.n_cells} cells of {g.h:g} m "
+        f"({geom.outlet_radius / g.h:.1f} across the outlet radius)",
+        f"  P-wave speed c_p   {e['p_wave_speed_m_s']:.4g} m/s",
+        f"  time step          {model.dt:.4g} s",
+        f"  cone height        {geom.cone_height:.4g} m (transition to the bin)",
+        f"  fill mass          {e['fill_mass_kg']:.4g} kg",
+        f"  Beverloo rate      {e['beverloo_rate_kg_s']:.4g} kg/s = "
+        f"{e['beverloo_flat_rate_kg_s']:.4g} kg/s (flat bottom, C = 0.58) x "
+        f"{e['rose_tanaka_factor']:.3f} (Rose-Tanaka, {geom.half_angle_deg:g} deg cone)",
+        f"  discharge time     about {e['expected_discharge_time_s']:.3g} s at that rate",
+        f"  Jenike theta_c     {theta_c_text} (phi = {cfg.material.friction_angle_deg:g} deg, "
+        f"phi_w = {cfg.wall.friction_angle_deg:g} deg)",
+        f"  expected flow      {e['jenike_flow_mode']} flow ({geom.half_angle_deg:g} deg cone)",
+        f"  run                until {end}, samples every {run.output_interval:g} s, "
+        f"fields every {run.field_interval:g} s",
+    ]
+    print("\n".join(lines))
+    return EXIT_OK
+
+
+def _plot(args) -> int:
+    from . import plotting
+    from .io import RunDirectory
+
+    run = Path(args.dir)
+    if not (run / RunDirectory.CONFIG).is_file() or not (run / RunDirectory.TIMESERIES).is_file():
+        return _error(f"{run} is not a run directory (no {RunDirectory.CONFIG} and "
+                      f"{RunDirectory.TIMESERIES})", EXIT_BAD_INPUT)
+    for path in plotting.plot_run(run):
+        print(path)
+    return EXIT_OK
+
+
+def _run(args, config, source=None) -> int:
+    from . import api
+    from .io import RunDirectory, RunDirectoryError
+
+    if args.checkpoint_interval < 0:
+        return _error(f"--checkpoint-interval = {args.checkpoint_interval:g}: expected "
+                      "seconds >= 0", EXIT_BAD_INPUT)
+    command = " ".join(shlex.quote(a) for a in [PROG] + list(args.argv))
+    again = ("fipy-hopper demo" if args.command == "demo" else
+             f"fipy-hopper run {shlex.quote(args.config)}") + \
+        f" --out {shlex.quote(args.out)} --resume"
+    try:
+        with _sigterm_as_interrupt():
+            summary = api.run(config, args.out, force=args.force, resume=args.resume,
+                              quiet=args.quiet, checkpoint_interval=args.checkpoint_interval,
+                              command=command, config_source=source)
+    except (ConfigError, RunDirectoryError) as exc:
+        return _error(exc, EXIT_BAD_INPUT)
+    except KeyboardInterrupt:
+        return _error(f"interrupted; the outputs so far are in {args.out}; continue from the "
+                      f"last checkpoint with: {again}", EXIT_INTERRUPTED)
+    except Exception as exc:
+        from .model import InstabilityError
+        kind = "the run went unstable" if isinstance(exc, InstabilityError) else "the run failed"
+        log = Path(args.out) / RunDirectory.ERROR_LOG
+        where = f"; the traceback is in {log}" if log.is_file() else ""
+        return _error(f"{kind}: {exc} (everything measured so far is in {args.out}{where})",
+                      EXIT_FAILED)
+    if not args.quiet:
+        _print_summary(summary, args.out)
+        if summary.get("stop_reason") == "wall_time_limit":
+            print(f"  stopped at run.wall_time_limit; continue with: {again}")
+    return EXIT_OK
+
+
+class _sigterm_as_interrupt:
+    """SIGTERM (a batch scheduler's notice) stops a run like Ctrl-C: outputs written, resumable."""
+
+    def __enter__(self):
+        self.previous = None
+        if threading.current_thread() is threading.main_thread():
+            self.previous = signal.signal(signal.SIGTERM, self._raise)
+        return self
+
+    @staticmethod
+    def _raise(signum, frame):
+        raise KeyboardInterrupt
+
+    def __exit__(self, *exc):
+        if self.previous is not None:
+            signal.signal(signal.SIGTERM, self.previous)
+        return False
+
+
+def _print_summary(s: dict, out) -> None:
+    def num(key, fmt):
+        value = s.get(key)
+        return "n/a" if value is None else format(value, fmt)
+
+    print(f"{PROG}: {s.get('stop_reason')} after {num('discharge_time_s', '.3g')} s of discharge "
+          f"({num('steps', 'd')} steps, {num('wall_time_s', '.0f')} s wall time)\n"
+          f"  steady discharge rate  {num('steady_discharge_rate_kg_s', '.4g')} kg/s "
+          f"(Beverloo x Rose-Tanaka {num('beverloo_rate_kg_s', '.4g')} kg/s)\n"
+          f"  flow mode              {s.get('flow_mode')} (mass-flow index "
+          f"{num('mass_flow_index', '.2f')}; Jenike expects {s.get('jenike_flow_mode')})\n"
+          f"  mass                   {num('initial_mass_kg', '.4g')} kg filled, "
+          f"{num('remaining_mass_kg', '.4g')} kg left "
+          f"(mass balance error {num('mass_balance_error', '.1e')})\n"
+          f"  results in             {out}/")
+
+
+def main(argv=None) -> int:
+    """Entry point of ``fipy-hopper``; returns the exit code."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    parser = _parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:      # --help, --version, usage errors: argparse has spoken
+        return exc.code if isinstance(exc.code, int) else EXIT_BAD_INPUT
+    args.argv = argv
+    if args.command is None:
+        parser.print_help()
+        return EXIT_BAD_INPUT
+    with warnings.catch_warnings():
+        warnings.showwarning = _show_warning
+        warnings.filterwarnings("default", category=ResolutionWarning)
+        return _dispatch(args)
+
+
+def _dispatch(args) -> int:
+    try:
+        if args.command == "validate":
+            return _validate(args)
+        if args.command == "plot":
+            return _plot(args)
+        if args.command == "demo":
+            return _run(args, HopperConfig(), "the reference hopper (HopperConfig() defaults)")
+        return _run(args, _load(args.config), str(Path(args.config).resolve()))
+    except ConfigError as exc:
+        return _error(exc, EXIT_BAD_INPUT)
+    except KeyboardInterrupt:
+        return _error("interrupted", EXIT_INTERRUPTED)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,344 @@
+"""The ``fipy-hopper`` command line end to end on a coarse, short hopper (a few seconds a run).
+
+One run of ``fipy-hopper run`` is shared by the tests of its outputs: the run directory's
+files exist, the CSV and JSON files parse with the contract's columns and keys, the pictures
+are non-empty PNG/GIF files, and the VTU series reads back with meshio with the named fields
+at the expected times.  Then: ``validate``, ``plot``, ``--help``, overwrite protection and a
+run that goes unstable (exit code 1, everything measured so far kept).
+"""
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+import warnings
+import xml.etree.ElementTree as ET
+from dataclasses import fields
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+try:
+    import tomllib
+except ModuleNotFoundError:  # Python 3.10
+    import tomli as tomllib
+
+import fipy_hopper as fh
+from fipy_hopper import theory
+from fipy_hopper.cli import main
+from fipy_hopper.config import HopperConfig
+from fipy_hopper.io import read_csv
+
+COARSE = """\
+[hopper]
+bin_diameter = 0.2
+outlet_diameter = 0.06
+bin_height = 0.25
+fill_height = 0.15
+
+[numerics]
+cell_size = 0.01
+gravity_ramp_time = 0.05
+
+[run]
+end_time = 0.2
+output_interval = 0.02
+field_interval = 0.05
+"""
+
+SUMMARY_KEYS = ("steady_discharge_rate_kg_s", "flow_mode", "mass_flow_index", "initial_mass_kg",
+                "remaining_mass_kg", "mass_balance_error", "discharge_time_s", "stop_reason",
+                "cells", "steps", "wall_time_s", "youngs_modulus_used")
+TIMESERIES = ["t_s", "mass_in_hopper_kg", "discharged_kg", "discharge_rate_kg_s"]
+WALL = ["stage", "t_s", "s_m", "r_m", "z_m", "p_n_Pa", "tau_Pa"]
+CELL_FIELDS = ("alpha", "layer", "velocity", "stress_rr", "stress_zz", "stress_tt", "stress_rz",
+               "pressure", "plastic_strain")
+REPO = Path(__file__).resolve().parents[1]
+
+
+def coarse_config(folder: Path) -> Path:
+    path = folder / "coarse.toml"
+    path.write_text(COARSE)
+    return path
+
+
+@pytest.fixture(scope="module")
+def run_dir(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("cli")
+    out = folder / "run"
+    code = main(["run", str(coarse_config(folder)), "--out", str(out), "--quiet"])
+    assert code == 0
+    return out
+
+
+def test_run_directory_has_every_output(run_dir):
+    for name in ("config.toml", "manifest.json", "summary.json", "timeseries.csv",
+                 "wall_pressure.csv", "fields/fields.pvd", "fields/snapshots.csv",
+                 "flow_pattern.png", "discharge.png", "wall_pressure.png", "discharge.gif"):
+        assert (run_dir / name).is_file(), name
+    assert not (run_dir / "checkpoint.npz").exists()       # removed when the run finished
+    assert not list(run_dir.rglob(".*.tmp*"))               # no temporary files left
+
+
+def test_resolved_config_and_manifest(run_dir):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        saved = HopperConfig.from_toml(run_dir / "config.toml")
+        given = HopperConfig.from_toml(run_dir.parent / "coarse.toml")
+    assert saved == given
+    text = tomllib.loads((run_dir / "config.toml").read_text())
+    for section in ("hopper", "material", "wall", "numerics", "run"):   # every key resolved
+        assert set(text[section]) == {f.name for f in fields(getattr(saved, section))}
+    manifest = json.loads((run_dir / "manifest.json").read_text())
+    assert manifest["package"] == "fipy_hopper" and manifest["version"] == fh.__version__
+    for dep in ("fipy", "numpy", "scipy", "numba", "matplotlib", "meshio"):
+        assert manifest["dependencies"][dep]
+    assert manifest["start_time"] <= manifest["end_time"]
+    assert manifest["wall_time_s"] > 0
+    assert manifest["status"] == "finished" and manifest["stop_reason"] == "end_time"
+
+
+def test_summary_json_contract(run_dir):
+    summary = json.loads((run_dir / "summary.json").read_text())
+    for key in SUMMARY_KEYS:
+        assert key in summary, key
+    assert summary["flow_mode"] in ("mass", "funnel")
+    assert summary["stop_reason"] == "end_time"
+    assert summary["steady_discharge_rate_kg_s"] > 0
+    assert summary["mass_balance_error"] < 1e-9
+    assert summary["discharge_time_s"] == pytest.approx(0.2, abs=0.005)
+    assert summary["initial_mass_kg"] == pytest.approx(
+        summary["remaining_mass_kg"] + summary["discharged_kg"], rel=1e-9)
+
+
+def test_timeseries_and_wall_pressure_csv(run_dir):
+    summary = json.loads((run_dir / "summary.json").read_text())
+    header = (run_dir / "timeseries.csv").read_text().splitlines()[0].split(",")
+    assert header[:4] == TIMESERIES
+    ts = read_csv(run_dir / "timeseries.csv")
+    assert len(ts["t_s"]) >= 10 and ts["t_s"][0] == 0.0
+    assert np.all(np.diff(ts["t_s"]) > 0)
+    m0 = summary["initial_mass_kg"]
+    np.testing.assert_allclose(ts["mass_in_hopper_kg"] + ts["discharged_kg"], m0, rtol=1e-9)
+    assert ts["mass_in_hopper_kg"][-1] == pytest.approx(summary["remaining_mass_kg"], rel=1e-12)
+    assert (run_dir / "wall_pressure.csv").read_text().splitlines()[0].split(",") == WALL
+    wall = read_csv(run_dir / "wall_pressure.csv")
+    assert "filling" in set(wall["stage"])
+    filled = wall["stage"] == "filling"
+    assert filled.sum() >= 5 and np.all(wall["p_n_Pa"][filled] > 0)
+    assert np.all(np.diff(wall["s_m"][filled]) > 0)
+
+
+def test_pictures_are_non_empty_images(run_dir):
+    from PIL import Image
+
+    for name in ("flow_pattern.png", "discharge.png", "wall_pressure.png"):
+        data = (run_dir / name).read_bytes()
+        assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 10_000, name
+        with Image.open(run_dir / name) as im:
+            assert im.size[0] > 300 and im.size[1] > 300
+            assert len(np.unique(np.asarray(im.convert("L")))) > 10   # not a blank canvas
+    with Image.open(run_dir / "discharge.gif") as gif:
+        assert gif.format == "GIF" and gif.n_frames >= 4
+
+
+def test_field_series_reads_back_with_meshio(run_dir):
+    import meshio
+
+    summary = json.loads((run_dir / "summary.json").read_text())
+    cfg = fh.read_results(run_dir).config
+    snapshots = fh.read_results(run_dir).snapshots
+    pvd = ET.parse(run_dir / "fields" / "fields.pvd").getroot()
+    datasets = pvd.find("Collection").findall("DataSet")
+    assert [d.get("file") for d in datasets] == [s["file"] for s in snapshots]
+    times = np.array([float(d.get("timestep")) for d in datasets])
+    assert np.all(np.diff(times) > 0)
+    np.testing.assert_array_equal(times, [s["t_s"] for s in snapshots])
+
+    # a snapshot when filling starts, at the start of discharge, then every field_interval of
+    # simulated time (at the first check of 2 ms after it) and one of the final state
+    interval = cfg.run.field_interval
+    dis = [s for s in snapshots if s["stage"] == "discharge"]
+    assert snapshots[0]["stage"] == "filling" and snapshots[0]["t_s"] < 0.01
+    assert 0 < dis[0]["discharge_time_s"] < 0.003
+    gaps = np.diff([s["discharge_time_s"] for s in dis[:-1]])
+    assert np.all((gaps >= interval - 1e-9) & (gaps < interval + 0.0021))
+    assert dis[-1]["step"] == summary["steps"]
+    assert dis[-1]["discharge_time_s"] == pytest.approx(summary["discharge_time_s"], abs=1e-12)
+
+    for entry in (snapshots[0], dis[-1]):
+        mesh = meshio.read(run_dir / "fields" / entry["file"])
+        assert len(mesh.cells_dict["quad"]) == summary["cells"]
+        data = {k: v[0] for k, v in mesh.cell_data.items()}
+        for name in CELL_FIELDS:
+            assert name in data, name
+            assert len(data[name]) == summary["cells"]
+        assert data["velocity"].shape == (summary["cells"], 3)
+        assert np.all((data["alpha"] >= -1e-12) & (data["alpha"] <= 1 + 1e-9))
+        np.testing.assert_allclose(
+            data["pressure"], -(data["stress_rr"] + data["stress_zz"] + data["stress_tt"]) / 3,
+            rtol=1e-12, atol=1e-9)
+        # the r-z plane: x = r >= 0, y = z, third coordinate 0
+        assert mesh.points[:, 0].min() == 0.0 and np.all(mesh.points[:, 2] == 0.0)
+    # material left through the outlet: less of it in the hopper at the end
+    first = meshio.read(run_dir / "fields" / dis[0]["file"]).cell_data
+    last = meshio.read(run_dir / "fields" / dis[-1]["file"]).cell_data
+    assert np.max(last["velocity"][0][:, 1]) <= 0 or np.min(last["velocity"][0][:, 1]) < -0.1
+    assert np.sum(last["alpha"][0]) != np.sum(first["alpha"][0])
+
+
+def test_read_results_api(run_dir):
+    res = fh.read_results(run_dir)
+    assert res.summary["stop_reason"] == "end_time"
+    assert set(TIMESERIES) <= set(res.timeseries)
+    assert res.wall_stage("filling")["p_n_Pa"].size >= 5
+    assert "alpha" in res.field(-1).cell_data
+
+
+def test_plot_command(run_dir, tmp_path, capsys):
+    (run_dir / "discharge.png").unlink()
+    assert main(["plot", str(run_dir)]) == 0
+    assert (run_dir / "discharge.png").stat().st_size > 10_000
+    assert main(["plot", str(tmp_path)]) == 2
+    assert "not a run directory" in capsys.readouterr().err
+
+
+def test_validate_prints_derived_quantities(tmp_path, capsys):
+    from fipy_hopper.mesh import build_grid
+
+    path = coarse_config(tmp_path)
+    assert main(["validate", str(path)]) == 0
+    out = capsys.readouterr()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        cfg = HopperConfig.from_toml(path)
+    grid = build_grid(cfg)
+    bev = float(theory.beverloo_rate(1500.0, 0.06) * theory.rose_tanaka_factor(20.0))
+    theta_c = float(theory.jenike_critical_half_angle(30.0, 15.0))
+    fill_mass = 1500.0 * cfg.hopper.fill_volume()
+    for text in (f"{grid.n_cells} cells", "time step", "P-wave speed c_p",
+                 f"{cfg.material.p_wave_speed:.4g} m/s", f"{bev:.4g} kg/s", "Rose-Tanaka",
+                 f"{theta_c:.1f} deg", "mass flow", f"{fill_mass:.4g} kg"):
+        assert text in out.out, text
+    assert "warning: only 3.0 cells across the outlet radius" in out.err
+    assert "Traceback" not in out.err
+
+
+def test_reference_config_file_equals_defaults():
+    path = REPO / "studies" / "configs" / "reference.toml"
+    assert fh.load_config(path) == HopperConfig()
+    text = tomllib.loads(path.read_text())
+    for section in ("hopper", "material", "wall", "numerics", "run"):
+        assert set(text[section]) == {f.name for f in fields(getattr(HopperConfig(), section))}
+
+
+def test_overwrite_refused_without_force(run_dir, capsys):
+    before = (run_dir / "summary.json").stat().st_mtime_ns
+    code = main(["run", str(run_dir.parent / "coarse.toml"), "--out", str(run_dir), "--quiet"])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert "not empty" in err and "--force" in err and "Traceback" not in err
+    assert (run_dir / "summary.json").stat().st_mtime_ns == before
+    assert main(["run", str(run_dir.parent / "coarse.toml"), "--out", str(run_dir),
+                 "--resume"]) == 2                             # a finished run has no checkpoint
+
+
+def test_force_overwrites(tmp_path):
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / "summary.json").write_text("{}")
+    (out / "notes.txt").write_text("mine")
+    cfg = coarse_config(tmp_path)
+    text = cfg.read_text().replace("end_time = 0.2", "end_time = 0.05")
+    cfg.write_text(text)
+    assert main(["run", str(cfg), "--out", str(out), "--force", "--quiet"]) == 0
+    assert json.loads((out / "summary.json").read_text())["stop_reason"] == "end_time"
+    assert (out / "notes.txt").read_text() == "mine"          # only its own files are replaced
+
+
+def test_unstable_run_exits_1_and_keeps_its_outputs(tmp_path, monkeypatch, capsys):
+    from fipy_hopper.model import HopperModel
+
+    original = HopperModel.step
+
+    def blow_up(self, state):             # a NaN appears 0.05 s into the discharge
+        original(self, state)
+        if state.stage == "discharge":
+            self._steps_open = getattr(self, "_steps_open", 0) + 1
+            if self._steps_open * self.dt > 0.05:
+                state.v[1, 20, 3] = np.nan
+        return state
+
+    monkeypatch.setattr(HopperModel, "step", blow_up)
+    out = tmp_path / "run"
+    code = main(["run", str(coarse_config(tmp_path)), "--out", str(out), "--quiet"])
+    err = capsys.readouterr().err
+    assert code == 1
+    assert "the run went unstable" in err and "at step" in err and "Traceback" not in err
+    summary = json.loads((out / "summary.json").read_text())
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert summary["stop_reason"].startswith("unstable: ") and "at step" in summary["stop_reason"]
+    assert manifest["status"] == "failed" and manifest["stop_reason"] == summary["stop_reason"]
+    ts = read_csv(out / "timeseries.csv")
+    assert 2 <= len(ts["t_s"]) and ts["t_s"][-1] < 0.06
+    snaps = fh.read_results(out).snapshots
+    assert snaps[-1]["step"] == summary["steps"]             # the state that failed, for ParaView
+    assert (out / "discharge.png").is_file()
+
+
+def test_demo_runs_the_reference_hopper(monkeypatch):
+    from fipy_hopper import api
+
+    seen = {}
+
+    def fake_run(config, out, **kwargs):
+        seen.update(config=config, out=out, **kwargs)
+        return {"stop_reason": "empty"}
+
+    monkeypatch.setattr(api, "run", fake_run)
+    assert main(["demo", "--quiet"]) == 0
+    assert seen["config"] == HopperConfig() and seen["out"] == "hopper_run"
+    assert seen["checkpoint_interval"] == 60.0 and not seen["force"]
+
+
+@pytest.mark.parametrize("argv", [["--help"], ["run", "--help"], ["demo", "--help"],
+                                  ["plot", "--help"], ["validate", "--help"], ["--version"]])
+def test_help_everywhere(argv, capsys):
+    assert main(argv) == 0
+    assert "fipy-hopper" in capsys.readouterr().out
+
+
+def test_usage_errors_exit_2(capsys):
+    assert main([]) == 2
+    assert main(["run"]) == 2                      # no configuration, no --out
+    assert main(["frobnicate"]) == 2
+    assert main(["run", "x.toml", "--out", "d", "--checkpoint-interval", "soon"]) == 2
+    assert "Traceback" not in capsys.readouterr().err
+
+
+def test_console_script_help():
+    script = shutil.which("fipy-hopper", path=os.path.dirname(sys.executable))
+    assert script, "the console script fipy-hopper is not installed next to this Python"
+    done = subprocess.run([script, "--help"], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    for word in ("run", "demo", "plot", "validate", "Exit codes"):
+        assert word in done.stdout
+
+
+def test_wall_time_limit_stops_a_run_that_can_be_resumed(tmp_path, capsys):
+    cfg = coarse_config(tmp_path)
+    text = cfg.read_text().replace("end_time = 0.2", "end_time = 2.0")   # tens of seconds
+    cfg.write_text(text.replace("[run]\n", "[run]\nwall_time_limit = 0.4\n"))
+    out = tmp_path / "run"
+    argv = ["run", str(cfg), "--out", str(out), "--checkpoint-interval", "0.1"]
+    assert main(argv) == 0
+    assert "--resume" in capsys.readouterr().out
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["status"] == "stopped" and manifest["stop_reason"] == "wall_time_limit"
+    assert (out / "checkpoint.npz").is_file()
+    assert main(argv + ["--resume", "--quiet"]) == 0
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert len(manifest["sessions"]) == 2
+    assert manifest["sessions"][1]["resumed_from_t_s"] > 0

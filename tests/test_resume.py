@@ -1,0 +1,183 @@
+"""Interrupt and resume: a run stopped after a checkpoint and continued with ``--resume`` ends
+with exactly the outputs of an uninterrupted run.
+
+The interruption is a wall-time callback (where the command line's checkpoints are written)
+that writes the checkpoint into the run directory at a chosen simulated time and raises
+``KeyboardInterrupt`` right after, as Ctrl-C would.  The interrupted run keeps what it had
+written (``stop_reason`` "interrupted"); ``fipy-hopper run ... --resume`` restores the
+checkpoint, drops the snapshots taken after it and continues.  The run is deterministic, so the
+summary numbers, the time series, the wall samples and every field snapshot, the final one
+included, must be *bitwise* equal to the uninterrupted run's.
+"""
+
+import json
+import warnings
+
+import meshio
+import numpy as np
+import pytest
+
+from fipy_hopper import api
+from fipy_hopper.cli import main
+from fipy_hopper.io import read_snapshot_index
+
+CONFIG = """\
+[hopper]
+bin_diameter = 0.2
+outlet_diameter = 0.06
+bin_height = 0.25
+fill_height = 0.15
+
+[numerics]
+cell_size = 0.01
+gravity_ramp_time = 0.05
+
+[run]
+end_time = 0.12
+output_interval = 0.02
+field_interval = 0.05
+"""
+
+
+@pytest.fixture(scope="module")
+def setup_dirs(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("resume")
+    config = folder / "coarse.toml"
+    config.write_text(CONFIG)
+    reference = folder / "uninterrupted"
+    assert main(["run", str(config), "--out", str(reference), "--quiet"]) == 0
+    return folder, config, reference
+
+
+def interrupt_when(condition, out):
+    """A ``setup(sim)`` hook: checkpoint and Ctrl-C at the first check where ``condition``."""
+
+    def setup(sim):
+        def maybe_interrupt(sim_, state):
+            if condition(sim_, state):
+                sim_.checkpoint(out / "checkpoint.npz")
+                raise KeyboardInterrupt
+
+        sim.add_wall_time_callback(maybe_interrupt, 0.0)    # every check
+
+    return setup
+
+
+def interrupt_and_resume(folder, config, name, condition):
+    out = folder / name
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        with pytest.raises(KeyboardInterrupt):
+            api.run(config, out, setup=interrupt_when(condition, out), plots=False)
+    summary = json.loads((out / "summary.json").read_text())
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert summary["stop_reason"] == "interrupted" and manifest["status"] == "interrupted"
+    assert (out / "checkpoint.npz").is_file()
+    assert main(["run", str(config), "--out", str(out), "--resume", "--quiet"]) == 0
+    return out
+
+
+def assert_same_outputs(resumed, reference):
+    a = json.loads((resumed / "summary.json").read_text())
+    b = json.loads((reference / "summary.json").read_text())
+    a.pop("wall_time_s"), b.pop("wall_time_s")
+    assert a == b                                     # every number, bitwise (JSON repr)
+    for name in ("timeseries.csv", "wall_pressure.csv", "fields/snapshots.csv",
+                 "fields/fields.pvd", "config.toml"):
+        assert (resumed / name).read_text() == (reference / name).read_text(), name
+    snaps = read_snapshot_index(reference / "fields")
+    assert sorted(p.name for p in (resumed / "fields").glob("*.vtu")) == \
+        [s["file"] for s in snaps]
+    for entry in snaps:
+        m_a = meshio.read(resumed / "fields" / entry["file"])
+        m_b = meshio.read(reference / "fields" / entry["file"])
+        for key in m_b.cell_data:
+            np.testing.assert_array_equal(m_a.cell_data[key][0], m_b.cell_data[key][0],
+                                          err_msg=f"{entry['file']}: {key}")
+        np.testing.assert_array_equal(m_a.point_data["node_velocity"],
+                                      m_b.point_data["node_velocity"])
+    manifest = json.loads((resumed / "manifest.json").read_text())
+    assert manifest["status"] == "finished" and len(manifest["sessions"]) == 2
+    assert manifest["sessions"][1]["resumed_from_step"] > 0
+    assert not (resumed / "checkpoint.npz").exists()
+    assert (resumed / "flow_pattern.png").is_file() and (resumed / "discharge.gif").is_file()
+
+
+def test_resume_during_discharge_equals_uninterrupted(setup_dirs):
+    folder, config, reference = setup_dirs
+    out = interrupt_and_resume(
+        folder, config, "discharge",
+        lambda sim, st: st.stage == "discharge" and st.t - sim.t_open >= 0.071)
+    assert_same_outputs(out, reference)
+
+
+def test_resume_during_filling_equals_uninterrupted(setup_dirs):
+    folder, config, reference = setup_dirs
+    out = interrupt_and_resume(folder, config, "filling",
+                               lambda sim, st: st.stage == "filling" and st.t >= 0.02)
+    assert_same_outputs(out, reference)
+
+
+def test_resume_from_a_check_that_takes_a_sample(setup_dirs):
+    folder, config, reference = setup_dirs
+
+    def on_a_sample(sim, st):
+        if st.stage != "discharge" or st.t - sim.t_open < 0.05:
+            return False
+        due = st.t >= sim.next_sample - 1e-12                    # not yet taken in this check
+        taken = sim.record.t and sim.record.t[-1] == st.t - sim.t_open   # just taken
+        return bool(due or taken)
+
+    out = interrupt_and_resume(folder, config, "on_sample", on_a_sample)
+    assert_same_outputs(out, reference)
+
+
+def test_sigterm_then_resume_from_the_periodic_checkpoint(setup_dirs, capsys):
+    """The real thing: ``fipy-hopper run`` writes its periodic checkpoints, is stopped by SIGTERM
+    (as a batch scheduler does) at whatever point it has reached, exits 130 with everything
+    written so far, and ``--resume`` finishes the run with a seamless time series and field
+    series.  The signal comes from a watcher thread once the first checkpoint exists."""
+    import os
+    import signal
+    import threading
+    import time
+
+    folder, config, reference = setup_dirs
+    out = folder / "terminated"
+
+    def watch():
+        deadline = time.monotonic() + 60
+        while not (out / "checkpoint.npz").exists() and time.monotonic() < deadline:
+            time.sleep(0.01)
+        os.kill(os.getpid(), signal.SIGTERM)
+
+    # a SIGTERM arriving after the run must not end the test session
+    previous = signal.signal(signal.SIGTERM, lambda signum, frame: None)
+    try:
+        watcher = threading.Thread(target=watch, daemon=True)
+        watcher.start()
+        code = main(["run", str(config), "--out", str(out), "--quiet",
+                     "--checkpoint-interval", "0.2"])
+        watcher.join(timeout=60)
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    err = capsys.readouterr().err
+    assert code == 130, err
+    assert "--resume" in err and "Traceback" not in err
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["status"] == "interrupted" and manifest["checkpoints_written"] >= 1
+
+    assert main(["run", str(config), "--out", str(out), "--resume", "--quiet"]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    expected = json.loads((reference / "summary.json").read_text())
+    assert summary["stop_reason"] == "end_time" and summary["steps"] == expected["steps"]
+    ts = (out / "timeseries.csv").read_text().splitlines()
+    t = np.array([float(line.split(",")[0]) for line in ts[1:]])
+    assert len(t) == len((reference / "timeseries.csv").read_text().splitlines()) - 1
+    gaps = np.diff(t)[:-1]                                 # the last sample is the end state
+    assert np.all(np.abs(gaps - 0.02) < 0.0025)           # every 0.02 s, on 2 ms checks
+    snaps = read_snapshot_index(out / "fields")
+    assert [s["index"] for s in snaps] == list(range(len(snaps)))
+    assert np.all(np.diff([s["t_s"] for s in snaps]) > 0)
+    assert sorted(p.name for p in (out / "fields").glob("*.vtu")) == [s["file"] for s in snaps]
+    assert len(json.loads((out / "manifest.json").read_text())["sessions"]) == 2
