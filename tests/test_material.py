@@ -68,6 +68,24 @@ def mixed_states(mat, n, seed, strain=1e-3):
     return sig, de
 
 
+def flowing_states(mat, n, seed, strain=(1e-5, 3e-3)):
+    """The flowing cells of a discharging hopper: stresses on the yield surface at p = 0.1-20 kPa
+    (Lode angle uniform, random axes and hoop position) and log-uniform strain increments in the
+    range ``strain``, deviatoric with a small volumetric part, signed to load where they can."""
+    rng = np.random.default_rng(seed)
+    p = 10.0 ** rng.uniform(2.0, np.log10(2e4), n)
+    theta = rng.uniform(0.0, np.pi / 3, n)
+    q = (p * math.tan(mat.phi_rad) + mat.c) / R_mc(theta, mat.phi_rad)
+    sig = principal_to_sigma(rng.permuted(lode_principal(p, q, theta), axis=-1),
+                             rng.uniform(0.0, np.pi, n))
+    de = rng.normal(size=(n, 4))
+    de[:, :3] -= de[:, :3].mean(-1, keepdims=True) + 0.01 * rng.normal(size=(n, 1))
+    de *= (10.0 ** rng.uniform(*np.log10(strain), n) / np.abs(de).max(-1))[:, None]
+    unloads = yield_function(elastic_trial(sig, de, mat), mat) <= 0.0
+    de[unloads] *= -1.0
+    return sig, de
+
+
 def cosine(a, b):
     with np.errstate(invalid="ignore", divide="ignore"):
         a = a / np.abs(a).max(-1, keepdims=True)
@@ -288,6 +306,62 @@ def test_update_equals_reference(name):
     tol = scale * (1e-10 + 1e-14 * cond)
     assert (np.abs(a[0] - b[0]).max(-1) <= tol).all()
     assert (np.abs(a[1] - b[1]).max(-1) <= tol / mat.shear_modulus).all()
+
+
+FLOWING = dict(MATERIALS, **{
+    "dense, psi = 0": MohrCoulomb(E=5e6, nu=0.3, rho=1600.0, phi=40.0),
+    "loose, psi = 0": MohrCoulomb(E=5e6, nu=0.3, rho=1600.0, phi=20.0),
+    "hopper default, c = 20": MohrCoulomb(E=5e6, nu=0.3, rho=1600.0, phi=32.0, psi=5.0, c=20.0),
+    "sharp G": MohrCoulomb(E=5e6, nu=0.3, rho=1600.0, phi=30.0, e=0.52),
+})
+
+
+@pytest.mark.parametrize("name", sorted(FLOWING))
+def test_update_on_flowing_states_guarantees_and_reference(name):
+    """Hopper-like flowing states, nearly all plastic (the compiled fast path): every guarantee,
+    and the compiled update equal to the reference as in test_update_equals_reference."""
+    mat = FLOWING[name]
+    sig, de = flowing_states(mat, 3000, seed=21)
+    a = update(sig, de, mat, return_status=True)
+    check_update(mat, sig, de, *a)
+    assert (a[2] == PLASTIC).mean() > 0.9
+    b = update_reference(sig, de, mat, return_status=True)
+    np.testing.assert_array_equal(a[2], b[2])
+    scale = np.abs(elastic_trial(sig, de, mat)).max(-1)
+    assert (np.abs(a[0] - b[0]).max(-1) <= 1e-10 * scale).all()
+    assert (np.abs(a[1] - b[1]).max(-1) <= 1e-10 * scale / mat.shear_modulus).all()
+
+
+def _fast_path(mat, sig, de):
+    """The compiled fast return (mm._fast_block) of the plastic trial states: sorted trial
+    principal stresses, whether the fast path accepted each, and its returned sorted stresses."""
+    s = principal_stresses(elastic_trial(sig, de, mat))
+    sp, cp = math.sin(mat.phi_rad), math.cos(mat.phi_rad)
+    f = ((s[:, 0] - s[:, 2]) + (s[:, 0] + s[:, 2]) * sp) / (2 * cp) - mat.c
+    s, f = s[f > 0], f[f > 0]
+    m = len(f)
+    S = np.ascontiguousarray(np.vstack([s.T, f]))
+    W, flags = np.empty((mm._W_ROWS, m)), np.empty((3, m), dtype=bool)
+    mm._fast_block(m, S, W, flags, mm._fast_constants(mat.kernel_parameters()))
+    return s, flags[mm._F_OK], W[[mm._W_N1, mm._W_N2, mm._W_N3]].T
+
+
+@pytest.mark.parametrize("name", sorted(FLOWING))
+def test_fast_return_equals_robust_return_and_takes_the_flowing_states(name):
+    """The fast path (one scalar equation in the Lode angle) returns what the robust algorithm
+    (_return_sorted, the one of update_reference) returns wherever it accepts a point, and it
+    accepts the regular returns of flowing states: (almost) none fall back to the slow one."""
+    mat = FLOWING[name]
+    sig, de = flowing_states(mat, 1500, seed=22)
+    s, ok, fast = _fast_path(mat, sig, de)
+    prm = mat.kernel_parameters()
+    robust = np.array([mm._return_sorted(*row, prm) for row in s])
+    regular = robust[:, 3] == PLASTIC
+    # (for e -> 1/2 the sharp corner of G sends a few to the robust return)
+    assert ok[regular].mean() >= (0.999 if mat.e > 0.55 else 0.9)
+    assert (robust[ok, 3] == PLASTIC).all()
+    scale = np.abs(s).max(-1)
+    assert (np.abs(fast[ok] - robust[ok, :3]).max(-1) <= 1e-11 * scale[ok]).all()
 
 
 def test_update_shapes_and_broadcasting():
