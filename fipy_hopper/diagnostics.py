@@ -145,6 +145,12 @@ class WallSampler:
 
     def profile(self, state):
         """``(s, r, z, p_n, tau)`` arrays for the bins that hold material (Pa)."""
+        s, r, z, p_n, tau = self.profile_all(state)
+        ok = np.isfinite(p_n)
+        return s[ok], r[ok], z[ok], p_n[ok], tau[ok]
+
+    def profile_all(self, state):
+        """``(s, r, z, p_n, tau)`` for every bin; NaN where a bin holds no material."""
         m = self.model
         w = (state.alpha * m.open_volume).ravel()[self.cells]
         w = np.where(state.alpha.ravel()[self.cells] > 0.5, w, 0.0)
@@ -158,6 +164,6 @@ class WallSampler:
         t_r, t_z = -n_z, n_r          # tangent pointing up the wall
         trac_r = mean[:, 0] * n_r + mean[:, 3] * n_z
         trac_z = mean[:, 3] * n_r + mean[:, 1] * n_z
-        p_n = -(trac_r * n_r + trac_z * n_z)
-        tau = trac_r * t_r + trac_z * t_z
-        return self.centres[ok], self.r[ok], self.z[ok], p_n[ok], tau[ok]
+        p_n = np.where(ok, -(trac_r * n_r + trac_z * n_z), np.nan)
+        tau = np.where(ok, trac_r * t_r + trac_z * t_z, np.nan)
+        return self.centres, self.r, self.z, p_n, tau

@@ -28,6 +28,12 @@ from .mesh import HopperGrid, build_grid
 
 GRAVITY = 9.81  # m/s^2
 
+#: Boxed-in excess alpha goes to the nearest cell with at least this much room (fraction of its
+#: volume).  1e-6 keeps it local (the micro-voids of packed material).  1e-3 is 5x cheaper, but
+#: it sends the excess compacted above the outlet into the open jet below it. Measured: that
+#: raised the early discharge rate by 8% against the Lagrangian run of the same case.
+REDISTRIBUTION_ROOM_MIN = 1e-6
+
 TRANSPORTED = ("alpha", "s_rr", "s_zz", "s_tt", "s_rz", "eps_p", "layer")
 
 
@@ -257,10 +263,7 @@ class HopperModel:
         new, face_flux = transport.step_stacked(stacked, u_mean, dt_T)
         # compaction above alpha = 1 (and round-off below 0) is moved to face neighbours with
         # room, conservatively; the alpha-weighted fields move with the same fractions
-        new_alpha_flat, moved = transport.redistribute_overshoot(new[0])
-        if moved.moved:
-            new = transport.apply_redistribution(new, moved)
-            new[0] = new_alpha_flat
+        moved = transport.redistribute_fields(new, room_min=REDISTRIBUTION_ROOM_MIN)
         alpha_flux = face_flux[0] + (moved.face_flux if moved.face_flux is not None else 0.0)
         shape = alpha.shape
         new_alpha = new[0].reshape(shape)

@@ -33,6 +33,14 @@ from . import diagnostics
 from .model import GRAVITY, HopperModel, InstabilityError, State
 
 
+def _nanmean(samples) -> np.ndarray:
+    """Mean over axis 0 ignoring NaN; NaN where every sample is NaN."""
+    arr = np.asarray(samples, dtype=float)
+    count = np.isfinite(arr).sum(axis=0)
+    total = np.where(np.isfinite(arr), arr, 0.0).sum(axis=0)
+    return np.where(count > 0, total / np.maximum(count, 1), np.nan)
+
+
 @dataclass
 class Schedule:
     """Call ``fn(sim, state)`` every ``interval`` seconds of simulated time in ``stages``."""
@@ -191,7 +199,7 @@ class Simulation:
             mass = m.mass_in_hopper(st)
             for name, frac in stage_marks.items():
                 if name not in rec.wall and mass <= frac * m0:
-                    self._sample_wall(name, average_over=0.05)
+                    self._sample_wall(name, average_over=0.1)
             if self.end_time != "empty" and t_dis >= float(self.end_time):
                 reason = "end_time"
             elif self.end_time == "empty" and mass < run.empty_fraction * m0:
@@ -256,48 +264,24 @@ class Simulation:
         rec.stagnant_fraction.append(stagnant)
 
     def _sample_wall(self, stage: str, average_over: float = 0.0):
-        """Wall pressure profile; in discharge averaged over ``average_over`` s of steps."""
-        st = self.state
-        s, r, z, p, tau = self.wall_sampler.profile(st)
-        if average_over > 0:
-            n_avg = max(1, int(average_over / self.model.dt / 20))
-            acc_p, acc_t = p.copy(), tau.copy()
-            count = 1
-            for _ in range(n_avg):
-                for _ in range(20):
-                    self.model.step(st)
-                s2, _, _, p2, t2 = self.wall_sampler.profile(st)
-                if len(s2) == len(s):
-                    acc_p += p2
-                    acc_t += t2
-                    count += 1
-            p, tau = acc_p / count, acc_t / count
-        self.record.wall[stage] = (st.t - (self.t_open if np.isfinite(self.t_open) else st.t),
-                                   s, r, z, p, tau)
+        """Wall pressure profile; in discharge the mean over ``average_over`` s of steps.
 
-    def _eta(self, t_dis: float, mass: float) -> str:
-        """``ETA`` of the discharge in wall time: simulated time left / recent simulated speed.
-
-        The simulated time left is ``end_time - t`` or, for ``"empty"``, the mass left above
-        ``empty_fraction`` over the last sampled rate (capped at ``max_time``).
+        Samples are taken every 20 steps; a bin's mean is over the samples in which it held
+        material (the free surface moves down during the average).
         """
-        now = time.perf_counter()
-        if self._eta_mark is None:
-            self._eta_mark = (now, t_dis)
-            return ""
-        wall, t0 = now - self._eta_mark[0], t_dis - self._eta_mark[1]
-        if wall <= 0 or t0 <= 0:
-            return ""
-        run = self.model.cfg.run
-        if self.end_time != "empty":
-            left = float(self.end_time) - t_dis
-        else:
-            rate = self.record.rate[-1] if self.record.rate else 0.0
-            if rate <= 0:
-                return ""
-            left = (mass - run.empty_fraction * self.record.initial_mass) / rate
-        left = max(0.0, min(left, run.max_time - t_dis))
-        return f"  ETA {left * wall / t0:.0f} s"
+        st = self.state
+        s, r, z, p, tau = self.wall_sampler.profile_all(st)
+        samples_p, samples_t = [p], [tau]
+        for _ in range(int(average_over / self.model.dt / 20)):
+            for _ in range(20):
+                self.model.step(st)
+            _, _, _, p2, t2 = self.wall_sampler.profile_all(st)
+            samples_p.append(p2)
+            samples_t.append(t2)
+        p, tau = _nanmean(samples_p), _nanmean(samples_t)
+        ok = np.isfinite(p)
+        t_stage = st.t - (self.t_open if np.isfinite(self.t_open) else st.t)
+        self.record.wall[stage] = (t_stage, s[ok], r[ok], z[ok], p[ok], tau[ok])
 
     def _progress(self, text: str):
         if not self.progress:

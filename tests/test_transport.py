@@ -181,7 +181,7 @@ def rotation_psi(r, z):
     return OMEGA_C * np.minimum((r - R0) ** 2 + (z - Z0) ** 2, R_DISC ** 2)
 
 
-def run_blob_revolution(scheme, redistribute, n=50):
+def run_blob_revolution(scheme, redistribute, n=50, room_min=1e-6):
     mesh = cylinder_grid(n, n, 1.0 / n)
     transport = Transport(mesh, np.ones(mesh.numberOfCells), np.ones(mesh.numberOfFaces),
                           None, ["alpha", "alpha_tracer"], scheme=scheme)
@@ -199,7 +199,7 @@ def run_blob_revolution(scheme, redistribute, n=50):
         phi, _ = transport.step_stacked(phi, u_n, dt)
         raw_high, raw_low = max(raw_high, phi[0].max()), min(raw_low, phi[0].min())
         if redistribute:
-            phi[0], moved = transport.redistribute_overshoot(phi[0])
+            phi[0], moved = transport.redistribute_overshoot(phi[0], room_min=room_min)
             phi[1] = transport.apply_redistribution(phi[1], moved)
         low, high = min(low, phi[0].min()), max(high, phi[0].max())
     divergence = np.abs(np.bincount(geom.face_cell_1[geom.interior],
@@ -212,12 +212,13 @@ def run_blob_revolution(scheme, redistribute, n=50):
                 divergence=divergence.max() / np.abs(geom.volume_flux(u_n)).max())
 
 
-def test_blob_revolution_fipy_scheme_with_redistribution():
+@pytest.mark.parametrize("room_min", [1e-6, 1e-3])
+def test_blob_revolution_fipy_scheme_with_redistribution(room_min):
     """FiPy's scheme (the default) plus ``redistribute_overshoot`` after every step: mass and
     the tracer kept to 1e-12, 0 <= alpha <= 1 throughout, return error (V-weighted L1 of
     alpha - alpha0 over the blob mass) 0.456 at 50 x 50 cells (0.273 at 100 x 100).  Without
     the redistribution FiPy's scheme overshoots to ~1.14 and undershoots to ~-0.002 here."""
-    result = run_blob_revolution("fipy", redistribute=True)
+    result = run_blob_revolution("fipy", redistribute=True, room_min=room_min)
     assert result["divergence"] < 1e-13
     assert np.all(result["mass_error"] < 1e-12)
     assert result["low"] >= -1e-12 and result["high"] <= 1.0 + 1e-12
@@ -276,7 +277,8 @@ def test_outflow_column_loses_exactly_what_crosses_the_outflow_faces():
 
 # ------------------------------------------------------------------ (d) cut cells, pile-up
 
-def test_material_piles_onto_a_cut_cell_wall_bounded_and_conserved():
+@pytest.mark.parametrize("room_min", [1e-6, 1e-3])
+def test_material_piles_onto_a_cut_cell_wall_bounded_and_conserved(room_min):
     """Loose material (alpha 0.6) falls at 0.2 m/s onto a sloped immersed wall cutting the
     cells (apertures and open fractions from the line): the compression drives the transported
     alpha above 1; ``redistribute_overshoot`` after each step keeps 0 <= alpha <= 1 while mass
@@ -300,7 +302,7 @@ def test_material_piles_onto_a_cut_cell_wall_bounded_and_conserved():
     for _ in range(150):
         phi, _ = transport.step_stacked(phi, u_n, dt)
         raw_high = max(raw_high, phi[0].max())
-        phi[0], moved = transport.redistribute_overshoot(phi[0])
+        phi[0], moved = transport.redistribute_overshoot(phi[0], room_min=room_min)
         phi[1] = transport.apply_redistribution(phi[1], moved)
         assert moved.residual_excess == 0.0 and moved.residual_deficit == 0.0
         assert phi[0].min() >= -1e-12 and phi[0].max() <= 1.0 + 1e-12
@@ -443,3 +445,165 @@ def test_deficit_among_empty_cells_is_filled_from_the_nearest_material():
     kappa_volume = geom.kappa * geom.cell_volume
     assert new.min() >= -1e-14
     assert abs((new - alpha) @ kappa_volume) < 1e-14 * (np.abs(alpha) @ kappa_volume)
+
+
+# ------------------------------------------- compiled redistribution against the numpy rule
+
+def compacted_case(seed, n=16, deep=False, deficits=True):
+    """Cut cells, a packed bed with micro-voids, an overfull band (at its surface or boxed in
+    below it), deficits among empty cells and next to material, six alpha-weighted fields."""
+    mesh, transport, geom = redistribution_case(seed=seed, n=n)
+    rng = np.random.default_rng(seed + 100)
+    r, z = np.asarray(mesh.cellCenters)
+    n_cells = geom.n_cells
+    alpha = np.where(z < 0.6 * z.max(), 1.0, 0.0)
+    packed = alpha > 0
+    voids = packed & (rng.random(n_cells) < 0.5)
+    alpha[voids] -= 10.0 ** rng.uniform(-6, -3, voids.sum())
+    top = z[packed].max()
+    band = packed & (rng.random(n_cells) < 0.6) & (
+        (z < top - 0.04) & (z > top - 0.07) if deep else (z > top - 0.03))
+    alpha[band] *= 1.0 + 10.0 ** rng.uniform(-4, -1, band.sum())
+    if deficits:
+        empty = ~packed
+        alpha[empty & (rng.random(n_cells) < 0.1)] = -1e-3 * rng.random()
+    ratios = np.stack([np.sin(7 * r + k) + 2.0 * np.cos(3 * z * k) for k in range(6)])
+    fields = np.ascontiguousarray(np.vstack([alpha[None], alpha * ratios]))
+    return transport, geom, fields
+
+
+def face_divergence(geom, flux):
+    return (np.bincount(geom.face_cell_1, flux, geom.n_cells)
+            - np.bincount(geom.face_cell_2[geom.interior], flux[geom.interior], geom.n_cells))
+
+
+@pytest.mark.parametrize("room_min", [1e-6, 1e-3])
+@pytest.mark.parametrize("seed,deep", [(0, False), (1, True), (2, False), (3, True)])
+def test_compiled_redistribution_equals_numpy_rule(seed, deep, room_min):
+    """The compiled kernel (transfer by transfer) and the numpy form of the rule (whole-array
+    passes) give the same alpha, fields, face transfers, sweeps and residuals to round-off;
+    the one-call in-place form equals the two calls exactly."""
+    transport, geom, fields = compacted_case(seed, deep=deep)
+    kappa_volume = geom.kappa * geom.cell_volume
+    alpha_ref, ref = transport.redistribute_overshoot(fields[0], room_min=room_min,
+                                                      backend="numpy")
+    alpha_new, moved = transport.redistribute_overshoot(fields[0], room_min=room_min)
+    scale = np.abs(fields) @ kappa_volume
+    assert moved.sweeps == ref.sweeps >= 1 and moved.moved > 50
+    assert np.max(np.abs(alpha_new - alpha_ref)) < 1e-12
+    assert np.max(np.abs(moved.face_flux - ref.face_flux)) < 1e-12 * scale[0]
+    assert moved.residual_excess == pytest.approx(ref.residual_excess, rel=1e-9, abs=1e-15)
+    assert moved.residual_deficit == pytest.approx(ref.residual_deficit, rel=1e-9, abs=1e-15)
+    q_ref = ref.apply(fields, kappa_volume)
+    q_new = transport.apply_redistribution(fields, moved)
+    for k in range(1, fields.shape[0]):
+        assert np.max(np.abs(q_new[k] - q_ref[k])) < 1e-11 * np.max(np.abs(fields[k]))
+    # one call, in place: the same numbers as the two calls
+    work = fields.copy()
+    once = transport.redistribute_fields(work, room_min=room_min)
+    assert np.array_equal(work[0], alpha_new) and np.array_equal(work[1:], q_new[1:])
+    assert np.array_equal(once.face_flux, moved.face_flux) and once.moved == moved.moved
+    # the plain function with the fields, compiled and numpy form
+    pairs, faces = open_neighbour_pairs(geom)
+    for backend in ("numba", "numpy"):
+        work = fields[1:].copy()
+        plain, _ = redistribute_overshoot(fields[0], geom.kappa, geom.cell_volume, pairs,
+                                          faces=faces, n_faces=geom.n_faces,
+                                          room_min=room_min, fields=work, backend=backend)
+        assert np.max(np.abs(plain - alpha_new)) < 1e-12
+        assert np.max(np.abs(work - q_new[1:])) < 1e-11 * np.max(np.abs(fields[1:]))
+
+
+@pytest.mark.parametrize("room_min", [1e-6, 1e-3])
+@pytest.mark.parametrize("seed,deep", [(4, False), (5, True)])
+def test_redistributed_fields_are_conserved_bounded_and_mixed(seed, deep, room_min):
+    """In place on seven fields: every field's total conserved to round-off, alpha in
+    [0, 1] (no residual), face transfers account for every cell's change of alpha, cells not
+    taking part keep their values exactly, and with excess only the moved material keeps its
+    donors' field ratios (every cell's ``q / alpha`` stays within the range it had)."""
+    transport, geom, fields = compacted_case(seed, deep=deep)
+    kappa_volume = geom.kappa * geom.cell_volume
+    work = fields.copy()
+    moved = transport.redistribute_fields(work, room_min=room_min)
+    assert moved.residual_excess == 0.0 and moved.residual_deficit == 0.0
+    assert work[0].max() <= 1.0 + 1e-14 and work[0].min() >= -1e-14
+    scale = np.abs(fields) @ kappa_volume
+    assert np.all(np.abs((work - fields) @ kappa_volume) < 1e-14 * scale)
+    change = (work[0] - fields[0]) * kappa_volume
+    assert np.max(np.abs(change + face_divergence(geom, moved.face_flux))) < 1e-15 * scale[0]
+    taking_part = np.zeros(geom.n_cells, dtype=bool)
+    taking_part[moved.donor] = taking_part[moved.receiver] = True
+    assert np.array_equal(work[:, ~taking_part], fields[:, ~taking_part])
+    # excess only: mixtures of the donors' ratios
+    transport, geom, fields = compacted_case(seed, deep=deep, deficits=False)
+    work = fields.copy()
+    transport.redistribute_fields(work, room_min=room_min)
+    held = work[0] > 1e-9
+    ratio_before = fields[1:, fields[0] > 1e-9] / fields[0, fields[0] > 1e-9]
+    ratio_after = work[1:, held] / work[0, held]
+    assert np.all(ratio_after >= ratio_before.min(1, keepdims=True) - 1e-9)
+    assert np.all(ratio_after <= ratio_before.max(1, keepdims=True) + 1e-9)
+
+
+def test_redistribution_log_replays_as_simultaneous_passes():
+    """``Redistribution.apply`` (compiled replay of the donor groups) equals replaying the
+    log's ``passes`` the way the numpy form moves content (``np.add.at`` per pass), and the
+    log reproduces alpha itself."""
+    transport, geom, fields = compacted_case(7, deep=True)
+    kappa_volume = geom.kappa * geom.cell_volume
+    alpha, moved = transport.redistribute_overshoot(fields[0])
+    content = fields * kappa_volume
+    touched = np.zeros(geom.n_cells, dtype=bool)
+    for donor, receiver, fraction in moved.passes:
+        touched[donor] = touched[receiver] = True
+        for row in content:
+            amount = fraction * row[donor]
+            np.subtract.at(row, donor, amount)
+            np.add.at(row, receiver, amount)
+    replayed = np.divide(content, kappa_volume, out=fields.copy(),
+                         where=touched & (kappa_volume > 0))
+    applied = transport.apply_redistribution(fields, moved)
+    assert np.max(np.abs(applied - replayed) / (np.abs(fields).max(1, keepdims=True))) < 1e-13
+    assert np.max(np.abs(applied[0] - alpha)) < 1e-13
+    # in place through ``out``
+    out = fields.copy()
+    assert transport.apply_redistribution(out, moved, out=out) is out
+    assert np.array_equal(out, applied)
+
+
+def test_bounded_fields_return_at_once_untouched():
+    _, transport, geom = redistribution_case(seed=8)
+    rng = np.random.default_rng(8)
+    fields = np.ascontiguousarray(rng.random((7, geom.n_cells)))
+    fields[0, :5] = [0.0, 1.0, 1.0 + 1e-15, -1e-15, 0.5]        # within tol of the bounds
+    work = fields.copy()
+    moved = transport.redistribute_fields(work)
+    assert moved.moved == 0 and moved.sweeps == 0 and np.array_equal(work, fields)
+    assert np.array_equal(moved.face_flux, np.zeros(geom.n_faces))
+    with pytest.raises(ValueError):
+        transport.redistribute_fields(np.asfortranarray(fields))
+
+
+def test_room_min_sends_boxed_in_excess_past_micro_voids():
+    """A larger ``room_min`` converges where the default needs more sweeps: boxed-in excess
+    goes past micro-voids to cells with real room (here the free surface)."""
+    transport, geom, fields = compacted_case(9, n=20, deep=True, deficits=False)
+    slow = transport.redistribute_fields(fields.copy())
+    fast = transport.redistribute_fields(fields.copy(), room_min=1e-3)
+    assert fast.residual_excess == 0.0 and fast.sweeps < slow.sweeps
+
+
+def test_redistribution_scratch_is_reused_and_its_log_grows():
+    """The compiled kernel keeps its scratch with the graph: a second call gives the same
+    numbers, also when the kept log arrays are too short and grow during the call."""
+    transport, geom, fields = compacted_case(1, n=24, deep=True)
+    first = fields.copy()
+    moved = transport.redistribute_fields(first)
+    work = transport.neighbours().work
+    work.log = (np.empty(1, dtype=np.int64), np.zeros(2, dtype=np.int64),
+                np.empty(1, dtype=np.int64), np.empty(1))
+    again = fields.copy()
+    moved_again = transport.redistribute_fields(again)
+    assert np.array_equal(again, first) and work.log[2].size > moved.moved
+    for name in ("donor", "offsets", "receiver", "fraction", "face_flux"):
+        assert np.array_equal(getattr(moved_again, name), getattr(moved, name))

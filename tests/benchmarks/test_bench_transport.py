@@ -4,6 +4,11 @@ Run the measurement with ``.venv/bin/pytest tests/benchmarks/test_bench_transpor
 --benchmark-only -o addopts="" -p no:cacheprovider``;
 the default test command runs each benchmark once on a small mesh (``--benchmark-disable``).
 Sizes: ~5,000 cells (70 x 71, the 5 mm reference hopper) and ~20,000 cells (141 x 142).
+
+The redistribution benchmarks (``-k redistrib``) include the hopper's own use: seven stacked
+fields (alpha and six alpha-weighted ones) on the 5,000-cell grid with a compacted band,
+redistributed and moved in one call (``redistribute_fields``) or in the two calls of the model
+(``redistribute_overshoot`` + ``apply_redistribution``), compiled and with the numpy reference.
 """
 
 import numpy as np
@@ -97,6 +102,101 @@ def test_bench_redistribute_overshoot(benchmark, size, depth):
     transport.redistribute_overshoot(alpha)
     new, moved = benchmark(transport.redistribute_overshoot, alpha)
     assert new.max() <= 1.0 + 1e-12 and moved.residual_excess == 0.0
+
+
+HOPPER_FIELDS = ("alpha", "s_rr", "s_zz", "s_tt", "s_rz", "eps_p", "layer")
+
+
+def compacted_hopper(benchmark, depth, seed=0):
+    """The 5k grid of ``case`` filled to 70 %, compacted as transport compacts the hopper.
+
+    The packing is not quite full: half of its cells are short by 1e-6..1e-3 (log-uniform),
+    as in the hopper's packed material (micro-voids).  A band four rows deep of packed cells,
+    60 % of them overfull by 1e-4..1e-2 (log-uniform, ~170 cells), lies at the free surface
+    (``"surface"``: room next door) or ten rows below it (``"deep"``: boxed in, the excess
+    travels hop by hop); 2 % of the empty cells are 1e-12 below zero.  Returns the transport
+    (axisymmetric scheme, as the hopper) and the seven stacked fields (alpha, alpha * stress
+    (4), alpha * plastic strain, alpha * layer).
+    """
+    mesh, kappa, aperture, outflow, _, _ = case(benchmark, "5k")
+    transport = Transport(mesh, kappa, aperture, outflow, HOPPER_FIELDS, scheme="axisymmetric")
+    rng = np.random.default_rng(seed)
+    r, z = np.asarray(mesh.cellCenters)
+    n, nz = mesh.numberOfCells, mesh.shape[1]
+    alpha = np.where(z > -0.05 + 0.7 * nz * H, 0.0, 1.0) * (kappa > 0)
+    packed = alpha > 0
+    voids = packed & (rng.random(n) < 0.5)
+    alpha[voids] -= 10.0 ** rng.uniform(-6, -3, voids.sum())
+    surface = z[packed].max() + 0.5 * H
+    below = 0 if depth == "surface" else 10
+    band = (packed & (z < surface - below * H) & (z > surface - (below + 4) * H)
+            & (rng.random(n) < 0.6))
+    alpha[band] *= 1.0 + 10.0 ** rng.uniform(-4, -2, band.sum())
+    empty = (kappa > 0) & ~packed
+    alpha[empty & (rng.random(n) < 0.02)] = -1e-12
+    stress = -1e3 * (1.0 + np.sin(5 * r / 0.35) * np.cos(3 * z / 0.35))
+    fields = np.stack([alpha] + [alpha * stress * (1 + 0.1 * k) for k in range(4)]
+                      + [alpha * np.abs(np.sin(r + z)), alpha * np.floor(8 * (z + 0.05) / 0.25)])
+    return transport, np.ascontiguousarray(fields)
+
+
+def check_redistributed(benchmark, transport, before, after, moved):
+    """Conserved, bounded where converged; the excess left (``residual_excess``: the default
+    ``room_min`` needs more than its 50 sweeps in the ``deep`` case) goes to the report."""
+    kappa_volume = transport.geometry.kappa * transport.geometry.cell_volume
+    assert moved.moved > 0 and moved.residual_deficit == 0.0
+    assert after[0].min() >= -1e-12
+    if moved.residual_excess == 0.0:
+        assert after[0].max() <= 1.0 + 1e-12
+    totals = np.abs(before) @ kappa_volume
+    assert np.all(np.abs((after - before) @ kappa_volume) <= 1e-12 * totals)
+    benchmark.extra_info["residual_excess_of_total"] = moved.residual_excess / totals[0]
+
+
+@pytest.mark.parametrize("room_min", [1e-6, 1e-3])
+@pytest.mark.parametrize("depth", ["surface", "deep"])
+def test_bench_redistribute_fields(benchmark, depth, room_min):
+    """The hopper's call: alpha back into [0, 1] and six alpha-weighted fields moved with it,
+    in place, face transfers summed (compiled, one call).  ``room_min``: the room (of kappa V)
+    a cell needs to be a target of hop-by-hop transfers (1e-6: the default; 1e-3: boxed-in
+    excess skips micro-voids, far fewer sweeps)."""
+    transport, fields = compacted_hopper(benchmark, depth)
+    work = fields.copy()
+    transport.redistribute_fields(work, room_min=room_min)   # compile / load the cache
+
+    def setup():
+        work[...] = fields
+        return (work,), {"room_min": room_min}
+
+    moved = benchmark.pedantic(transport.redistribute_fields, setup=setup, rounds=300,
+                               warmup_rounds=3)
+    check_redistributed(benchmark, transport, fields, work, moved)
+    benchmark.extra_info["transfers"] = moved.moved
+    benchmark.extra_info["sweeps"] = moved.sweeps
+    if room_min == 1e-3:
+        assert moved.residual_excess == 0.0 and moved.sweeps <= 10
+
+
+@pytest.mark.parametrize("backend", ["numba", "numpy"])
+@pytest.mark.parametrize("depth", ["surface", "deep"])
+def test_bench_redistribute_and_apply(benchmark, depth, backend):
+    """The same in the model's two calls: ``redistribute_overshoot`` of alpha, then
+    ``apply_redistribution`` of the seven fields; ``numpy``: the reference form of the rule."""
+    transport, fields = compacted_hopper(benchmark, depth)
+    options = {} if backend == "numba" else {"backend": "numpy"}
+
+    def both():
+        alpha, moved = transport.redistribute_overshoot(fields[0], **options)
+        new = transport.apply_redistribution(fields, moved)
+        new[0] = alpha
+        return new, moved
+
+    both()
+    if backend == "numba":
+        new, moved = benchmark(both)
+    else:
+        new, moved = benchmark.pedantic(both, rounds=5, iterations=1)
+    check_redistributed(benchmark, transport, fields, new, moved)
 
 
 @pytest.mark.parametrize("size", list(SIZES))
