@@ -1,0 +1,244 @@
+"""Generate ``studies/REPORT.md`` from the outputs of the studies (never written by hand).
+
+Reads ``ROOT/<study>/study.json`` of each validation study (``flow_mode_map``,
+``discharge_rate``, ``wall_pressure``, ``convergence``, ``robustness``) and the outputs of
+``element_tests`` (``failure_deviators.csv`` and its pictures), and writes one Markdown report:
+an overview, then per study its setting, findings (the comparisons as numbers), tables, figures
+and settings.  Studies without outputs are listed as missing, with the command that makes them.
+A study run on its ``--quick`` setting is flagged as such: those are test-sized runs, not
+validation results.
+
+The figures are copied next to the report (``report_figures/<study>/``) so that the report and
+its pictures travel together; ``--no-copy`` links the study outputs in place instead.
+
+Usage::
+
+    python studies/make_report.py [--root studies/output] [--out studies/REPORT.md] [--no-copy]
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import datetime
+import json
+import math
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+DEFAULT_ROOT = HERE / "output"
+DEFAULT_OUT = HERE / "REPORT.md"
+STUDIES = ("flow_mode_map", "discharge_rate", "wall_pressure", "convergence", "robustness",
+           "lagrangian_vs_eulerian")
+ELEMENT_TESTS = "element_tests"
+ELEMENT_FIGURES = (("meridional.png", "Stress paths in the meridional (p, q) plane with the "
+                    "yield surface's meridians and the flow potential."),
+                   ("deviatoric.png", "The Mohr-Coulomb hexagon and the Menetrey-Willam flow "
+                    "potential in the deviatoric plane, with the failure states."),
+                   ("stress_strain.png", "Deviatoric stress and volumetric strain against the "
+                    "controlled strain."))
+
+
+def _fmt(v) -> str:
+    if v is None:
+        return ""
+    if isinstance(v, bool):
+        return "yes" if v else "no"
+    if isinstance(v, float):
+        if math.isnan(v):
+            return ""
+        return f"{v:.4g}"
+    if isinstance(v, (list, tuple)):
+        return ", ".join(f"({_fmt(x)})" if isinstance(x, (list, tuple)) else _fmt(x)
+                         for x in v)
+    if isinstance(v, dict):
+        return "; ".join(f"{k}: {_fmt(x)}" for k, x in v.items())
+    return str(v).replace("|", "\\|").replace("\n", " ")
+
+
+def table(columns, rows) -> list:
+    lines = ["| " + " | ".join(_fmt(c) for c in columns) + " |",
+             "|" + "---|" * len(columns)]
+    lines += ["| " + " | ".join(_fmt(c) for c in r) + " |" for r in rows]
+    return lines
+
+
+class Figures:
+    """Copies (or links) figures and returns their Markdown paths relative to the report."""
+
+    def __init__(self, report: Path, copy: bool):
+        self.report = report
+        self.copy = copy
+        self.folder = report.parent / "report_figures"
+        if copy and self.folder.is_dir():
+            shutil.rmtree(self.folder)
+
+    def link(self, study: str, path: Path) -> str:
+        if self.copy:
+            target = self.folder / study / path.name
+            target.parent.mkdir(parents=True, exist_ok=True)
+            shutil.copyfile(path, target)
+            path = target
+        return Path(os.path.relpath(path, self.report.parent)).as_posix()
+
+
+def _git_commit() -> str:
+    try:
+        out = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=HERE,
+                             capture_output=True, text=True, timeout=10)
+        dirty = subprocess.run(["git", "status", "--porcelain"], cwd=HERE, capture_output=True,
+                               text=True, timeout=10)
+        if out.returncode == 0:
+            return out.stdout.strip() + (" (with uncommitted changes)" if dirty.stdout.strip()
+                                         else "")
+    except (OSError, subprocess.SubprocessError):
+        pass
+    return "unknown"
+
+
+def study_section(name: str, data: dict, folder: Path, figures: Figures) -> list:
+    lines = [f"## {data.get('title', name)}", ""]
+    setting = data.get("setting", "?")
+    minutes = data.get("case_wall_time_total_s", 0) / 60
+    meta = (f"Study `{name}` — setting **{setting}**, {data.get('cases', '?')} case(s)"
+            f" ({data.get('cases_failed', 0)} failed), {minutes:.1f} min of run wall time summed "
+            f"over the cases, written {data.get('created', '?')} by fipy_hopper "
+            f"{data.get('fipy_hopper_version', '?')}.")
+    lines += [meta, "", f"Command: `{data.get('command', '')}`", ""]
+    if setting == "quick":
+        lines += ["> **Quick setting**: tiny hoppers on coarse grids, the test-suite size. These "
+                  "numbers show that the study runs; they are not validation results.", ""]
+    if data.get("findings"):
+        lines += ["### Findings", ""]
+        lines += [f"- {f}" for f in data["findings"]]
+        lines.append("")
+    for fig in data.get("figures", []):
+        path = folder / fig["file"]
+        if path.is_file():
+            lines += [f"![{fig['file']}]({figures.link(name, path)})", "",
+                      f"*{fig.get('caption', '')}*", ""]
+        else:
+            lines += [f"*(figure {fig['file']} is missing)*", ""]
+    for t in data.get("tables", []):
+        if not t.get("rows"):
+            continue
+        lines += [f"### {t['title']}", ""]
+        lines += table(t["columns"], t["rows"])
+        lines.append("")
+    if data.get("settings"):
+        lines += ["<details><summary>Settings</summary>", ""]
+        lines += table(["option", "value"], sorted(data["settings"].items()))
+        lines += ["", "</details>", ""]
+    return lines
+
+
+def element_section(folder: Path, figures: Figures):
+    csv_path = folder / "failure_deviators.csv"
+    if not csv_path.is_file():
+        return None
+    with open(csv_path, newline="", encoding="utf-8") as fh:
+        rows = list(csv.DictReader(fh))
+    worst = max((float(r["rel_error"]) for r in rows), default=math.nan)
+    failed = sum(1 for r in rows if r.get("failed") == "True")
+    headline = (f"{len(rows)} triaxial tests reached failure in {failed} cases; the largest "
+                f"relative difference of the failure deviator q_f from the closed form "
+                f"6 sin(phi)(p + c cot(phi))/(3 -+ sin(phi)) is {worst:.2e}.")
+    lines = ["## Material element tests (Mohr-Coulomb)", "",
+             "Study `element_tests` (`studies/element_tests.py`): drained triaxial compression "
+             "and extension, simple shear and oedometric loading of one material point.", "",
+             "### Findings", "", f"- {headline}", ""]
+    for name, caption in ELEMENT_FIGURES:
+        path = folder / name
+        if path.is_file():
+            lines += [f"![{name}]({figures.link(ELEMENT_TESTS, path)})", "", f"*{caption}*", ""]
+    lines += ["### Failure deviators", ""]
+    lines += table(["path", "p0 (Pa)", "p_f (Pa)", "q_f (Pa)", "closed form (Pa)", "rel. error"],
+                   [[r["path"], float(r["p0_Pa"]), float(r["p_f_Pa"]), float(r["q_f_Pa"]),
+                     float(r["q_closed_form_Pa"]), f"{float(r['rel_error']):.1e}"] for r in rows])
+    lines.append("")
+    return lines, headline
+
+
+def build(root: Path, out: Path, copy: bool = True) -> dict:
+    """Write the report; returns ``{"present": [...], "missing": [...], "path": out}``."""
+    root, out = Path(root), Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    figures = Figures(out, copy)
+    present, missing, body, overview = [], [], [], []
+    for name in STUDIES:
+        path = root / name / "study.json"
+        if not path.is_file():
+            missing.append(name)
+            continue
+        with open(path, encoding="utf-8") as fh:
+            data = json.load(fh)
+        present.append(name)
+        body += study_section(name, data, root / name, figures)
+        head = data.get("headline") or (data.get("findings") or [""])[0]
+        overview.append([f"`{name}`", data.get("setting", "?"), data.get("cases", ""), head])
+    element = element_section(root / ELEMENT_TESTS, figures)
+    if element is None:
+        missing.append(ELEMENT_TESTS)
+    else:
+        present.append(ELEMENT_TESTS)
+        body += element[0]
+        overview.append([f"`{ELEMENT_TESTS}`", "", "", element[1]])
+    now = datetime.datetime.now().astimezone().isoformat(timespec="seconds")
+    lines = ["# fipy_hopper validation report", "",
+             f"*Generated by `python studies/make_report.py` from the study outputs in "
+             f"`{_display(root, out)}` on {now} (git {_git_commit()}). Do not edit by hand: "
+             "rerun the studies and this script.*", "",
+             "Each study is rerun with `python studies/<study>.py` (a Dask cluster on this "
+             "machine's cores by default; `--scheduler ADDRESS` for an existing cluster, "
+             "`--serial` without Dask); finished cases are not recomputed.  The correlations "
+             "and their verification tags are those of `fipy_hopper.theory`.", ""]
+    if overview:
+        lines += ["## Overview", ""]
+        lines += table(["study", "setting", "cases", "headline"], overview)
+        lines.append("")
+    if missing:
+        lines += ["## Missing studies", "",
+                  "No outputs were found for these studies (run them, then this script):", ""]
+        for name in missing:
+            cmd = (f"python studies/{name}.py --out {_display(root / name, out)}"
+                   if name != ELEMENT_TESTS else
+                   f"python studies/element_tests.py --out {_display(root / name, out)}")
+            lines.append(f"- `{name}`: `{cmd}`")
+        lines.append("")
+    lines += body
+    from fipy_hopper.io import atomic_write_text
+
+    atomic_write_text(out, "\n".join(lines).rstrip() + "\n")
+    return {"present": present, "missing": missing, "path": out}
+
+
+def _display(path: Path, out: Path) -> str:
+    try:
+        return Path(os.path.relpath(path, Path.cwd())).as_posix()
+    except ValueError:
+        return str(path)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--root", type=Path, default=DEFAULT_ROOT,
+                        help="folder holding the study outputs (default studies/output)")
+    parser.add_argument("--out", type=Path, default=DEFAULT_OUT,
+                        help="the report (default studies/REPORT.md)")
+    parser.add_argument("--no-copy", dest="copy", action="store_false",
+                        help="link the figures in place instead of copying them next to the "
+                             "report")
+    args = parser.parse_args(argv)
+    result = build(args.root, args.out, args.copy)
+    print(f"report written to {result['path']}: {len(result['present'])} studies "
+          f"({', '.join(result['present']) or 'none'}); missing: "
+          f"{', '.join(result['missing']) or 'none'}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,452 @@
+"""Normal wall pressure along the wall: filled at rest and during discharge, against the theories.
+
+Each case fills a hopper, lets it come to rest and discharges it past the half-way mark (by
+default the reference hopper, D = 0.3 m, 20 deg, D0 = 0.06 m, 0.3 m fill, phi = 30 deg,
+phi_w = 15 deg, and the same hopper with a 30 deg cone, 5 mm cells).  The package samples the
+normal wall pressure ``p_n`` along the wall (``wall_pressure.csv``) when the fill is at rest
+(``filling``), and averaged over 0.05 s when 90 % and 50 % of the mass is left
+(``early_discharge``, ``mid_discharge``).
+
+Theory, from :mod:`fipy_hopper.theory` (all with the material's phi and the wall's phi_w):
+
+* bin (vertical wall): Janssen with ``K = 1 - sin(phi)`` (Jaky) and ``mu = tan(phi_w)``;
+  EN 1991-4 filling loads with ``K_m = 1.1 (1 - sin(phi))`` (mean values, no a_K factors),
+  for slender silos (``h_c/d_c >= 2``) eq. 5.1-5.6 and otherwise the §5.3 squat/intermediate
+  form with a levelled surface (angle of repose 0, ``h0 = 0``); EN discharge ``C_h = 1.15``
+  times the filling load (the slender-silo factor; for squat silos EN allows 1.0 [M]);
+* cone: Walker's slice method (D = 1) with the EN filling ratio ``F_f`` and Walker's
+  discharge ratio ``F_e`` on top of the Janssen vertical stress at the transition; EN 1991-4
+  hopper loads (class from K_m and mu; steep: F_f / F_e, shallow: F_s) on top of the EN
+  vertical stress at the transition (``C_b = 1``);
+* the switch: Walker's simple estimate, ``F_e sigma_vt`` just below the transition
+  (:func:`fipy_hopper.theory.walker_switch_pressure`), against the largest simulated
+  discharge pressure within a quarter of the cone's slant length below the transition.
+
+During discharge the theories are evaluated with the *equivalent levelled surface* of the
+mass left in the hopper at the sample time (EN's equivalent surface).  The comparison numbers
+are means over two regions that avoid the outlet, the transition and the free surface: the
+bin from 5 % to 85 % of the (equivalent) fill depth below the surface, and the cone from 20 %
+to 80 % of its slant length; ``diff`` is ``100 (mean simulated - mean theory) / mean theory``.
+
+Written to ``--out`` (default ``studies/output/wall_pressure``): ``profiles.csv`` (simulated and
+theoretical p_n at every sampled wall point), ``comparison.csv`` (the region means),
+``switch.csv``, ``study.json``, ``wall_pressure_<case>.png`` and ``cases/<name>/``.
+
+Usage::
+
+    python studies/wall_pressure.py [--out DIR] [--quick] [--serial | --scheduler ADDRESS]
+                                    [--cell-size 0.005] [--half-angles 20 30]
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+if str(HERE) not in sys.path:
+    sys.path.insert(0, str(HERE))
+import _sweep  # noqa: E402
+
+from fipy_hopper import geometry, theory  # noqa: E402
+from fipy_hopper.config import HopperConfig  # noqa: E402
+
+NAME = "wall_pressure"
+TITLE = "Wall pressure at rest and in discharge against Janssen, Walker and EN 1991-4"
+DEFAULTS = {
+    "half_angles": (20.0, 30.0),     # deg
+    "wall_friction": 15.0,           # deg
+    "friction_angle": 30.0,          # deg
+    "bin_diameter": 0.3,             # m
+    "outlet_diameter": 0.06,         # m
+    "fill_height": 0.3,              # m above the transition
+    "bin_height": 0.35,              # m
+    "cell_size": 0.005,              # m
+    "youngs_modulus": 5.0e6,         # Pa
+    "end_time": None,                # s; None: emptying_fraction of the Beverloo emptying time
+    "emptying_fraction": 0.65,
+    "case_plots": True,
+}
+QUICK = {"half_angles": (30.0,), "bin_diameter": 0.2, "fill_height": 0.1, "bin_height": 0.12,
+         "cell_size": 0.01, "end_time": 0.5, "case_plots": False}
+STAGES = ("filling", "early_discharge", "mid_discharge")
+
+
+def base_config(opts, theta) -> dict:
+    return {"hopper": {"bin_diameter": opts["bin_diameter"], "half_angle_deg": float(theta),
+                       "outlet_diameter": opts["outlet_diameter"],
+                       "fill_height": opts["fill_height"], "bin_height": opts["bin_height"]},
+            "material": {"friction_angle_deg": opts["friction_angle"],
+                         "youngs_modulus": opts["youngs_modulus"]},
+            "wall": {"friction_angle_deg": opts["wall_friction"]},
+            "numerics": {"cell_size": opts["cell_size"]},
+            "run": {"output_interval": 0.05}}
+
+
+def setup(quick: bool = False, **options) -> dict:
+    """The cases and options (``{"options", "cases", "setting"}``); unknown options raise."""
+    unknown = set(options) - set(DEFAULTS)
+    if unknown:
+        raise TypeError(f"unknown options {sorted(unknown)}; known: {sorted(DEFAULTS)}")
+    opts = {**DEFAULTS, **(QUICK if quick else {}), **options}
+    cases = []
+    for theta in opts["half_angles"]:
+        config = base_config(opts, theta)
+        end = opts["end_time"]
+        if end is None:
+            cfg = _sweep._config(config)
+            rate = float(theory.beverloo_rate(cfg.material.density, cfg.hopper.outlet_diameter)
+                         * theory.rose_tanaka_factor(theta))
+            mass = cfg.material.density * cfg.hopper.fill_volume()
+            end = round(opts["emptying_fraction"] * mass / rate, 2)
+        config["run"]["end_time"] = float(end)
+        cases.append(_sweep.make_case(
+            _sweep.case_name(("theta", float(theta)), ("wall", float(opts["wall_friction"]))),
+            {"half_angle_deg": float(theta), "wall_friction_deg": float(opts["wall_friction"]),
+             "end_time_s": float(end)},
+            config, plots=opts["case_plots"]))
+    return {"options": opts, "cases": cases, "setting": _sweep.setting_label(quick, options)}
+
+
+# ---------------------------------------------------------------- theory along the wall
+def equivalent_fill(cfg: HopperConfig, mass: float) -> float:
+    """Height above the transition of the levelled surface holding ``mass`` (m; may be < 0
+    when the surface is in the cone, then the bin curves are not drawn)."""
+    geom = cfg.hopper
+    r0, r1, h = geom.outlet_radius, geom.bin_radius, geom.cone_height
+    cone = math.pi * h / 3.0 * (r0 * r0 + r0 * r1 + r1 * r1)
+    return (mass / cfg.material.density - cone) / (math.pi * r1 * r1)
+
+
+def theory_curves(cfg: HopperConfig, s, fill: float, stage: str) -> dict:
+    """``{name: p_n(s)}`` (Pa) for the wall points ``s`` with a levelled surface ``fill`` m
+    above the transition; NaN outside a theory's section or where it does not apply."""
+    geom, mat = cfg.hopper, cfg.material
+    phi, phi_w = mat.friction_angle_deg, cfg.wall.friction_angle_deg
+    rho, g = mat.density, theory.G
+    gamma = rho * g
+    D = geom.bin_diameter
+    mu = math.tan(math.radians(phi_w))
+    K_j = float(theory.k_jaky(phi))
+    K_m = float(theory.k_en1991(phi))
+    s = np.asarray(s, float)
+    r, z, _, _ = geometry.wall_point(s, geom)
+    s_t = float(geometry.transition_arc_length(geom))
+    in_bin = s > s_t
+    depth = geom.cone_height + fill - z
+    out = {}
+    nan = np.full_like(s, np.nan)
+    discharge = stage != "filling"
+    if fill <= 0 or mu <= 0:
+        return out
+    # bin
+    dz = np.clip(depth, 0.0, None)
+    ok_bin = in_bin & (depth >= 0)
+    jan = np.where(ok_bin, theory.janssen_wall_pressure(dz, rho, D, K_j, mu), np.nan)
+    out["Janssen (K = 1 - sin phi)"] = jan
+    slender = fill / D >= 2.0
+    if slender:
+        en = theory.en1991_filling_vertical_walls(dz, gamma, D, K_m, mu)
+        p_vft_en = float(theory.en1991_filling_vertical_walls(fill, gamma, D, K_m, mu).p_v)
+    else:
+        en = theory.en1991_filling_intermediate(dz, gamma, D, K_m, mu, 0.0)
+        p_vft_en = float(theory.en1991_filling_intermediate(fill, gamma, D, K_m, mu, 0.0).p_v)
+    p_h = np.asarray(en.p_h, float)
+    if discharge:
+        p_h = np.asarray(theory.en1991_discharge_vertical_walls(p_h, mu * p_h)[0], float)
+    out["EN 1991-4 bin" + (" discharge (C_h = 1.15)" if discharge else " filling")] = \
+        np.where(ok_bin, p_h, np.nan)
+    # cone (theta < 90)
+    if geom.cone_height > 0:
+        theta = geom.half_angle_deg
+        h = geom.bin_radius / math.tan(geom.half_angle)
+        x = np.clip(z + geom.outlet_radius / math.tan(geom.half_angle), 0.0, h)
+        sigma_vt = float(theory.janssen_vertical_stress(fill, rho, D, K_j, mu))
+        mode = "discharge" if discharge else "filling"
+        try:
+            walker = theory.walker_hopper_wall_pressure(x, h, theta, rho, phi, phi_w, sigma_vt,
+                                                        mode=mode)
+            out[f"Walker slice, {mode}"] = np.where(~in_bin, walker, np.nan)
+        except ValueError:
+            pass
+        try:
+            en_h = theory.en1991_hopper_pressures(x, h, theta, gamma, K_m, mu, p_vft_en,
+                                                  mode=mode, phi_i=phi)
+            label = f"EN 1991-4 hopper ({en_h.hopper_class}), {mode}"
+            out[label] = np.where(~in_bin, np.asarray(en_h.p_n, float), np.nan)
+        except ValueError:
+            pass
+    return {k: np.asarray(v, float) for k, v in out.items()}
+
+
+def switch_estimate(cfg: HopperConfig, fill: float):
+    """Walker's switch estimate ``(K sigma_vt, F_e sigma_vt, F_e / K)`` (Pa, Pa, -)."""
+    mat = cfg.material
+    K = float(theory.k_jaky(mat.friction_angle_deg))
+    mu = math.tan(math.radians(cfg.wall.friction_angle_deg))
+    sigma_vt = float(theory.janssen_vertical_stress(max(fill, 0.0), mat.density,
+                                                    cfg.hopper.bin_diameter, K, mu))
+    sw = theory.walker_switch_pressure(sigma_vt, K, mat.friction_angle_deg,
+                                       cfg.wall.friction_angle_deg, cfg.hopper.half_angle_deg)
+    return float(sw.cylinder), float(sw.hopper), float(sw.ratio)
+
+
+# ---------------------------------------------------------------- analysis
+def load_case(row):
+    from fipy_hopper.api import read_results
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return read_results(row["run_dir"])
+
+
+def stage_fill(res, stage: str) -> float:
+    """The equivalent levelled fill (m above the transition) at a wall sample."""
+    cfg = res.config
+    if stage == "filling":
+        return cfg.hopper.fill_height
+    sel = res.wall_stage(stage)
+    if not len(sel["t_s"]):
+        return math.nan
+    t = float(sel["t_s"][0])
+    ts = res.timeseries
+    mass = float(np.interp(t, ts["t_s"], ts["mass_in_hopper_kg"]))
+    return equivalent_fill(cfg, mass)
+
+
+def analyse(rows: list, options: dict) -> tuple:
+    """Returns ``(profiles, comparison, switch, numbers)`` (lists of dicts and a dict)."""
+    profiles, comparison, switch = [], [], []
+    for row in rows:
+        try:
+            res = load_case(row)
+        except FileNotFoundError:
+            continue
+        cfg = res.config
+        geom = cfg.hopper
+        s_t = float(geometry.transition_arc_length(geom))
+        h = cfg.numerics.cell_size
+        for stage in STAGES:
+            sel = res.wall_stage(stage)
+            if not len(sel["s_m"]):
+                continue
+            fill = stage_fill(res, stage)
+            s, p = sel["s_m"], sel["p_n_Pa"]
+            curves = theory_curves(cfg, s, fill, stage)
+            for k in range(len(s)):
+                profiles.append({"case": row["case"], "stage": stage, "t_s": float(sel["t_s"][k]),
+                                 "s_m": float(s[k]), "z_m": float(sel["z_m"][k]),
+                                 "p_n_sim_Pa": float(p[k]),
+                                 **{name: float(v[k]) for name, v in curves.items()}})
+            z = sel["z_m"]
+            depth = geom.cone_height + fill - z
+            regions = {"bin": (s > s_t) & (depth >= 0.05 * fill) & (depth <= 0.85 * fill),
+                       "cone": (s >= 0.2 * s_t) & (s <= 0.8 * s_t)}
+            for region, mask in regions.items():
+                for name, v in curves.items():
+                    m = mask & np.isfinite(v) & np.isfinite(p)
+                    if m.sum() < 2:
+                        continue
+                    mean_sim, mean_th = float(np.mean(p[m])), float(np.mean(v[m]))
+                    comparison.append({
+                        "case": row["case"], "half_angle_deg": row["half_angle_deg"],
+                        "stage": stage, "region": region, "theory": name, "points": int(m.sum()),
+                        "fill_m": fill, "mean_sim_Pa": mean_sim, "mean_theory_Pa": mean_th,
+                        "diff_pct": _sweep.pct(mean_sim, mean_th),
+                        "rms_rel_diff_pct": float(100 * np.sqrt(np.mean((p[m] - v[m]) ** 2))
+                                                  / mean_th)})
+            if stage != "filling" and geom.cone_height > 0:
+                window = (s >= s_t - 0.25 * s_t) & (s <= s_t + 2 * h)
+                fsel = res.wall_stage("filling")
+                fwin = (fsel["s_m"] >= s_t - 0.25 * s_t) & (fsel["s_m"] <= s_t + 2 * h)
+                if window.any():
+                    k = int(np.argmax(np.where(window, p, -np.inf)))
+                    cyl, hop, ratio = switch_estimate(cfg, fill)
+                    fill_peak = float(np.max(fsel["p_n_Pa"][fwin])) if fwin.any() else math.nan
+                    switch.append({
+                        "case": row["case"], "half_angle_deg": row["half_angle_deg"],
+                        "stage": stage, "fill_m": fill, "peak_sim_Pa": float(p[k]),
+                        "peak_s_m": float(s[k]), "transition_s_m": s_t,
+                        "peak_filling_sim_Pa": fill_peak,
+                        "sim_ratio_discharge_to_filling": float(p[k]) / fill_peak,
+                        "walker_hopper_Pa": hop, "walker_cylinder_Pa": cyl,
+                        "walker_ratio_Fe_over_K": ratio,
+                        "diff_peak_vs_walker_pct": _sweep.pct(float(p[k]), hop)})
+    numbers = {}
+    for c in comparison:
+        key = f"diff_pct[{c['case']}|{c['stage']}|{c['region']}|{c['theory']}]"
+        numbers[key] = c["diff_pct"]
+    for sw in switch:
+        numbers[f"switch_peak_Pa[{sw['case']}|{sw['stage']}]"] = sw["peak_sim_Pa"]
+        numbers[f"switch_diff_vs_walker_pct[{sw['case']}|{sw['stage']}]"] = \
+            sw["diff_peak_vs_walker_pct"]
+    numbers["failed"] = [r["case"] for r in rows if r.get("error")]
+    numbers["missing_stages"] = sorted({f"{r['case']}:{st}" for r in rows for st in STAGES}
+                                       - {f"{p['case']}:{p['stage']}" for p in profiles})
+    return profiles, comparison, switch, numbers
+
+
+# ---------------------------------------------------------------- figures
+STAGE_STYLE = {"filling": ("o", "C0", "simulated, filled at rest"),
+               "early_discharge": ("s", "C1", "simulated, discharge, 90 % left"),
+               "mid_discharge": ("^", "C3", "simulated, discharge, 50 % left")}
+THEORY_STYLE = (("Janssen", "k", "-"), ("EN 1991-4 bin filling", "0.45", "--"),
+                ("EN 1991-4 bin discharge", "0.45", ":"), ("Walker slice, filling", "C0", "-"),
+                ("Walker slice, discharge", "C3", "-"), ("EN 1991-4 hopper", "C2", "--"))
+
+
+def plot_case(row, profiles, switch):
+    res = load_case(row)
+    cfg = res.config
+    s_t = float(geometry.transition_arc_length(cfg.hopper))
+    stages = [st for st in STAGES if any(p["case"] == row["case"] and p["stage"] == st
+                                         for p in profiles)]
+    fig = _sweep.figure(4.6 * max(1, len(stages)), 4.6)
+    axes = fig.subplots(1, max(1, len(stages)), sharey=True, squeeze=False)[0]
+    tops = []
+    for ax, stage in zip(axes, stages):
+        rows = [p for p in profiles if p["case"] == row["case"] and p["stage"] == stage]
+        marker, colour, label = STAGE_STYLE[stage]
+        ax.plot([p["s_m"] for p in rows], [p["p_n_sim_Pa"] / 1e3 for p in rows], marker,
+                color=colour, ms=4, label=label)
+        fill = stage_fill(res, stage)
+        s_fine = np.linspace(0.0, float(geometry.arc_length(cfg.hopper.cone_height + fill,
+                                                           cfg.hopper)), 300)
+        curves = theory_curves(cfg, s_fine, fill, stage)
+        sim = np.sort([p["p_n_sim_Pa"] for p in rows])
+        top = max([np.nanmax(v) for v in curves.values() if np.isfinite(v).any()]
+                  + [sim[-2] if len(sim) > 1 else sim[-1]]) * 1.25
+        tops.append(top)
+        for p in rows:                          # e.g. the outlet lip: marked, not scaled to
+            if p["p_n_sim_Pa"] > top:
+                ax.annotate(f"{p['p_n_sim_Pa'] / 1e3:.1f} kPa", (p["s_m"], top / 1e3 * 0.97),
+                            ha="left", va="top", fontsize=7, color=colour,
+                            arrowprops={"arrowstyle": "->", "color": colour})
+        for name, v in curves.items():
+            col, ls = next(((c, l) for key, c, l in THEORY_STYLE if name.startswith(key)),
+                           ("0.6", "-"))
+            ax.plot(s_fine, v / 1e3, ls, color=col, lw=1.2, label=name)
+        for sw in switch:
+            if sw["case"] == row["case"] and sw["stage"] == stage:
+                ax.plot([sw["peak_s_m"]], [sw["peak_sim_Pa"] / 1e3], "*", color="k", ms=11,
+                        label=f"switch peak {sw['peak_sim_Pa'] / 1e3:.2f} kPa")
+                ax.plot([s_t], [sw["walker_hopper_Pa"] / 1e3], "P", color="C3", ms=8,
+                        label=f"Walker F_e sigma_vt = {sw['walker_hopper_Pa'] / 1e3:.2f} kPa")
+        ax.axvline(s_t, color="0.5", lw=0.8, ls=":")
+        ax.set_xlabel("arc length from the outlet lip, s (m)")
+        title = {"filling": "filled, at rest", "early_discharge": "discharge, 90 % left",
+                 "mid_discharge": "discharge, 50 % left"}[stage]
+        ax.set_title(f"{title} (equivalent fill {fill:.3f} m)", fontsize=9)
+        ax.set_xlim(left=0.0)
+        ax.legend(fontsize=6, loc="best")
+    if tops:
+        axes[0].set_ylim(0.0, max(tops) / 1e3)
+    axes[0].set_ylabel("normal wall pressure p_n (kPa)")
+    fig.suptitle(f"{row['case']}: theta = {cfg.hopper.half_angle_deg:g} deg, phi = "
+                 f"{cfg.material.friction_angle_deg:g} deg, phi_w = "
+                 f"{cfg.wall.friction_angle_deg:g} deg, h = {1000 * cfg.numerics.cell_size:g} mm"
+                 " (dotted: transition)", fontsize=9)
+    return fig
+
+
+# ---------------------------------------------------------------- outputs
+def write_outputs(out, rows, profiles, comparison, switch, numbers, options, setting,
+                  argv=None):
+    out = Path(out)
+    _sweep.write_rows_csv(out / "profiles.csv", profiles)
+    _sweep.write_rows_csv(out / "comparison.csv", comparison)
+    _sweep.write_rows_csv(out / "switch.csv", switch)
+    _sweep.write_rows_csv(out / "results.csv", rows, first=(
+        "case", "half_angle_deg", "wall_friction_deg", "end_time_s", "flow_mode",
+        "steady_discharge_rate_kg_s", "fill_at_rest", "wall_time_s", "error"))
+    figures = []
+    for row in rows:
+        if row.get("error") and not Path(row.get("run_dir", "")).is_dir():
+            continue
+        name = f"wall_pressure_{row['case']}.png"
+        _sweep.save(plot_case(row, profiles, switch), out / name)
+        figures.append({"file": name, "caption": f"{row['case']}: simulated p_n along the wall "
+                        "against Janssen, Walker's slice method and EN 1991-4, filled and in "
+                        "discharge."})
+    findings = []
+    for case in dict.fromkeys(c["case"] for c in comparison):
+        for stage in STAGES:
+            parts = [f"{c['theory']} {c['diff_pct']:+.0f} %" for c in comparison
+                     if c["case"] == case and c["stage"] == stage]
+            if parts:
+                findings.append(f"{case}, {stage.replace('_', ' ')}: mean simulated p_n vs "
+                                + "; ".join(parts) + ".")
+    for sw in switch:
+        findings.append(
+            f"{sw['case']}, {sw['stage'].replace('_', ' ')}: switch peak {sw['peak_sim_Pa']:.0f}"
+            f" Pa at s = {sw['peak_s_m']:.3f} m (transition {sw['transition_s_m']:.3f} m), "
+            f"{sw['sim_ratio_discharge_to_filling']:.2f} x the filled peak there; Walker's "
+            f"F_e sigma_vt = {sw['walker_hopper_Pa']:.0f} Pa ({sw['diff_peak_vs_walker_pct']:+.0f}"
+            f" %), F_e/K = {sw['walker_ratio_Fe_over_K']:.2f}.")
+    if numbers["missing_stages"]:
+        findings.append("Stages not reached: " + ", ".join(numbers["missing_stages"]) + ".")
+    if numbers["failed"]:
+        findings.append("Failed runs: " + ", ".join(numbers["failed"]) + ".")
+    tables = [
+        {"title": "Region means (diff = 100 (simulated - theory) / theory)",
+         "columns": ["case", "stage", "region", "theory", "sim (Pa)", "theory (Pa)", "diff %",
+                     "rms %"],
+         "rows": [[c["case"], c["stage"], c["region"], c["theory"], round(c["mean_sim_Pa"]),
+                   round(c["mean_theory_Pa"]), round(c["diff_pct"], 1),
+                   round(c["rms_rel_diff_pct"], 1)] for c in comparison]},
+        {"title": "Switch peak in discharge",
+         "columns": ["case", "stage", "peak sim (Pa)", "filled there (Pa)", "ratio",
+                     "Walker F_e sigma_vt (Pa)", "diff %", "F_e/K"],
+         "rows": [[sw["case"], sw["stage"], round(sw["peak_sim_Pa"]),
+                   round(sw["peak_filling_sim_Pa"]), round(sw["sim_ratio_discharge_to_filling"], 2),
+                   round(sw["walker_hopper_Pa"]), round(sw["diff_peak_vs_walker_pct"], 1),
+                   round(sw["walker_ratio_Fe_over_K"], 2)] for sw in switch]}]
+    settings = {k: (list(v) if isinstance(v, tuple) else v) for k, v in options.items()}
+    settings["regions"] = ("bin: 5-85 % of the equivalent fill depth; cone: 20-80 % of the "
+                           "slant length; switch window: the quarter of the slant length below "
+                           "the transition to 2 cells above it")
+    head = [f"{sw['case']} {sw['stage'].replace('_', ' ')}: switch peak "
+            f"{sw['peak_sim_Pa'] / 1e3:.2f} kPa vs Walker {sw['walker_hopper_Pa'] / 1e3:.2f} kPa "
+            f"({sw['diff_peak_vs_walker_pct']:+.0f} %)" for sw in switch]
+    fill = [f"{c['case']} filled, {c['region']}: {c['diff_pct']:+.0f} % from {c['theory']}"
+            for c in comparison if c["stage"] == "filling"
+            and c["theory"].startswith(("Janssen", "Walker"))]
+    _sweep.write_study_json(out, NAME, TITLE, setting, settings,
+                            {k: v for k, v in numbers.items()}, findings, figures, tables,
+                            rows, argv, headline="; ".join(fill + head) + ".")
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    _sweep.add_arguments(parser, NAME)
+    parser.add_argument("--cell-size", type=float, help="m (default 0.005)")
+    parser.add_argument("--half-angles", type=float, nargs="+", help="deg (default 20 30)")
+    parser.add_argument("--end-time", type=float, help="s of discharge (default: 0.65 of the "
+                        "Beverloo x Rose-Tanaka emptying time)")
+    args = parser.parse_args(argv)
+    options = {k: v for k, v in (("cell_size", args.cell_size),
+                                 ("half_angles", args.half_angles),
+                                 ("end_time", args.end_time)) if v is not None}
+    if not args.case_plots:
+        options["case_plots"] = False
+    study = setup(quick=args.quick, **options)
+    args.out.mkdir(parents=True, exist_ok=True)
+    print(f"{NAME}: {len(study['cases'])} case(s) into {args.out}")
+    rows = _sweep.sweep(study["cases"], args)
+    profiles, comparison, switch, numbers = analyse(rows, study["options"])
+    write_outputs(args.out, rows, profiles, comparison, switch, numbers, study["options"],
+                  study["setting"], argv)
+    for sw in switch:
+        print(f"{sw['case']} {sw['stage']}: switch peak {sw['peak_sim_Pa']:.0f} Pa, Walker "
+              f"{sw['walker_hopper_Pa']:.0f} Pa ({sw['diff_peak_vs_walker_pct']:+.0f} %)")
+    print(f"written to {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

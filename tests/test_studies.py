@@ -1,0 +1,282 @@
+"""The validation studies (issues 6 and 7) run on their quick settings and their outputs hold.
+
+Every study runs serially (no Dask) on tiny hoppers with 1 cm cells; one test runs two tiny
+cases on a one-worker Dask ``LocalCluster`` when dask.distributed is installed.  The report
+is generated from the outputs of all of them.
+"""
+
+import csv
+import importlib.util
+import json
+import math
+import os
+import pathlib
+import shutil
+
+import pytest
+
+STUDIES = pathlib.Path(__file__).resolve().parents[1] / "studies"
+PNG = b"\x89PNG\r\n\x1a\n"
+
+
+def load(name):
+    spec = importlib.util.spec_from_file_location(f"{name}_study", STUDIES / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def rows_of(path):
+    with open(path, newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+def study_json(folder):
+    with open(folder / "study.json") as fh:
+        return json.load(fh)
+
+
+def assert_png(path):
+    assert path.is_file(), path
+    assert path.read_bytes()[:8] == PNG, path
+
+
+@pytest.fixture(scope="module")
+def root(tmp_path_factory):
+    return tmp_path_factory.mktemp("study_outputs")
+
+
+def run_quick(root, name, *extra):
+    out = root / name
+    assert load(name).main(["--quick", "--serial", "--out", str(out), *extra]) == 0
+    return out
+
+
+@pytest.fixture(scope="module")
+def flow_map(root):
+    return run_quick(root, "flow_mode_map")
+
+
+@pytest.fixture(scope="module")
+def discharge(root):
+    return run_quick(root, "discharge_rate")
+
+
+@pytest.fixture(scope="module")
+def wall(root):
+    return run_quick(root, "wall_pressure")
+
+
+@pytest.fixture(scope="module")
+def convergence(root):
+    return run_quick(root, "convergence")
+
+
+@pytest.fixture(scope="module")
+def robustness(root):
+    return run_quick(root, "robustness")
+
+
+# ---------------------------------------------------------------- flow-mode map
+def test_flow_mode_map_classifies_the_two_clear_cases(flow_map):
+    rows = {(float(r["half_angle_deg"]), float(r["wall_friction_deg"])): r
+            for r in rows_of(flow_map / "results.csv")}
+    assert rows[(15.0, 12.0)]["flow_mode"] == "mass"
+    assert rows[(15.0, 12.0)]["jenike_mode"] == "mass"
+    assert rows[(60.0, 25.0)]["flow_mode"] == "funnel"
+    assert rows[(60.0, 25.0)]["jenike_mode"] == "funnel"
+    data = study_json(flow_map)
+    assert data["setting"] == "quick"
+    assert data["numbers"]["agreement_fraction"] == 1.0
+    assert data["numbers"]["classified"] == 2
+    for name in ("flow_mode_map.png", "mass_flow_index.png", "thumbnails.png"):
+        assert_png(flow_map / name)
+    for case in ("theta15_wall12", "theta60_wall25"):     # ordinary run directories
+        assert (flow_map / "cases" / case / "summary.json").is_file()
+        assert (flow_map / "cases" / case / "config.toml").is_file()
+
+
+def test_restarted_sweep_does_not_recompute_finished_cases(flow_map, capsys):
+    summaries = sorted((flow_map / "cases").glob("*/summary.json"))
+    stamps = {p: p.stat().st_mtime_ns for p in summaries}
+    load("flow_mode_map").main(["--quick", "--serial", "--out", str(flow_map)])
+    assert "2 of 2 case(s) already finished" in capsys.readouterr().out
+    assert {p: p.stat().st_mtime_ns for p in summaries} == stamps
+    assert all(r["reused"] == "True" for r in rows_of(flow_map / "results.csv"))
+
+
+def test_a_finished_case_with_another_configuration_is_refused(flow_map):
+    with pytest.raises(SystemExit, match="different configuration"):
+        load("flow_mode_map").main(["--quick", "--serial", "--out", str(flow_map),
+                                    "--end-time", "0.5"])
+
+
+def test_case_status_reads_finished_resumable_and_new_cases(flow_map, tmp_path):
+    import _sweep   # on sys.path once a study is loaded
+
+    study = load("flow_mode_map").setup(quick=True)
+    case = study["cases"][0]
+    assert _sweep.case_status(case, flow_map) == "done"
+    root = tmp_path / "copy"
+    shutil.copytree(flow_map / "cases" / case["name"], root / "cases" / case["name"])
+    summary_path = root / "cases" / case["name"] / "summary.json"
+    summary = json.loads(summary_path.read_text())
+    summary["stop_reason"] = "interrupted"
+    summary_path.write_text(json.dumps(summary))
+    assert _sweep.case_status(case, root) == "new"       # no checkpoint: run again
+    (root / "cases" / case["name"] / "checkpoint.npz").write_bytes(b"")
+    assert _sweep.case_status(case, root) == "resume"
+    assert _sweep.case_status(study["cases"][1], root) == "new"
+
+
+# ---------------------------------------------------------------- discharge rate
+def test_discharge_rate_exponent_and_beverloo_constant(discharge):
+    fits = rows_of(discharge / "fits.csv")
+    assert len(fits) == 1 and int(fits[0]["outlets"]) >= 4
+    n = float(fits[0]["exponent_n"])
+    assert 2.0 <= n <= 3.0, n                           # 5/2, wide band on a 1 cm grid
+    assert 0.4 <= float(fits[0]["C_beverloo_via_rose_tanaka"]) <= 0.8
+    rows = rows_of(discharge / "results.csv")
+    assert {float(r["half_angle_deg"]) for r in rows} == {45.0, 90.0}
+    for r in rows:
+        assert float(r["steady_discharge_rate_kg_s"]) > 0
+        assert math.isfinite(float(r["diff_beverloo_pct"]))
+        assert math.isfinite(float(r["diff_brown_pct"]))
+    for name in ("rate_vs_outlet.png", "rate_vs_half_angle.png"):
+        assert_png(discharge / name)
+    assert "exponent_n_theta45" in study_json(discharge)["numbers"]
+
+
+# ---------------------------------------------------------------- wall pressure
+def test_wall_pressure_profiles_theories_and_switch(wall):
+    comparison = rows_of(wall / "comparison.csv")
+    seen = {(r["stage"], r["region"], r["theory"].split(" (")[0].split(",")[0])
+            for r in comparison}
+    assert ("filling", "bin", "Janssen") in seen
+    assert ("filling", "cone", "Walker slice") in seen
+    assert any(s[0] == "early_discharge" and s[2].startswith("EN 1991-4") for s in seen)
+    for r in comparison:
+        assert float(r["mean_sim_Pa"]) > 0 and float(r["mean_theory_Pa"]) > 0
+    switch = rows_of(wall / "switch.csv")
+    assert switch and float(switch[0]["peak_sim_Pa"]) > 0
+    assert float(switch[0]["walker_ratio_Fe_over_K"]) > 1
+    assert_png(wall / "wall_pressure_theta30_wall15.png")
+    profiles = rows_of(wall / "profiles.csv")
+    assert {r["stage"] for r in profiles} >= {"filling", "early_discharge"}
+
+
+# ---------------------------------------------------------------- convergence
+def test_convergence_three_cell_sizes_and_three_moduli(convergence):
+    rows = rows_of(convergence / "results.csv")
+    assert len({r["cell_size_mm"] for r in rows}) >= 3
+    assert len({r["youngs_modulus_MPa"] for r in rows}) >= 3
+    numbers = study_json(convergence)["numbers"]
+    assert numbers["rate_spread_over_E_pct"] < 10.0
+    assert len(numbers["rates_by_cell_kg_s"]) == 3
+    diffs = rows_of(convergence / "profiles.csv")
+    assert {r["series"] for r in diffs} == {"cell size", "stiffness"}
+    assert_png(convergence / "convergence.png")
+
+
+# ---------------------------------------------------------------- robustness
+def test_robustness_bands_are_evaluated_for_both_hoppers(robustness):
+    bands = rows_of(robustness / "bands.csv")
+    assert {(b["hopper"], b["band"]) for b in bands} == {
+        (h, b) for h in ("mass", "funnel")
+        for b in ("stiffness", "cell_size", "hourglass", "alpha_bounds", "mass_balance")}
+    status = {(b["hopper"], b["band"]): b["status"] for b in bands}
+    assert status[("mass", "alpha_bounds")] == "PASS"
+    assert status[("funnel", "alpha_bounds")] == "PASS"
+    assert status[("mass", "mass_balance")] == "n/a"       # quick: no complete emptying asked
+    assert all(b["status"] in ("PASS", "FAIL", "n/a") for b in bands)
+    rows = rows_of(robustness / "results.csv")
+    assert len(rows) == 14
+    assert {r["flow_mode"] for r in rows if r["hopper"] == "mass"} == {"mass"}
+    assert {r["flow_mode"] for r in rows if r["hopper"] == "funnel"} == {"funnel"}
+    for r in rows:
+        assert float(r["mass_balance_error"]) < 1e-9
+        assert -1e-12 <= float(r["alpha_min"]) and float(r["alpha_max"]) <= 1 + 1e-3
+    assert_png(robustness / "robustness.png")
+    assert_png(robustness / "robustness_discharge.png")
+
+
+def test_robustness_bands_on_known_numbers():
+    study = load("robustness")
+    opts = study.setup()["options"]
+
+    def row(hopper, h, e, f, w, err=1e-12, stop="empty", lo=0.0, hi=1.0):
+        return {"hopper": hopper, "cell_size_mm": h, "youngs_modulus_MPa": e,
+                "hourglass_factor": f, "steady_discharge_rate_kg_s": w,
+                "mass_balance_error": err, "stop_reason": stop, "alpha_min": lo,
+                "alpha_max": hi}
+
+    good = [row("mass", 5.0, 2.0, 1.0, 3.30), row("mass", 5.0, 5.0, 1.0, 3.32),
+            row("mass", 5.0, 20.0, 1.0, 3.40), row("mass", 7.5, 5.0, 1.0, 3.10),
+            row("mass", 3.75, 5.0, 1.0, 3.35), row("mass", 5.0, 5.0, 0.5, 3.35),
+            row("mass", 5.0, 5.0, 2.0, 3.28)]
+    bands = {b["band"]: b for b in study.evaluate_bands(good, opts)}
+    assert all(b["passed"] is True for b in bands.values()), bands
+    assert bands["stiffness"]["value"] == pytest.approx(0.10 / 3.32)
+    assert bands["cell_size"]["value"] == pytest.approx(0.03 / 3.35)
+
+    bad = [dict(r) for r in good]
+    bad[2]["steady_discharge_rate_kg_s"] = 3.60          # E = 20 MPa: 9 % off
+    bad[4]["steady_discharge_rate_kg_s"] = 3.70          # 5 -> 3.75 mm: larger change
+    bad[6]["steady_discharge_rate_kg_s"] = 3.00          # doubled hourglass: -10 %
+    bad[0]["alpha_max"] = 1.01
+    bad[1]["stop_reason"] = "at_rest"
+    bands = {b["band"]: b for b in study.evaluate_bands(bad, opts)}
+    assert all(b["passed"] is False for b in bands.values()), bands
+
+
+# ---------------------------------------------------------------- Dask
+def test_local_dask_cluster_runs_two_tiny_cases(tmp_path):
+    pytest.importorskip("dask.distributed")
+    load("flow_mode_map")
+    import _sweep
+
+    base = {"hopper": {"bin_diameter": 0.16, "half_angle_deg": 45.0, "outlet_diameter": 0.06,
+                       "fill_height": 0.04, "bin_height": 0.06},
+            "numerics": {"cell_size": 0.01, "gravity_ramp_time": 0.05},
+            "run": {"end_time": 0.1, "output_interval": 0.02}}
+    cases = [_sweep.make_case(_sweep.case_name(("wall", w)), {"wall_friction_deg": w},
+                              _sweep.merge(base, wall={"friction_angle_deg": w}), plots=False)
+             for w in (10.0, 20.0)]
+    rows = _sweep.run_cases(cases, tmp_path, workers=1, log=lambda *a: None)
+    assert [r["case"] for r in rows] == ["wall10", "wall20"]
+    for r in rows:
+        assert r["error"] == "" and r["reused"] is False
+        assert r["stop_reason"] == "end_time"
+        assert (tmp_path / "cases" / r["case"] / "summary.json").is_file()
+        assert r["run_dir"] == os.fspath(tmp_path.resolve() / "cases" / r["case"])
+
+
+# ---------------------------------------------------------------- the report
+def test_report_is_generated_from_the_outputs(root, flow_map, discharge, wall, convergence,
+                                              robustness, tmp_path):
+    assert load("element_tests").main(["--out", str(root / "element_tests"),
+                                       "--n-steps", "20"]) == 0
+    make_report = load("make_report")
+    report = tmp_path / "REPORT.md"
+    assert make_report.main(["--root", str(root), "--out", str(report)]) == 0
+    text = report.read_text()
+    assert "Missing studies" not in text
+    for title in ("Jenike", "outlet diameter", "Wall pressure", "Convergence", "Robustness",
+                  "element tests"):
+        assert title in text, title
+    assert "agreement fraction 1.00" in text
+    assert "Quick setting" in text
+    links = [line.split("](")[1].rstrip(")") for line in text.splitlines()
+             if line.startswith("![")]
+    assert len(links) >= 10
+    for link in links:
+        assert_png(report.parent / link)
+
+    partial = tmp_path / "partial"
+    shutil.copytree(flow_map, partial / "flow_mode_map",
+                    ignore=shutil.ignore_patterns("cases"))
+    result = make_report.build(partial, tmp_path / "partial.md", copy=False)
+    assert result["present"] == ["flow_mode_map"]
+    assert set(result["missing"]) == {"discharge_rate", "wall_pressure", "convergence",
+                                      "robustness", "element_tests"}
+    assert "python studies/robustness.py" in (tmp_path / "partial.md").read_text()
