@@ -46,6 +46,6 @@ def test_checkerboard_mode_decays(kappa):
     a1 = checkerboard_amplitude(model, st.v, interior)
     rate = 16 * kappa * math.sqrt(9.81 / g.h)
     # decays at least as fast as the hourglass force alone predicts (transport and plasticity
-    # only add to it), and never grows on the way
+    # only add to it)
     assert a1 < 1.5 * a0 * math.exp(-rate * t_end) + 1e-4 * a0
     assert a1 < 0.1 * a0
