@@ -242,7 +242,8 @@ class RunConfig:
 
     ``"empty"`` stops when less than ``empty_fraction`` of the initial mass is left, or when
     nothing moves any more (a heel at rest), or at ``max_time`` seconds of discharge.
-    ``wall_time_limit`` (s) stops any run; 0 means none.
+    ``wall_time_limit`` (s) stops any run; 0 means none.  ``markers_per_side``: passive
+    marker points per cell side (``n x n`` per full cell) for the layer pictures; 0 = none.
     """
 
     end_time: Union[float, str] = "empty"
@@ -251,6 +252,7 @@ class RunConfig:
     wall_time_limit: float = 0.0
     output_interval: float = 0.05
     field_interval: float = 0.25
+    markers_per_side: int = 2
 
     def __post_init__(self):
         if isinstance(self.end_time, str):
@@ -266,6 +268,10 @@ class RunConfig:
                      unit=" s")
         _check_range("run.field_interval", self.field_interval, 0, None, low_open=True,
                      unit=" s")
+        if not isinstance(self.markers_per_side, int) or isinstance(self.markers_per_side, bool):
+            raise ConfigError(f"run.markers_per_side = {self.markers_per_side!r}: expected an "
+                              "integer in [0, 6]")
+        _check_range("run.markers_per_side", self.markers_per_side, 0, 6)
 
 
 _SECTIONS = {"hopper": HopperGeometry, "material": MaterialConfig, "wall": WallConfig,

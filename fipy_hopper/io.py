@@ -9,6 +9,7 @@ A run directory describes itself::
     wall_pressure.csv    stage, t_s, s_m, r_m, z_m, p_n_Pa, tau_Pa
     fields/fields.pvd    the field snapshots over time for ParaView (a VTU series)
     fields/fields_NNNN.vtu, fields/snapshots.csv
+    fields/markers_NNNN.vtu   the passive layer markers of snapshot NNNN (when the run has them)
     checkpoint.npz       while a run is unfinished (removed when it finishes)
     *.png, discharge.gif the pictures (:mod:`fipy_hopper.plotting`)
 
@@ -37,7 +38,8 @@ import numpy as np
 __all__ = [
     "RunDirectory", "RunDirectoryError", "Manifest", "FieldWriter", "atomic_path",
     "atomic_write_text", "write_json", "write_timeseries", "write_wall_pressure", "read_csv",
-    "environment_versions", "grid_points_and_quads", "cell_fields",
+    "environment_versions", "grid_points_and_quads", "cell_fields", "marker_file",
+    "write_markers", "read_markers",
     "TIMESERIES_COLUMNS", "WALL_PRESSURE_COLUMNS",
 ]
 
@@ -388,14 +390,52 @@ def cell_fields(state, grid) -> dict:
     }
 
 
+def marker_file(field_file: str) -> str:
+    """The name of the marker file of a snapshot: ``fields_NNNN.vtu`` -> ``markers_NNNN.vtu``."""
+    return "markers_" + field_file.removeprefix("fields_")
+
+
+def write_markers(path: PathLike, markers) -> None:
+    """Marker points ``(n, 3)`` = ``(r, z, layer)`` as a VTU of vertices, atomically.
+
+    The points are ``(r, z, 0)`` (m, x = r, y = z as the field snapshots) with the layer id as
+    point data ``layer``.
+    """
+    import meshio
+
+    markers = np.asarray(markers, dtype=float).reshape(-1, 3)
+    n = len(markers)
+    points = np.column_stack([markers[:, 0], markers[:, 1], np.zeros(n)])
+    mesh = meshio.Mesh(points, [("vertex", np.arange(n, dtype=np.int64)[:, None])],
+                       point_data={"layer": markers[:, 2].copy()})
+    with atomic_path(path) as tmp:
+        meshio.write(tmp, mesh, file_format="vtu")
+
+
+def read_markers(path: PathLike) -> Optional[np.ndarray]:
+    """The markers ``(n, 3)`` = ``(r, z, layer)`` of a file of :func:`write_markers`, or
+    ``None`` if there is no such file."""
+    import meshio
+
+    path = Path(path)
+    if not path.is_file():
+        return None
+    mesh = meshio.read(path)
+    return np.column_stack([mesh.points[:, 0], mesh.points[:, 1],
+                            np.asarray(mesh.point_data["layer"], dtype=float).ravel()])
+
+
 class FieldWriter:
     """Field snapshots as a VTU series with a ParaView ``.pvd`` index (physical time ``t_s``).
 
     Each snapshot ``fields_NNNN.vtu`` holds the r-z plane of the axisymmetric hopper as quads
     (x = r, y = z) with the cell data of :func:`cell_fields` and the nodal velocity as point
-    data ``node_velocity``.  ``fields.pvd`` and ``snapshots.csv`` (index, file, step, ``t_s``
-    since the start of filling, ``discharge_time_s`` since the outlet opened, stage) are
-    rewritten after every snapshot.  Use it as a simulation callback: ``writer(sim, state)``.
+    data ``node_velocity``.  A state with passive layer markers (``state.markers``, a
+    non-empty ``(n, 3)`` array, see :mod:`fipy_hopper.markers`) also gets
+    ``markers_NNNN.vtu`` (:func:`write_markers`, same ``NNNN``).  ``fields.pvd`` and
+    ``snapshots.csv`` (index, file, step, ``t_s`` since the start of filling,
+    ``discharge_time_s`` since the outlet opened, stage) are rewritten after every snapshot.
+    Use it as a simulation callback: ``writer(sim, state)``.
     """
 
     PVD = "fields.pvd"
@@ -428,6 +468,12 @@ class FieldWriter:
                            cell_data={k: [v] for k, v in cell_fields(state, self.grid).items()})
         with atomic_path(self.folder / name) as tmp:
             meshio.write(tmp, mesh, file_format="vtu")
+        markers = getattr(state, "markers", None)
+        marker_path = self.folder / marker_file(name)
+        if markers is not None and len(markers):
+            write_markers(marker_path, markers)
+        else:
+            marker_path.unlink(missing_ok=True)      # never pair a snapshot with stale markers
         t_dis = state.t - t_open if math.isfinite(t_open) else math.nan
         self.entries.append({"index": index, "file": name, "step": int(state.step),
                              "t_s": float(state.t), "discharge_time_s": t_dis,
@@ -450,8 +496,9 @@ class FieldWriter:
     def resume(self, step: int) -> None:
         """Continue the series of an interrupted run from a checkpoint taken at ``step``.
 
-        Snapshots taken after the checkpoint are dropped (the resumed run takes them again, at
-        the same steps), so the series continues as if the run had never stopped.
+        Snapshots taken after the checkpoint are dropped with their marker files (the resumed
+        run takes them again, at the same steps), so the series continues as if the run had
+        never stopped.
         """
         self.entries = []
         index_path = self.folder / self.INDEX
@@ -459,7 +506,8 @@ class FieldWriter:
             table = read_snapshot_index(self.folder)
             self.entries = [e for e in table if e["step"] <= step]
         keep = {e["file"] for e in self.entries}
-        for item in self.folder.glob("fields_*.vtu"):
+        keep |= {marker_file(name) for name in keep}
+        for item in (*self.folder.glob("fields_*.vtu"), *self.folder.glob("markers_*.vtu")):
             if item.name not in keep:
                 item.unlink()
         self._write_index()

@@ -93,6 +93,7 @@ from numba import njit
 
 from . import geometry
 from .config import HopperConfig
+from .material import close_loose_volume, separation_strain
 from .model import GRAVITY
 
 __all__ = ["DistortionLimits", "LagrangianMesh", "LagrangianState", "LagrangianRecord",
@@ -535,6 +536,7 @@ class LagrangianState:
     active: np.ndarray             # (n_el,) bool: not eroded
     dt: float
     plate_closed: bool = True
+    loose: np.ndarray = None       # (n_el,) loose volumetric strain (material.close_loose_volume)
 
     def copy(self) -> "LagrangianState":
         return LagrangianState(**{k: (v.copy() if isinstance(v, np.ndarray) else v)
@@ -706,9 +708,15 @@ class LagrangianModel:
         v[self.axis_nodes, 0] = 0.0
         x_mid = x + 0.5 * dt * v
         _strain_kernel(x_mid, v, dt, conn, state.sigma, state.active, self._d_eps, self._sig_rot)
-        sig_new, deps_p = self._material_update(self._sig_rot, self._d_eps, self.material)
+        # the same dense/loose rule as the Eulerian model (material.close_loose_volume)
+        if state.loose is None:
+            state.loose = np.zeros(len(state.sigma))
+        d_skeleton, loose = close_loose_volume(self._d_eps, state.loose)
+        sig_new, deps_p, status = self._material_update(self._sig_rot, d_skeleton,
+                                                        self.material, return_status=True)
         sig_new[~state.active] = 0.0
         state.sigma = sig_new
+        state.loose = np.where(state.active, loose + separation_strain(deps_p, status), 0.0)
         e = deps_p
         state.eps_p += np.sqrt(2.0 / 3.0 * (e[:, 0] ** 2 + e[:, 1] ** 2 + e[:, 2] ** 2
                                             + 2.0 * e[:, 3] ** 2))

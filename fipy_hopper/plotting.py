@@ -1,8 +1,9 @@
 """Pictures of a run, drawn from its run directory only (never from a live simulation).
 
 - :func:`flow_pattern`: snapshots of the discharge, each the r-z section mirrored about the
-  axis: the coloured layers on the left (cells with material fraction below 1/2 blank), the
-  speed on the right, the hopper wall in grey;
+  axis: the coloured layers on the left (the passive marker points of
+  :mod:`fipy_hopper.markers` when the run wrote them, else the cell layer tracer with cells of
+  material fraction below 1/2 blank), the speed on the right, the hopper wall in grey;
 - :func:`discharge_curves`: the mass in the hopper ``M(t)`` and the discharge rate ``W(t)``,
   with the steady rate and Beverloo's rate times the Rose-Tanaka factor;
 - :func:`wall_pressure`: the normal wall pressure along the wall against Janssen in the bin
@@ -27,10 +28,15 @@ import numpy as np
 
 from . import geometry, theory
 from .config import HopperConfig
-from .io import FieldWriter, RunDirectory, atomic_path, read_csv, read_snapshot_index
+from .io import (FieldWriter, RunDirectory, atomic_path, marker_file, read_csv, read_markers,
+                 read_snapshot_index)
 
 __all__ = ["plot_run", "flow_pattern", "discharge_curves", "wall_pressure", "animate",
-           "load_snapshot", "theory_wall_pressure"]
+           "load_snapshot", "draw_layers", "theory_wall_pressure"]
+
+#: Diameter of a drawn marker over the markers' median nearest-neighbour spacing: above
+#: ``sqrt(2)``, the discs of a square lattice cover it (the material looks filled).
+MARKER_DIAMETER = 1.5
 
 _STAGE_STYLE = {"filling": ("o", "C0", "filled, at rest"),
                 "early_discharge": ("s", "C1", "discharge, 90 % left"),
@@ -76,16 +82,19 @@ def snapshots(run) -> list:
 
 
 def load_snapshot(run, entry) -> dict:
-    """One snapshot as ``(nz, nr)`` arrays with its node coordinates ``r_nodes``, ``z_nodes``."""
+    """One snapshot as ``(nz, nr)`` arrays with its node coordinates ``r_nodes``, ``z_nodes``;
+    ``markers`` is its ``(n, 3)`` array of marker points ``(r, z, layer)``, or ``None``."""
     import meshio
 
-    mesh = meshio.read(Path(run) / RunDirectory.FIELDS / entry["file"])
+    folder = Path(run) / RunDirectory.FIELDS
+    mesh = meshio.read(folder / entry["file"])
     r_nodes = np.unique(mesh.points[:, 0])
     z_nodes = np.unique(mesh.points[:, 1])
     shape = (len(z_nodes) - 1, len(r_nodes) - 1)
     out = {"r_nodes": r_nodes, "z_nodes": z_nodes, **entry}
     for name in ("alpha", "layer", "speed", "open_fraction", "pressure", "plastic_strain"):
         out[name] = np.asarray(mesh.cell_data[name][0]).reshape(shape)
+    out["markers"] = read_markers(folder / marker_file(entry["file"]))
     return out
 
 
@@ -107,22 +116,63 @@ def _layer_colours(n_layers):
     return ListedColormap(colours), BoundaryNorm(np.arange(n_layers + 1) - 0.5, n_layers)
 
 
+def _has_markers(snap) -> bool:
+    markers = snap.get("markers")
+    return markers is not None and len(markers) > 0
+
+
+def _marker_spacing(markers) -> float:
+    """The median distance (m) from a marker to its nearest neighbour (its lattice spacing
+    ``h / per_side`` where the material has not deformed)."""
+    from scipy.spatial import cKDTree
+
+    points = np.asarray(markers)[:, :2]
+    if len(points) < 2:
+        return 0.0
+    distance, _ = cKDTree(points).query(points, k=2)
+    return float(np.median(distance[:, 1]))
+
+
+def draw_layers(ax, snap, n_layers=None, side: float = -1.0):
+    """The layers of a snapshot on one half of a mirrored section (``side`` -1: left, x = -r).
+
+    With markers (``snap["markers"]``), each is a disc of diameter ``MARKER_DIAMETER`` times
+    their median spacing, in data units, coloured by its layer id; without, the cell layer
+    tracer, cells with ``alpha < 1/2`` blank.  Colours: :func:`_layer_colours`; ``n_layers``
+    defaults to the layers of this snapshot.
+    """
+    from matplotlib.collections import EllipseCollection
+
+    cmap, norm = _layer_colours(n_layers if n_layers is not None else _n_layers([snap]))
+    if not _has_markers(snap):
+        layer = np.ma.masked_where(snap["alpha"] < 0.5, snap["layer"])
+        return ax.pcolormesh(side * snap["r_nodes"], snap["z_nodes"], layer, cmap=cmap,
+                             norm=norm, shading="flat")
+    markers = np.asarray(snap["markers"])
+    size = MARKER_DIAMETER * _marker_spacing(markers)
+    discs = EllipseCollection(size, size, 0.0, units="xy", cmap=cmap, norm=norm,
+                              offsets=np.column_stack([side * markers[:, 0], markers[:, 1]]),
+                              offset_transform=ax.transData, linewidths=0)
+    discs.set_array(markers[:, 2])
+    ax.add_collection(discs, autolim=False)
+    return discs
+
+
 def _draw_section(ax, snap, cfg, n_layers, speed_max):
     """Layers on the left (r < 0), speed on the right, the wall in grey; returns the mesh.
 
-    The grey cells are the grid cells closed by the wall (open fraction 0); the black line is
-    the exact wall of :func:`fipy_hopper.geometry.wall_polyline`.
+    The layers are drawn by :func:`draw_layers` (markers when the snapshot has them).  The grey
+    cells are the grid cells closed by the wall (open fraction 0); the black line is the exact
+    wall of :func:`fipy_hopper.geometry.wall_polyline`.
     """
     from matplotlib.colors import ListedColormap
 
     r, z = snap["r_nodes"], snap["z_nodes"]
     alpha = snap["alpha"]
-    layer = np.ma.masked_where(alpha < 0.5, snap["layer"])
     speed = np.ma.masked_where(alpha < 0.05, snap["speed"])
     solid = np.ma.masked_where(snap["open_fraction"] > 0, np.ones_like(alpha))
     grey = ListedColormap(["0.78"])
-    cmap, norm = _layer_colours(n_layers)
-    ax.pcolormesh(-r, z, layer, cmap=cmap, norm=norm, shading="flat")
+    draw_layers(ax, snap, n_layers, side=-1.0)
     mesh = ax.pcolormesh(r, z, speed, cmap="viridis", vmin=0.0, vmax=speed_max, shading="flat")
     wall = geometry.wall_polyline(cfg.hopper, r[-1], z[-1])
     for sign in (-1.0, 1.0):
@@ -148,7 +198,11 @@ def _speed_scale(snaps):
 
 
 def _n_layers(snaps):
+    """Number of layers: one more than the largest layer id of the cells with ``alpha > 1/2``
+    and of the markers."""
     values = [s["layer"][(s["alpha"] > 0.5) & np.isfinite(s["layer"])] for s in snaps]
+    values += [np.asarray(s["markers"])[:, 2] for s in snaps if _has_markers(s)]
+    values = [v[np.isfinite(v)] for v in values]
     values = [v for v in values if v.size]
     return int(round(max(float(v.max()) for v in values))) + 1 if values else 1
 

@@ -224,9 +224,6 @@ def pick_thumbnails(rows, n):
 
 
 def plot_thumbnails(rows, n):
-    from matplotlib import colormaps
-    from matplotlib.colors import BoundaryNorm, ListedColormap
-
     from fipy_hopper import plotting
     from fipy_hopper.api import load_config
 
@@ -239,6 +236,7 @@ def plot_thumbnails(rows, n):
     axes = fig.subplots(nrows, ncols, squeeze=False).ravel()
     for ax in axes[len(picked):]:
         ax.set_axis_off()
+    with_markers = False
     for ax, r in zip(axes, picked):
         run = Path(r["run_dir"])
         snaps = [e for e in plotting.snapshots(run) if e["stage"] == "discharge"]
@@ -249,16 +247,11 @@ def plot_thumbnails(rows, n):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             cfg = load_config(run / "config.toml")
-        n_layers = int(np.nanmax(np.where(snap["alpha"] > 0.5, snap["layer"], 0))) + 1
-        base = colormaps["tab10"].colors
-        cmap = ListedColormap([base[k % 10] for k in range(max(n_layers, 1))])
-        norm = BoundaryNorm(np.arange(max(n_layers, 1) + 1) - 0.5, max(n_layers, 1))
-        layer = np.ma.masked_where(snap["alpha"] < 0.5, snap["layer"])
-        rr, zz = snap["r_nodes"], snap["z_nodes"]
-        for sign in (-1.0, 1.0):
-            ax.pcolormesh(sign * rr, zz, layer, cmap=cmap, norm=norm, shading="flat")
+        rr = snap["r_nodes"]
+        with_markers = with_markers or snap["markers"] is not None
         wall = geometry.wall_polyline(cfg.hopper, rr[-1], cfg.hopper.top)
         for sign in (-1.0, 1.0):
+            plotting.draw_layers(ax, snap, side=sign)
             ax.plot(sign * wall[:, 0], wall[:, 1], "k-", lw=0.8)
         ax.set_aspect("equal")
         ax.set_xlim(-rr[-1], rr[-1])
@@ -269,8 +262,8 @@ def plot_thumbnails(rows, n):
         ax.set_title(f"theta {r['half_angle_deg']:g}, phi_w {r['wall_friction_deg']:g}\n"
                      f"{r['flow_mode']} (Jenike: {r['jenike_mode']})\n"
                      f"t = {snap['discharge_time_s']:.2f} s", fontsize=7, color=colour)
-    fig.suptitle("Layers at the end of the discharge (cells with alpha < 1/2 blank)",
-                 fontsize=9)
+    how = "marker points" if with_markers else "cells with alpha < 1/2 blank"
+    fig.suptitle(f"Layers at the end of the discharge ({how})", fontsize=9)
     return fig
 
 

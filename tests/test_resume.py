@@ -19,7 +19,7 @@ import pytest
 
 from fipy_hopper import api
 from fipy_hopper.cli import main
-from fipy_hopper.io import read_snapshot_index
+from fipy_hopper.io import marker_file, read_markers, read_snapshot_index
 
 CONFIG = """\
 [hopper]
@@ -86,9 +86,14 @@ def assert_same_outputs(resumed, reference):
                  "fields/fields.pvd", "config.toml"):
         assert (resumed / name).read_text() == (reference / name).read_text(), name
     snaps = read_snapshot_index(reference / "fields")
-    assert sorted(p.name for p in (resumed / "fields").glob("*.vtu")) == \
+    assert sorted(p.name for p in (resumed / "fields").glob("fields_*.vtu")) == \
         [s["file"] for s in snaps]
+    assert sorted(p.name for p in (resumed / "fields").glob("markers_*.vtu")) == \
+        [marker_file(s["file"]) for s in snaps]
     for entry in snaps:
+        markers_a = read_markers(resumed / "fields" / marker_file(entry["file"]))
+        markers_b = read_markers(reference / "fields" / marker_file(entry["file"]))
+        np.testing.assert_array_equal(markers_a, markers_b)
         m_a = meshio.read(resumed / "fields" / entry["file"])
         m_b = meshio.read(reference / "fields" / entry["file"])
         for key in m_b.cell_data:
@@ -179,5 +184,6 @@ def test_sigterm_then_resume_from_the_periodic_checkpoint(setup_dirs, capsys):
     snaps = read_snapshot_index(out / "fields")
     assert [s["index"] for s in snaps] == list(range(len(snaps)))
     assert np.all(np.diff([s["t_s"] for s in snaps]) > 0)
-    assert sorted(p.name for p in (out / "fields").glob("*.vtu")) == [s["file"] for s in snaps]
+    assert sorted(p.name for p in (out / "fields").glob("fields_*.vtu")) == \
+        [s["file"] for s in snaps]
     assert len(json.loads((out / "manifest.json").read_text())["sessions"]) == 2

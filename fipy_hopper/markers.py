@@ -1,0 +1,134 @@
+"""Passive Lagrangian marker points: sharp layer pictures on the fixed Eulerian grid.
+
+The layer tracer carried by the cell transport (upwind / van Leer) smears a layer interface
+over a few cells within seconds of discharge, so the layers turn grey.  Marker points moved
+with the nodal velocity field keep them sharp: they carry only their layer id and never feed
+back into the physics.
+
+A marker set is an ``(n, 3)`` array of rows ``(r, z, layer)``: position in m in the r-z plane
+of the axisymmetric hopper and the layer id (an integer stored as float, 0 = bottom layer).
+
+- :func:`seed` puts ``per_side x per_side`` markers on a regular sub-grid of every full cell
+  of the hopper;
+- :func:`interpolate` evaluates a nodal field at the markers (bilinear);
+- :func:`advance` moves them by the displacement field of an interval (midpoint rule), then
+  reflects them at the axis, pushes those that went into the wall back to its surface, and
+  drops those that fell out of the bottom of the grid.
+
+All functions are vectorised pure functions of arrays (no state, no per-marker loops).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import geometry
+
+#: Markers pushed out of the wall end this far (fraction of the cell size) in the open region.
+WALL_GAP = 1e-6
+
+#: Passes of the wall push; a second one only matters within ``WALL_GAP`` of a wall corner.
+WALL_PASSES = 3
+
+
+def seed(grid, geom, alpha, layer, per_side: int = 2) -> np.ndarray:
+    """Markers ``(n, 3)`` = ``(r, z, layer)`` in the full cells of the hopper.
+
+    Every cell with ``alpha > 1/2`` and its centre at ``z >= 0`` (the hopper, above the outlet
+    plane) gets the ``per_side x per_side`` points ``r = r_i + (k + 1/2) h_r / per_side``,
+    ``z = z_j + (l + 1/2) h_z / per_side`` (m), ``k, l = 0 .. per_side - 1``; points inside the
+    wall (:func:`fipy_hopper.geometry.in_solid`) are left out.  The layer id is the cell's layer
+    tracer rounded to the nearest integer.  Deterministic: cells in row-major order ``(j, i)``,
+    then ``l``, then ``k``.
+    """
+    if int(per_side) != per_side or per_side < 1:
+        raise ValueError(f"per_side must be a positive integer, not {per_side!r}")
+    per_side = int(per_side)
+    alpha = np.asarray(alpha, dtype=float)
+    full = (alpha > 0.5) & (np.asarray(grid.z_cells) >= 0.0)[:, None]
+    j, i = np.nonzero(full)
+    t = (np.arange(per_side) + 0.5) / per_side
+    r_nodes, z_nodes = np.asarray(grid.r_nodes, float), np.asarray(grid.z_nodes, float)
+    h_r, h_z = np.diff(r_nodes), np.diff(z_nodes)
+    r = r_nodes[i, None, None] + h_r[i, None, None] * t[None, None, :]       # (m, 1, s)
+    z = z_nodes[j, None, None] + h_z[j, None, None] * t[None, :, None]       # (m, s, 1)
+    ids = np.round(np.asarray(layer, dtype=float)[j, i])[:, None, None]
+    r, z, ids = np.broadcast_arrays(r, z, ids)
+    keep = ~geometry.in_solid(r, z, geom)
+    return np.column_stack([r[keep], z[keep], ids[keep]])
+
+
+def interpolate(field, r_nodes, z_nodes, r, z) -> np.ndarray:
+    """Bilinear interpolation of a nodal field at points ``(r, z)``.
+
+    ``field`` has shape ``(k, nz + 1, nr + 1)`` (``k = 2``: ``(v_r, v_z)``), its node ``(j, i)``
+    at ``(r_nodes[i], z_nodes[j])`` (the nodes may be non-uniform).  With the points clamped
+    into the grid, ``s = (r - r_i) / (r_{i+1} - r_i)`` and ``t = (z - z_j) / (z_{j+1} - z_j)``
+    in their cell,
+    ``f = (1 - s)(1 - t) f_{j,i} + s (1 - t) f_{j,i+1} + (1 - s) t f_{j+1,i} + s t f_{j+1,i+1}``.
+    Returns ``(k, n)`` in the field's units.
+    """
+    field = np.asarray(field, dtype=float)
+    r_nodes, z_nodes = np.asarray(r_nodes, float), np.asarray(z_nodes, float)
+    r = np.clip(np.asarray(r, dtype=float), r_nodes[0], r_nodes[-1])
+    z = np.clip(np.asarray(z, dtype=float), z_nodes[0], z_nodes[-1])
+    i = np.clip(np.searchsorted(r_nodes, r, side="right") - 1, 0, len(r_nodes) - 2)
+    j = np.clip(np.searchsorted(z_nodes, z, side="right") - 1, 0, len(z_nodes) - 2)
+    s = (r - r_nodes[i]) / (r_nodes[i + 1] - r_nodes[i])
+    t = (z - z_nodes[j]) / (z_nodes[j + 1] - z_nodes[j])
+    return ((1 - s) * (1 - t) * field[:, j, i] + s * (1 - t) * field[:, j, i + 1]
+            + (1 - s) * t * field[:, j + 1, i] + s * t * field[:, j + 1, i + 1])
+
+
+def _displacement_at(displacement, grid, r, z) -> np.ndarray:
+    """The nodal displacement ``(d_r, d_z)`` at points that may lie at ``r < 0``.
+
+    The axisymmetric field continues across the axis as ``d_r(-r, z) = -d_r(r, z)``,
+    ``d_z(-r, z) = d_z(r, z)``.
+    """
+    d = interpolate(displacement, grid.r_nodes, grid.z_nodes, np.abs(r), z)
+    d[0] *= np.where(r < 0.0, -1.0, 1.0)
+    return d
+
+
+def _push_out_of_wall(r, z, geom, gap):
+    """Move points inside the wall to the nearest wall point, plus ``gap`` (m) into the open.
+
+    With the signed distance ``d < 0`` and the unit normal ``n`` into the wall
+    (:func:`fipy_hopper.geometry.signed_distance`, :func:`~fipy_hopper.geometry.wall_normal`),
+    ``x <- x + (d - gap) n``.  Repeated ``WALL_PASSES`` times for points that a corner of the
+    wall leaves within ``gap`` of the other segment.
+    """
+    r, z = r.copy(), z.copy()
+    for _ in range(WALL_PASSES):
+        inside = np.nonzero(geometry.in_solid(r, z, geom))[0]
+        if inside.size == 0:
+            break
+        ri, zi = r[inside], z[inside]
+        d = geometry.signed_distance(ri, zi, geom)
+        n_r, n_z = geometry.wall_normal(ri, zi, geom)
+        r[inside] = ri + (d - gap) * n_r
+        z[inside] = zi + (d - gap) * n_z
+    return r, z
+
+
+def advance(markers, displacement, grid, geom) -> np.ndarray:
+    """Markers moved by the nodal displacement field of an interval; returns a new array.
+
+    ``displacement`` ``(2, nz + 1, nr + 1)`` is the integral of the nodal velocity over the
+    interval, ``d = int v dt`` (m).  Midpoint (RK2) rule, second order in the interval:
+    ``x_mid = x + d(x) / 2``, ``x_new = x + d(x_mid)``, with ``d`` interpolated bilinearly
+    (:func:`interpolate`) and continued across the axis as an axisymmetric field.  Then
+    ``r < 0`` is reflected to ``|r|`` (the axis), markers inside the wall are pushed back to
+    its surface plus ``WALL_GAP h`` into the open region along the wall normal, and markers
+    below the grid (``z < z_nodes[0]``) are removed, so the result may be shorter.  The layer
+    column is kept.
+    """
+    markers = np.asarray(markers, dtype=float).reshape(-1, 3)
+    r, z = markers[:, 0], markers[:, 1]
+    d0 = _displacement_at(displacement, grid, r, z)
+    d_mid = _displacement_at(displacement, grid, r + 0.5 * d0[0], z + 0.5 * d0[1])
+    r_new, z_new = np.abs(r + d_mid[0]), z + d_mid[1]
+    r_new, z_new = _push_out_of_wall(r_new, z_new, geom, WALL_GAP * grid.h)
+    keep = z_new >= grid.z_nodes[0]
+    return np.column_stack([r_new[keep], z_new[keep], markers[keep, 2]])
