@@ -368,7 +368,8 @@ def cell_fields(state, grid) -> dict:
     the cell's four nodal velocities as ``(v_r, v_z, 0)`` (m/s), ``speed`` its magnitude,
     ``stress_rr/zz/tt/rz`` the material stress (Pa, tension positive), ``pressure``
     ``p = -(s_rr + s_zz + s_tt) / 3`` (Pa, compression positive), ``plastic_strain`` the
-    accumulated equivalent plastic strain.
+    accumulated equivalent plastic strain, ``loose_strain`` the loose volumetric strain of
+    the dense/loose rule (0 = dense, see :func:`fipy_hopper.material.close_loose_volume`).
     """
     v = np.asarray(state.v, float)
     v_cell = 0.25 * (v[:, :-1, :-1] + v[:, :-1, 1:] + v[:, 1:, :-1] + v[:, 1:, 1:])
@@ -387,6 +388,8 @@ def cell_fields(state, grid) -> dict:
         "stress_rz": sigma[:, 3].copy(),
         "pressure": -(sigma[:, 0] + sigma[:, 1] + sigma[:, 2]) / 3.0,
         "plastic_strain": np.asarray(state.eps_p, float).ravel(),
+        "loose_strain": (np.zeros(state.alpha.size) if state.loose is None
+                         else np.asarray(state.loose, float).ravel()),
     }
 
 

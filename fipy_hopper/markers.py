@@ -16,6 +16,12 @@ of the axisymmetric hopper and the layer id (an integer stored as float, 0 = bot
   drops those that fell out of the bottom of the grid.
 
 All functions are vectorised pure functions of arrays (no state, no per-marker loops).
+
+Limit (measured): the markers follow the nodal velocities, not the transported material
+fraction.  Near the cut cells of a cone wall the nodal field compresses more than ``alpha``
+(capped at 1 and redistributed) can follow, so in a discharging hopper the markers drain
+faster than the material: a 0.2 m hopper at 7.5 mm showed an empty crater of markers where
+``alpha`` was 1 after 2 s.  Hence ``run.markers_per_side = 0`` by default.
 """
 
 from __future__ import annotations

@@ -11,6 +11,27 @@ A step is an operator split:
    conservatively (van Leer); nodal momentum is carried on the dual grid with the same mass
    fluxes.  Transport runs when the material has moved ``transport_cfl`` of a cell.
 
+Dense and loose material (method.md sec. 7.2; the "disconnected" phase of Dunatunga & Kamrin
+2015).  ``alpha = 1`` is the dense (filled) state.  Each cell carries the loose volumetric
+strain ``e_l >= 0`` of its material, transported with it like ``eps_p``:
+
+* a return to the stress-free apex (the grains separate) adds its plastic dilation,
+  ``e_l += tr d_eps_p`` (:func:`fipy_hopper.material.separation_strain`);
+* a compressive increment first closes loose volume, ``e_l -= min(e_l, -tr d_eps)``, and only
+  the rest of the increment loads the grains (:func:`fipy_hopper.material.close_loose_volume`),
+  so loose material carries no stress until it is dense again.
+
+The volumetric strain of the stress update and the change of ``alpha`` in transport are the
+same discrete divergence of the same nodal velocities (the Q1 cell mean of ``tr D`` equals the
+face-flux divergence of the edge-mean velocities, ``tests/test_compaction.py``), so in a full
+cell ``alpha (1 + e_l)`` stays at its dense value as the material dilates and compacts.  In
+cells only partly filled (free surfaces, fronts smeared by transport) the cell's mean strain
+is not the material's; there the rule is approximate.
+
+Passive marker points (:mod:`fipy_hopper.markers`) are moved at every transport with the
+integrated nodal velocity of the interval (``state.displacement``); they never act on the
+physics and give the sharp layer pictures.
+
 The model only steps; :mod:`fipy_hopper.simulation` owns the run (stages, stop rules, output).
 Masses are reported for the full 3D hopper (``2 pi`` times the per-radian values).
 """

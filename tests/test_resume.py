@@ -36,6 +36,7 @@ gravity_ramp_time = 0.05
 end_time = 0.12
 output_interval = 0.02
 field_interval = 0.05
+markers_per_side = 2
 """
 
 

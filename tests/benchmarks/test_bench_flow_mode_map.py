@@ -5,7 +5,9 @@ at least 30 cases in under 30 minutes on 2 cores).
 ``studies/flow_mode_map.py`` with its defaults (30 cases, 5 mm cells, 0.8 s of discharge) on a
 Dask ``LocalCluster`` with one worker per core, once (``pedantic``, one round): expect about a
 quarter of an hour on 2 cores.  Under the default ``--benchmark-disable`` the same code runs a
-2-case map on the quick setting, serially, as a plain test.
+2-case map on the quick setting, serially, as a plain test.  ``FLOW_MODE_MAP_OUT=DIR`` keeps
+the measured map's outputs in ``DIR`` (a fresh folder: finished cases there are not rerun),
+e.g. ``studies/output/flow_mode_map`` for the report.
 """
 
 import csv
@@ -28,6 +30,8 @@ def load_study():
 def test_bench_flow_mode_map(benchmark, tmp_path):
     study = load_study()
     out = tmp_path / "flow_mode_map"
+    if benchmark.enabled and os.environ.get("FLOW_MODE_MAP_OUT"):
+        out = pathlib.Path(os.environ["FLOW_MODE_MAP_OUT"])
     if benchmark.disabled:
         argv = ["--quick", "--serial", "--out", str(out)]
     else:
