@@ -388,7 +388,7 @@ def cell_fields(state, grid) -> dict:
         "stress_rz": sigma[:, 3].copy(),
         "pressure": -(sigma[:, 0] + sigma[:, 1] + sigma[:, 2]) / 3.0,
         "plastic_strain": np.asarray(state.eps_p, float).ravel(),
-        "loose_strain": (np.zeros(state.alpha.size) if state.loose is None
+        "loose_strain": (np.zeros(np.size(state.alpha)) if getattr(state, "loose", None) is None
                          else np.asarray(state.loose, float).ravel()),
     }
 
