@@ -243,10 +243,7 @@ class RunConfig:
     ``"empty"`` stops when less than ``empty_fraction`` of the initial mass is left, or when
     nothing moves any more (a heel at rest), or at ``max_time`` seconds of discharge.
     ``wall_time_limit`` (s) stops any run; 0 means none.  ``markers_per_side``: passive
-    marker points per cell side (``n x n`` per full cell) for the layer pictures; 0 = none
-    (the default: markers follow the nodal velocities, which near the cut cells of a cone wall
-    compress more than the transported material can, so marker pictures drain faster than
-    the material fraction does; see fipy_hopper.markers).
+    marker points per cell side (``n x n`` per full cell) for the layer pictures; 0 = none.
     """
 
     end_time: Union[float, str] = "empty"
@@ -255,7 +252,7 @@ class RunConfig:
     wall_time_limit: float = 0.0
     output_interval: float = 0.05
     field_interval: float = 0.25
-    markers_per_side: int = 0
+    markers_per_side: int = 2
 
     def __post_init__(self):
         if isinstance(self.end_time, str):

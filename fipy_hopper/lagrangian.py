@@ -93,7 +93,7 @@ from numba import njit
 
 from . import geometry
 from .config import HopperConfig
-from .material import close_loose_volume, separation_strain
+from .material import close_loose_volume, equivalent_plastic_strain, separation_strain
 from .model import GRAVITY
 
 __all__ = ["DistortionLimits", "LagrangianMesh", "LagrangianState", "LagrangianRecord",
@@ -717,9 +717,7 @@ class LagrangianModel:
         sig_new[~state.active] = 0.0
         state.sigma = sig_new
         state.loose = np.where(state.active, loose + separation_strain(deps_p, status), 0.0)
-        e = deps_p
-        state.eps_p += np.sqrt(2.0 / 3.0 * (e[:, 0] ** 2 + e[:, 1] ** 2 + e[:, 2] ** 2
-                                            + 2.0 * e[:, 3] ** 2))
+        state.eps_p += equivalent_plastic_strain(deps_p)
         x += dt * v
         _project_kernel(x, self.vertices, self.geom.outlet_radius, self._tan_t,
                         self.geom.bin_radius, state.plate_closed)

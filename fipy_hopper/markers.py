@@ -17,11 +17,10 @@ of the axisymmetric hopper and the layer id (an integer stored as float, 0 = bot
 
 All functions are vectorised pure functions of arrays (no state, no per-marker loops).
 
-Limit (measured): the markers follow the nodal velocities, not the transported material
-fraction.  Near the cut cells of a cone wall the nodal field compresses more than ``alpha``
-(capped at 1 and redistributed) can follow, so in a discharging hopper the markers drain
-faster than the material: a 0.2 m hopper at 7.5 mm showed an empty crater of markers where
-``alpha`` was 1 after 2 s.  Hence ``run.markers_per_side = 0`` by default.
+The markers follow the nodal velocities, the material fraction the face fluxes of the same
+velocities; they agree as long as the velocity field is consistent with ``alpha`` (the model
+takes the volumetric strain over the open volume of cut cells for that reason; before it
+did, the markers drained faster than the material near a cone wall).
 """
 
 from __future__ import annotations

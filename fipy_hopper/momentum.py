@@ -143,6 +143,24 @@ def face_normal_velocity(v: np.ndarray) -> np.ndarray:
     return np.concatenate([vz_faces.ravel(), vr_faces.ravel()])
 
 
+def open_divergence(v: np.ndarray, zface_aperture: np.ndarray, rface_aperture: np.ndarray,
+                    kappa: np.ndarray, r_nodes: np.ndarray, h: float) -> np.ndarray:
+    """Divergence of the nodal velocity over each cell's open volume (1/s), as transport sees it.
+
+    With the face velocities of :func:`face_normal_velocity` (edge means, ``w`` along +z on
+    z-faces, ``u`` along +r on r-faces) and the apertures ``a`` (open fraction of each face),
+    ``div = [(a_T w_T - a_B w_B) / h + (a_R r_R u_R - a_L r_L u_L) / (r_c h)] / kappa``: the
+    net outflow through the open faces per open volume ``kappa r_c h^2`` (the wall is
+    impermeable).  In a full cell it equals the Q1 cell mean ``tr D`` of :func:`strain_rate`;
+    closed cells (``kappa = 0``) get 0.
+    """
+    w = 0.5 * (v[1, :, :-1] + v[1, :, 1:]) * zface_aperture          # (nz + 1, nr)
+    u = 0.5 * (v[0, :-1, :] + v[0, 1:, :]) * rface_aperture * r_nodes  # (nz, nr + 1)
+    r_c = 0.5 * (r_nodes[1:] + r_nodes[:-1])
+    net = (w[1:] - w[:-1]) / h + (u[:, 1:] - u[:, :-1]) / (r_c * h)
+    return np.where(kappa > 0, net / np.where(kappa > 0, kappa, 1.0), 0.0)
+
+
 def dual_momentum_transport(v, mass_old, mass_new, flux_z, flux_r, rho, bottom_outflow=True):
     """Conservative upwind transport of nodal momentum on the dual grid.
 
@@ -298,3 +316,26 @@ def strain_rate_jaumann_kernel(v, sigma, r_c, h, dt, d_eps, sigma_rot):
             sigma_rot[j, i, 1] = s_zz - 2.0 * w * s_rz
             sigma_rot[j, i, 2] = sigma[j, i, 2]
             sigma_rot[j, i, 3] = s_rz + w * (s_zz - s_rr)
+
+
+@njit(cache=True, error_model="numpy")
+def open_volumetric_kernel(v, zface_aperture, rface_aperture, kappa, r_nodes, h, dt, d_eps):
+    """Set the volumetric part of ``d_eps`` (nz, nr, 4) to ``open_divergence * dt``, in place
+    (the deviatoric part is kept), as :func:`open_divergence`."""
+    nz, nr = kappa.shape
+    for j in range(nz):
+        for i in range(nr):
+            k = kappa[j, i]
+            div = 0.0
+            if k > 0.0:
+                w_b = 0.5 * (v[1, j, i] + v[1, j, i + 1]) * zface_aperture[j, i]
+                w_t = 0.5 * (v[1, j + 1, i] + v[1, j + 1, i + 1]) * zface_aperture[j + 1, i]
+                u_l = 0.5 * (v[0, j, i] + v[0, j + 1, i]) * rface_aperture[j, i] * r_nodes[i]
+                u_r = (0.5 * (v[0, j, i + 1] + v[0, j + 1, i + 1]) * rface_aperture[j, i + 1]
+                       * r_nodes[i + 1])
+                r_c = 0.5 * (r_nodes[i] + r_nodes[i + 1])
+                div = ((w_t - w_b) / h + (u_r - u_l) / (r_c * h)) / k
+            corr = (div * dt - (d_eps[j, i, 0] + d_eps[j, i, 1] + d_eps[j, i, 2])) / 3.0
+            d_eps[j, i, 0] += corr
+            d_eps[j, i, 1] += corr
+            d_eps[j, i, 2] += corr

@@ -51,25 +51,69 @@ def test_separation_happens_only_at_the_apex():
     assert np.all(new[0] == 0.0) and gained[1] == 0.0 and gained[2] == 0.0
 
 
-def test_stress_update_and_transport_use_the_same_divergence():
-    """Q1 cell-average tr(D) equals the face-flux divergence of the averaged nodal velocity."""
-    cfg = _config()
+def test_volumetric_strain_is_the_transport_divergence_over_the_open_volume():
+    """momentum.open_divergence: the Q1 mean tr(D) in fully open cells; in cut cells the net
+    flux through the open face areas (FiPy's faces times apertures) over the open volume."""
+    cfg = _config_cone()
     model = HopperModel(cfg)
     g = model.grid
     rng = np.random.default_rng(3)
     v = rng.normal(size=(2, g.nz + 1, g.nr + 1))
     v[0, :, 0] = 0.0
+    za, ra = g.zface_aperture(), g.rface_aperture()
+    div = momentum.open_divergence(v, za, ra, g.kappa, g.r_nodes, g.h)
+    # reference: fluxes along FiPy's face normals through the open areas, summed per cell
+    flux = (momentum.face_normal_velocity(v) * model.face_sign
+            * np.asarray(g.mesh._faceAreas) * g.face_aperture)
+    ids = np.asarray(g.mesh.faceCellIDs.filled(-1))
+    net = np.zeros(g.n_cells)
+    np.add.at(net, ids[0], flux)
+    inner = ids[1] >= 0
+    np.add.at(net, ids[1][inner], -flux[inner])
+    open_volume = model.open_volume.ravel()
+    expected = np.where(open_volume > 0, net / np.where(open_volume > 0, open_volume, 1), 0)
+    cut = (g.kappa > 0) & (g.kappa < 1)
+    assert cut.sum() > 10
+    assert np.allclose(div.ravel(), expected, rtol=1e-10, atol=1e-10 * np.abs(expected).max())
     D, _ = momentum.strain_rate(v, model.r_c, g.h)
+    whole = ((g.kappa == 1) & (za[1:] == 1) & (za[:-1] == 1) & (ra[:, 1:] == 1)
+             & ((ra[:, :-1] == 1) | (g.r_nodes[:-1] == 0)[None, :]))
     trace = D[..., 0] + D[..., 1] + D[..., 2]
-    # the transport's divergence: face velocities (Q1 edge means, along +z and +r) times the
-    # axisymmetric face areas (r_face h), summed out of the cell volume r_c h^2
-    u = momentum.face_normal_velocity(v)
-    w = u[:g.n_zfaces].reshape(g.nz + 1, g.nr)
-    ur = u[g.n_zfaces:].reshape(g.nz, g.nr + 1)
-    r_f = g.r_nodes[None, :]
-    div = ((w[1:] - w[:-1]) / g.h
-           + (r_f[:, 1:] * ur[:, 1:] - r_f[:, :-1] * ur[:, :-1]) / (model.r_c[None, :] * g.h))
-    assert np.allclose(trace, div, rtol=1e-12, atol=1e-12 * np.abs(div).max())
+    assert np.allclose(div[whole], trace[whole], rtol=1e-12, atol=1e-12 * np.abs(trace).max())
+    # the compiled kernel sets exactly this volumetric part and keeps the deviator
+    d_eps = rng.normal(size=(g.nz, g.nr, 4))
+    out = d_eps.copy()
+    momentum.open_volumetric_kernel(v, za, ra, g.kappa, g.r_nodes, g.h, 0.5, out)
+    assert np.allclose(out[..., 0] + out[..., 1] + out[..., 2], 0.5 * div, atol=1e-12)
+    dev = lambda e: e[..., :3] - e[..., :3].mean(-1, keepdims=True)  # noqa: E731
+    assert np.allclose(dev(out), dev(d_eps), atol=1e-12) and np.array_equal(out[..., 3],
+                                                                              d_eps[..., 3])
+
+
+def test_compiled_loose_rule_equals_the_numpy_functions():
+    rng = np.random.default_rng(5)
+    n = 2000
+    d_eps = rng.normal(scale=1e-3, size=(n, 4))
+    loose = np.where(rng.random(n) < 0.5, rng.random(n) * 2e-3, 0.0)
+    skeleton, left = material.close_loose_volume(d_eps, loose)
+    out, out_loose = np.empty((n, 4)), np.empty(n)
+    material.close_loose_volume_kernel(d_eps, loose, out, out_loose)
+    assert np.allclose(out, skeleton, rtol=1e-14, atol=1e-18)
+    assert np.allclose(out_loose, left, rtol=1e-14, atol=1e-18)
+    mat = material.MohrCoulomb(E=5e6, nu=0.3, rho=RHO, phi=30.0)
+    sigma = -np.abs(rng.normal(scale=1e3, size=(n, 4))) * [1, 1, 1, 0] + [0, 0, 0, 1] * \
+        rng.normal(scale=300, size=(n, 4))
+    new, d_p, status = material.update(sigma, skeleton, mat, return_status=True)
+    loaded = rng.random(n) > 0.1
+    eps_p = rng.random(n)
+    ref_sigma = np.where(loaded[:, None], new, 0.0)
+    ref_loose = np.where(loaded, left + material.separation_strain(d_p, status), 0.0)
+    ref_eps = eps_p + np.where(loaded, material.equivalent_plastic_strain(d_p), 0.0)
+    assert (status == material.APEX).sum() > 10
+    material.finish_update_kernel(new, d_p, status, loaded, left, eps_p)
+    assert np.array_equal(new, ref_sigma)
+    assert np.allclose(left, ref_loose, rtol=1e-14, atol=1e-18)
+    assert np.allclose(eps_p, ref_eps, rtol=1e-14)
 
 
 # ---------------------------------------------------------------- the model
@@ -81,6 +125,15 @@ def _config(friction=0.0, cell=0.01):
                        "bin_height": 0.18, "fill_height": 0.1},
             "wall": {"friction_angle_deg": friction},
             "numerics": {"cell_size": cell, "gravity_ramp_time": 0.0}})
+
+
+def _config_cone(cell=0.01):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return HopperConfig.from_dict({
+            "hopper": {"bin_diameter": 0.2, "outlet_diameter": 0.06, "half_angle_deg": 25.0,
+                       "bin_height": 0.1, "fill_height": 0.08},
+            "numerics": {"cell_size": cell}})
 
 
 def _block(model, z_low, z_high, alpha):

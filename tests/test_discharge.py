@@ -88,15 +88,18 @@ def test_wide_rough_hopper_discharges_in_funnel_flow(funnel_flow):
 
 def test_switch_peak_at_the_transition_in_mass_flow(mass_flow):
     """The discharge pressure peaks in the upper cone, above the filling pressure there and
-    above the cone's lower part.  Measured (1 cm cells, 0.1 s averages): the peak is 2741 Pa
-    at 0.72 s_t (filling there 2230 Pa; lower cone at most 1545 Pa); without the loose/dense
-    rule 2809 Pa at 0.94 s_t.  Walker's radial field puts it at the transition (3306 Pa)."""
+    well above the cone's lower part.  Measured (1 cm cells, 0.1 s averages): the peak is
+    2442 Pa at 0.72 s_t, filling there at most 2248 Pa (ratio 1.09), lower cone at most
+    1311 Pa (1.86).  Walker's radial field puts 3306 Pa at the transition over 1975 Pa of
+    filling (1.67): the simulated switch is weaker than Walker's.  (Before the volumetric strain
+    was taken over the open volume of cut cells the ratio was 1.23, with spurious compression
+    at the cone wall.)"""
     model, sim, summary, _ = mass_flow
     _, s_f, r_f, z_f, p_fill, _ = sim.record.wall["filling"]
     _, s_d, r_d, z_d, p_dis, _ = sim.record.wall["early_discharge"]
     s_t = geometry.transition_arc_length(model.cfg.hopper)
     upper = lambda s: (s > 0.6 * s_t) & (s < s_t + model.grid.h)  # noqa: E731
     peak_discharge = p_dis[upper(s_d)].max()
-    assert peak_discharge > 1.15 * p_fill[upper(s_f)].max()
+    assert peak_discharge > 1.05 * p_fill[upper(s_f)].max()
     lower_cone = (s_d > 0.2 * s_t) & (s_d < 0.45 * s_t)
-    assert peak_discharge > 1.3 * p_dis[lower_cone].max()
+    assert peak_discharge > 1.5 * p_dis[lower_cone].max()

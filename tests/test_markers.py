@@ -322,3 +322,47 @@ def test_flow_pattern_and_thumbnails_with_markers(run_dir):
     thumbs = study.plot_thumbnails([row], 1)
     thumbs.canvas.draw()
     assert "marker points" in thumbs._suptitle.get_text()
+
+
+def test_markers_stay_with_the_material_through_discharge():
+    """Markers (moved by the nodal velocities) and alpha (face fluxes of the same velocities)
+    hold the same share of the material in the hopper and below its mid-height.  Each marker
+    stands for the seeded volume ``r_seed (h / 2)^2`` (per radian); its layer column is set to
+    its index to find ``r_seed`` again.  Measured on this case: 0.779 against 0.782 in the hopper, 0.281 against 0.289 below mid-height; before the
+    volumetric strain of cut cells was taken over their open volume, the markers drained much
+    faster than the material (below mid-height 0.36 of the markers against 0.29 of alpha)."""
+    import warnings
+
+    from fipy_hopper.config import HopperConfig
+    from fipy_hopper.model import HopperModel
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        cfg = HopperConfig.from_dict({
+            "hopper": {"bin_diameter": 0.2, "bin_height": 0.2, "fill_height": 0.12},
+            "numerics": {"cell_size": 0.01, "gravity_ramp_time": 0.05},
+            "run": {"markers_per_side": 2}})
+    model = HopperModel(cfg)
+    g = model.grid
+    state = model.initial_state()
+    seeded = state.markers.copy()
+    state.markers[:, 2] = np.arange(len(seeded))
+    volume0 = seeded[:, 0] * (g.h / 2) ** 2
+    while state.t < 0.3:
+        model.step(state)
+    model.open_outlet(state)
+    while state.t < 1.0:
+        model.step(state)
+    model.transport_step(state)
+    z_mid = 0.5 * model.cfg.hopper.fill_level
+    cells = state.alpha * model.open_volume
+    alpha_total = cells[g.z_cells >= 0].sum()
+    alpha_low = cells[(g.z_cells >= 0) & (g.z_cells < z_mid)].sum()
+    index = state.markers[:, 2].astype(int)
+    z = state.markers[:, 1]
+    marker_total = volume0[index[z >= 0]].sum()
+    marker_low = volume0[index[(z >= 0) & (z < z_mid)]].sum()
+    initial = (model.initial_state().alpha * model.open_volume)[g.z_cells >= 0].sum()
+    assert alpha_total < 0.85 * initial                 # a real part of it has gone
+    assert marker_total / volume0.sum() == pytest.approx(alpha_total / initial, abs=0.03)
+    assert marker_low / volume0.sum() == pytest.approx(alpha_low / initial, abs=0.03)
