@@ -18,8 +18,8 @@ Written to ``--out`` (default ``studies/output/flow_mode_map``):
 * ``thumbnails.png``: the layers at the end of the discharge for a few cases;
 * ``cases/<name>/``: the run directory of every case.
 
-Default cost (measured on this machine, one core per case): 13-95 s per case at 5 mm, about
-25 core-minutes for the 30 cases, about 13 minutes on 2 cores.
+Default cost (measured on this machine, 2026-11-22, one core per case): 7-14 s per case at
+5 mm, 264 core-seconds for the 30 cases, 162 s on 2 cores (``tests/benchmarks``).
 
 Usage::
 
