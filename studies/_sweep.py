@@ -231,6 +231,27 @@ def _finished_row(path: Path) -> dict:
 
 
 # ---------------------------------------------------------------- running a list of cases
+def study_options(args, names) -> dict:
+    """The study options given on the command line: ``args.<name>`` for each of ``names`` that
+    is not ``None``, and ``case_plots=False`` with ``--no-case-plots``."""
+    options = {name: getattr(args, name) for name in names if getattr(args, name) is not None}
+    if not args.case_plots:
+        options["case_plots"] = False
+    return options
+
+
+def run_study(name: str, study: dict, args) -> list:
+    """Create ``args.out`` and run the study's cases there (:func:`sweep`); returns the rows."""
+    args.out.mkdir(parents=True, exist_ok=True)
+    print(f"{name}: {len(study['cases'])} case(s) into {args.out}")
+    return sweep(study["cases"], args)
+
+
+def rounded(x, digits: int):
+    """``round(x, digits)``, or ``None`` for a missing or non-finite number (for JSON)."""
+    return round(x, digits) if finite(x) else None
+
+
 def add_arguments(parser: argparse.ArgumentParser, study: str) -> None:
     """The options every study shares."""
     parser.add_argument("--out", type=Path, default=DEFAULT_ROOT / study,

@@ -38,6 +38,7 @@ import _sweep  # noqa: E402
 
 from fipy_hopper import geometry  # noqa: E402
 
+_r = _sweep.rounded
 NAME = "convergence"
 TITLE = "Convergence of the rate and the wall pressure with cell size and stiffness"
 DEFAULTS = {
@@ -298,14 +299,9 @@ def main(argv=None) -> int:
     parser.add_argument("--moduli", type=float, nargs="+", help="Pa")
     parser.add_argument("--end-time", type=float, help="s of discharge (default 0.8)")
     args = parser.parse_args(argv)
-    options = {k: v for k, v in (("cell_sizes", args.cell_sizes), ("moduli", args.moduli),
-                                 ("end_time", args.end_time)) if v is not None}
-    if not args.case_plots:
-        options["case_plots"] = False
+    options = _sweep.study_options(args, ('cell_sizes', 'moduli', 'end_time'))
     study = setup(quick=args.quick, **options)
-    args.out.mkdir(parents=True, exist_ok=True)
-    print(f"{NAME}: {len(study['cases'])} case(s) into {args.out}")
-    rows = _sweep.sweep(study["cases"], args)
+    rows = _sweep.run_study(NAME, study, args)
     cells, stiff, steps, diffs, numbers = analyse(rows, study["options"])
     write_outputs(args.out, rows, cells, stiff, steps, diffs, numbers, study["options"],
                   study["setting"], argv)

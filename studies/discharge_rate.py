@@ -51,6 +51,7 @@ import _sweep  # noqa: E402
 from fipy_hopper import theory  # noqa: E402
 from fipy_hopper.diagnostics import fit_power_law  # noqa: E402
 
+_r = _sweep.rounded
 NAME = "discharge_rate"
 TITLE = "Discharge rate against outlet diameter and half-angle, with the correlations"
 DEFAULTS = {
@@ -329,10 +330,6 @@ def write_outputs(out, rows, fits, numbers, options, setting, argv=None):
                             [fit_table, table], rows, argv, headline=headline)
 
 
-def _r(x, n):
-    return round(x, n) if _sweep.finite(x) else None
-
-
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     _sweep.add_arguments(parser, NAME)
@@ -341,15 +338,9 @@ def main(argv=None) -> int:
     parser.add_argument("--outlets", type=float, nargs="+", help="D0 values (m)")
     parser.add_argument("--half-angles", type=float, nargs="+", help="deg")
     args = parser.parse_args(argv)
-    options = {k: v for k, v in (("cell_size", args.cell_size), ("end_time", args.end_time),
-                                 ("outlets", args.outlets), ("half_angles", args.half_angles))
-               if v is not None}
-    if not args.case_plots:
-        options["case_plots"] = False
+    options = _sweep.study_options(args, ('cell_size', 'end_time', 'outlets', 'half_angles'))
     study = setup(quick=args.quick, **options)
-    args.out.mkdir(parents=True, exist_ok=True)
-    print(f"{NAME}: {len(study['cases'])} case(s) into {args.out}")
-    rows = _sweep.sweep(study["cases"], args)
+    rows = _sweep.run_study(NAME, study, args)
     fits, numbers = analyse(rows, study["options"])
     write_outputs(args.out, rows, fits, numbers, study["options"], study["setting"], argv)
     for f in fits:

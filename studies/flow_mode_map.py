@@ -45,6 +45,7 @@ import _sweep  # noqa: E402
 
 from fipy_hopper import geometry, theory  # noqa: E402
 
+_r = _sweep.rounded
 NAME = "flow_mode_map"
 TITLE = "Mass vs funnel flow: the flow-mode map against Jenike's boundary"
 DEFAULTS = {
@@ -326,10 +327,6 @@ def write_outputs(out, rows, numbers, options, setting, argv=None) -> list:
     return figures
 
 
-def _r(x, n):
-    return round(x, n) if _sweep.finite(x) else None
-
-
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     _sweep.add_arguments(parser, NAME)
@@ -338,15 +335,9 @@ def main(argv=None) -> int:
     parser.add_argument("--half-angles", type=float, nargs="+", help="deg")
     parser.add_argument("--wall-angles", type=float, nargs="+", help="deg")
     args = parser.parse_args(argv)
-    options = {k: v for k, v in (("cell_size", args.cell_size), ("end_time", args.end_time),
-                                 ("half_angles", args.half_angles),
-                                 ("wall_angles", args.wall_angles)) if v is not None}
-    if not args.case_plots:
-        options["case_plots"] = False
+    options = _sweep.study_options(args, ('cell_size', 'end_time', 'half_angles', 'wall_angles'))
     study = setup(quick=args.quick, **options)
-    args.out.mkdir(parents=True, exist_ok=True)
-    print(f"{NAME}: {len(study['cases'])} case(s) into {args.out}")
-    rows = _sweep.sweep(study["cases"], args)
+    rows = _sweep.run_study(NAME, study, args)
     numbers = analyse(rows, study["options"])
     write_outputs(args.out, rows, numbers, study["options"], study["setting"], argv)
     print(f"agreement with Jenike: {numbers['agreeing']}/{numbers['classified']} = "

@@ -55,6 +55,7 @@ import _sweep  # noqa: E402
 
 from fipy_hopper.config import HopperConfig  # noqa: E402
 
+_r = _sweep.rounded
 NAME = "robustness"
 TITLE = "Robustness of the discharge rate to stiffness, cell size and hourglass control"
 _REF = HopperConfig()
@@ -375,12 +376,9 @@ def main(argv=None) -> int:
     if args.hopper:
         hoppers = DEFAULTS["hoppers"]
         options["hoppers"] = {h: hoppers[h] for h in args.hopper}
-    if not args.case_plots:
-        options["case_plots"] = False
+    options.update(_sweep.study_options(args, ()))
     study = setup(quick=args.quick, **options)
-    args.out.mkdir(parents=True, exist_ok=True)
-    print(f"{NAME}: {len(study['cases'])} case(s) into {args.out}")
-    rows = _sweep.sweep(study["cases"], args)
+    rows = _sweep.run_study(NAME, study, args)
     bands = evaluate_bands(rows, study["options"])
     write_outputs(args.out, rows, bands, study["options"], study["setting"], argv)
     for b in bands:

@@ -429,15 +429,9 @@ def main(argv=None) -> int:
     parser.add_argument("--end-time", type=float, help="s of discharge (default: 0.65 of the "
                         "Beverloo x Rose-Tanaka emptying time)")
     args = parser.parse_args(argv)
-    options = {k: v for k, v in (("cell_size", args.cell_size),
-                                 ("half_angles", args.half_angles),
-                                 ("end_time", args.end_time)) if v is not None}
-    if not args.case_plots:
-        options["case_plots"] = False
+    options = _sweep.study_options(args, ('cell_size', 'half_angles', 'end_time'))
     study = setup(quick=args.quick, **options)
-    args.out.mkdir(parents=True, exist_ok=True)
-    print(f"{NAME}: {len(study['cases'])} case(s) into {args.out}")
-    rows = _sweep.sweep(study["cases"], args)
+    rows = _sweep.run_study(NAME, study, args)
     profiles, comparison, switch, numbers = analyse(rows, study["options"])
     write_outputs(args.out, rows, profiles, comparison, switch, numbers, study["options"],
                   study["setting"], argv)
