@@ -640,7 +640,8 @@ class LagrangianModel:
         return LagrangianState(t=0.0, step=0, stage="filling", x=m.x.copy(),
                                v=np.zeros((m.n_nodes, 2)), sigma=np.zeros((m.n_elements, 4)),
                                eps_p=np.zeros(m.n_elements),
-                               active=np.ones(m.n_elements, dtype=bool), dt=self.dt0)
+                               active=np.ones(m.n_elements, dtype=bool), dt=self.dt0,
+                               loose=np.zeros(m.n_elements))
 
     def gravity(self, state: LagrangianState) -> float:
         ramp = self.cfg.numerics.gravity_ramp_time
@@ -709,8 +710,6 @@ class LagrangianModel:
         x_mid = x + 0.5 * dt * v
         _strain_kernel(x_mid, v, dt, conn, state.sigma, state.active, self._d_eps, self._sig_rot)
         # the same dense/loose rule as the Eulerian model (material.close_loose_volume)
-        if state.loose is None:
-            state.loose = np.zeros(len(state.sigma))
         d_skeleton, loose = close_loose_volume(self._d_eps, state.loose)
         sig_new, deps_p, status = self._material_update(self._sig_rot, d_skeleton,
                                                         self.material, return_status=True)

@@ -91,6 +91,13 @@ class State:
     markers: np.ndarray = None      # (n, 3) passive marker points (r, z, layer), fipy_hopper.markers
     displacement: np.ndarray = None  # (2, nz+1, nr+1) int v dt since the last transport, m
 
+    def __post_init__(self):
+        # states from before these fields existed (older checkpoints): dense, no pending motion
+        if self.loose is None:
+            self.loose = np.zeros_like(self.alpha)
+        if self.markers is not None and self.displacement is None:
+            self.displacement = np.zeros_like(self.v)
+
     def copy(self) -> "State":
         return State(**{k: (v.copy() if isinstance(v, np.ndarray) else v)
                         for k, v in self.__dict__.items()})
@@ -253,8 +260,6 @@ class HopperModel:
         # Dense and loose material: compression first closes the loose volume, only the rest
         # loads the grains; returns to the stress-free apex record the volume the material
         # separates by (material.close_loose_volume / separation_strain).
-        if state.loose is None:
-            state.loose = np.zeros_like(state.alpha)
         loaded = (state.alpha >= alpha_min).ravel()
         if self.kernels == "numba":
             momentum.open_volumetric_kernel(v, self._zface_aperture, self._rface_aperture,
@@ -331,7 +336,7 @@ class HopperModel:
                   "s_rr": alpha * state.sigma[..., 0], "s_zz": alpha * state.sigma[..., 1],
                   "s_tt": alpha * state.sigma[..., 2], "s_rz": alpha * state.sigma[..., 3],
                   "eps_p": alpha * state.eps_p, "layer": alpha * state.layer,
-                  "loose": alpha * (state.loose if state.loose is not None else 0.0)}
+                  "loose": alpha * state.loose}
         stacked = np.stack([np.ascontiguousarray(fields[k]).ravel() for k in TRANSPORTED])
         transport = self.transport_closed if state.plate_closed else self.transport_open
         new, face_flux = transport.step_stacked(stacked, u_mean, dt_T)
