@@ -15,7 +15,8 @@ of the axisymmetric hopper and the layer id (an integer stored as float, 0 = bot
   reflects them at the axis, pushes those that went into the wall back to its surface, and
   drops those that fell out of the bottom of the grid.
 
-All functions are vectorised pure functions of arrays (no state, no per-marker loops).
+All functions are pure functions of arrays (no state); the per-marker loop of the midpoint
+rule is compiled (numba) and held by a test to the numpy reference :func:`advance_reference`.
 
 The markers follow the nodal velocities, the material fraction the face fluxes of the same
 velocities; they agree as long as the velocity field is consistent with ``alpha`` (the model
@@ -25,7 +26,10 @@ did, the markers drained faster than the material near a cone wall).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
+from numba import njit
 
 from . import geometry
 
@@ -127,8 +131,37 @@ def advance(markers, displacement, grid, geom) -> np.ndarray:
     ``r < 0`` is reflected to ``|r|`` (the axis), markers inside the wall are pushed back to
     its surface plus ``WALL_GAP h`` into the open region along the wall normal, and markers
     below the grid (``z < z_nodes[0]``) are removed, so the result may be shorter.  The layer
-    column is kept.
+    column is kept.  The midpoint rule runs compiled (:func:`_midpoint_kernel`, the same
+    arithmetic as :func:`advance_reference`, which a test holds it to).
     """
+    markers = np.ascontiguousarray(markers, dtype=float).reshape(-1, 3)
+    r_new = np.empty(len(markers))
+    z_new = np.empty(len(markers))
+    vertices, normals = _wall_segments(geom)
+    tan_cone = float(np.tan(geom.half_angle)) if geom.cone_height > 0.0 else 0.0
+    _midpoint_kernel(markers, np.ascontiguousarray(displacement, dtype=float),
+                     np.asarray(grid.r_nodes, float), np.asarray(grid.z_nodes, float),
+                     geom.outlet_radius, geom.bin_radius, geom.cone_height, tan_cone, vertices,
+                     normals, WALL_GAP * grid.h, WALL_PASSES, r_new, z_new)
+    keep = z_new >= grid.z_nodes[0]
+    return np.column_stack([r_new[keep], z_new[keep], markers[keep, 2]])
+
+
+def _wall_segments(geom):
+    """Vertices (4, 2) of the wall polyline and the unit normal (3, 2) of each segment into
+    the wall, as :func:`fipy_hopper.geometry.wall_normal` computes them."""
+    vertices = geometry.wall_polyline(geom, 1e3, 1e3)
+    seg_dir = vertices[1:] - vertices[:-1]
+    seg_dir = seg_dir / np.linalg.norm(seg_dir, axis=1)[:, None]
+    normals = np.stack([seg_dir[:, 1], -seg_dir[:, 0]], axis=1)
+    mid = 0.5 * (vertices[1:] + vertices[:-1])
+    probe = mid + 1e-9 * normals
+    normals[~geometry.in_solid(probe[:, 0], probe[:, 1], geom)] *= -1.0
+    return np.ascontiguousarray(vertices), np.ascontiguousarray(normals)
+
+
+def advance_reference(markers, displacement, grid, geom) -> np.ndarray:
+    """:func:`advance` in plain numpy (the reference of the compiled midpoint rule)."""
     markers = np.asarray(markers, dtype=float).reshape(-1, 3)
     r, z = markers[:, 0], markers[:, 1]
     d0 = _displacement_at(displacement, grid, r, z)
@@ -137,3 +170,104 @@ def advance(markers, displacement, grid, geom) -> np.ndarray:
     r_new, z_new = _push_out_of_wall(r_new, z_new, geom, WALL_GAP * grid.h)
     keep = z_new >= grid.z_nodes[0]
     return np.column_stack([r_new[keep], z_new[keep], markers[keep, 2]])
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _cell_of(x, nodes, inv_spacing):
+    """Index ``i`` of the interval ``nodes[i] <= x < nodes[i + 1]`` of clamped ``x``, as
+    ``clip(searchsorted(nodes, x, 'right') - 1, 0, n - 2)``: a guess from the mean spacing,
+    corrected by comparisons (exact for any node positions)."""
+    n = nodes.shape[0]
+    i = min(max(int((x - nodes[0]) * inv_spacing), 0), n - 1)
+    while i > 0 and nodes[i] > x:
+        i -= 1
+    while i < n - 1 and nodes[i + 1] <= x:
+        i += 1
+    return min(i, n - 2)
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _interpolate_point(field, r_nodes, z_nodes, r, z):
+    """:func:`interpolate` of the two components of ``field`` at one point, same arithmetic."""
+    r = min(max(r, r_nodes[0]), r_nodes[-1])
+    z = min(max(z, z_nodes[0]), z_nodes[-1])
+    i = _cell_of(r, r_nodes, (r_nodes.shape[0] - 1) / (r_nodes[-1] - r_nodes[0]))
+    j = _cell_of(z, z_nodes, (z_nodes.shape[0] - 1) / (z_nodes[-1] - z_nodes[0]))
+    s = (r - r_nodes[i]) / (r_nodes[i + 1] - r_nodes[i])
+    t = (z - z_nodes[j]) / (z_nodes[j + 1] - z_nodes[j])
+    out0 = ((1 - s) * (1 - t) * field[0, j, i] + s * (1 - t) * field[0, j, i + 1]
+            + (1 - s) * t * field[0, j + 1, i] + s * t * field[0, j + 1, i + 1])
+    out1 = ((1 - s) * (1 - t) * field[1, j, i] + s * (1 - t) * field[1, j, i + 1]
+            + (1 - s) * t * field[1, j + 1, i] + s * t * field[1, j + 1, i + 1])
+    return out0, out1
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _in_solid(r, z, r_outlet, r_bin, cone_height, tan_cone):
+    """:func:`fipy_hopper.geometry.in_solid` of one point."""
+    if cone_height == 0.0:
+        wall = r_bin if z > 0.0 else r_outlet
+    else:
+        wall = r_outlet + max(z, 0.0) * tan_cone
+    return r >= min(wall, r_bin)
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _isclose(a, b):
+    return abs(a - b) <= 1e-8 + 1e-5 * abs(b)
+
+
+@njit(cache=True, error_model="numpy")
+def _push_point(r, z, vertices, normals, gap, inside):
+    """One pass of :func:`_push_out_of_wall` for one point inside the wall: the nearest wall
+    point (first nearest segment), the signed distance and the normal as in
+    :mod:`fipy_hopper.geometry`, then ``x + (d - gap) n``."""
+    best = np.inf
+    pr = pz = 0.0
+    seg = 0
+    for k in range(vertices.shape[0] - 1):
+        a0, a1 = vertices[k, 0], vertices[k, 1]
+        ab0, ab1 = vertices[k + 1, 0] - a0, vertices[k + 1, 1] - a1
+        t = ((r - a0) * ab0 + (z - a1) * ab1) / (ab0 * ab0 + ab1 * ab1)
+        t = min(max(t, 0.0), 1.0)
+        qr, qz = a0 + t * ab0, a1 + t * ab1
+        d2 = (r - qr) ** 2 + (z - qz) ** 2
+        if d2 < best:
+            best, pr, pz, seg = d2, qr, qz, k
+    dr, dz = pr - r, pz - z
+    dist = math.hypot(dr, dz)
+    d = -dist if inside else dist
+    n_r, n_z = normals[seg, 0], normals[seg, 1]
+    at_vertex = ((_isclose(pr, vertices[seg, 0]) and _isclose(pz, vertices[seg, 1]))
+                 or (_isclose(pr, vertices[seg + 1, 0]) and _isclose(pz, vertices[seg + 1, 1])))
+    if at_vertex and dist > 1e-12:
+        sign = -1.0 if inside else 1.0
+        safe = dist if dist > 0 else 1.0
+        n_r, n_z = sign * dr / safe, sign * dz / safe
+    return r + (d - gap) * n_r, z + (d - gap) * n_z
+
+
+@njit(cache=True, error_model="numpy")
+def _midpoint_kernel(markers, displacement, r_nodes, z_nodes, r_outlet, r_bin, cone_height,
+                     tan_cone, vertices, normals, gap, passes, r_new, z_new):
+    """:func:`advance` of every marker into ``r_new, z_new``: the midpoint rule with the axis
+    reflection, then up to ``passes`` pushes out of the wall (:func:`_push_point`)."""
+    for k in range(markers.shape[0]):
+        r = markers[k, 0]
+        z = markers[k, 1]
+        d0r, d0z = _interpolate_point(displacement, r_nodes, z_nodes, abs(r), z)
+        if r < 0.0:
+            d0r = -d0r
+        rm = r + 0.5 * d0r
+        zm = z + 0.5 * d0z
+        dmr, dmz = _interpolate_point(displacement, r_nodes, z_nodes, abs(rm), zm)
+        if rm < 0.0:
+            dmr = -dmr
+        rn = abs(r + dmr)
+        zn = z + dmz
+        for _ in range(passes):
+            if not _in_solid(rn, zn, r_outlet, r_bin, cone_height, tan_cone):
+                break
+            rn, zn = _push_point(rn, zn, vertices, normals, gap, True)
+        r_new[k] = rn
+        z_new[k] = zn

@@ -830,38 +830,69 @@ def _fast_block(m, S, W, flags, cst):
 def _fast_sweeps(m, q_tr, ct, st, f, tau, lo, hi, done, cst, hyperbolic):
     """The lockstep Halley sweeps of :func:`_fast_block` (the rows of its work arrays are passed
     one by one: LLVM vectorises the loop only when it can tell them apart; hyperbolic is compiled
-    in as a constant)."""
+    in as a constant).
+
+    Each point iterates until it converges or has had _FAST_MAXIT sweeps, whatever the other
+    points of the block do, so its result does not depend on which points share its block.
+    When after 6 sweeps only a few points (at most 1/64 of the block) are still open, they are
+    gathered and swept on their own (the same iterates, at a fraction of the cost).
+    """
     for sweep in range(_FAST_MAXIT):
-        n_open = 0
-        for j in range(m):
-            t0 = tau[j]
-            h, h1, h2, w2 = _fast_eval(t0, q_tr[j], ct[j], st[j], f[j], cst, hyperbolic)[:4]
-            l = t0 if h > 0.0 else lo[j]
-            u = t0 if h < 0.0 else hi[j]
-            # Halley step in tau (dTheta/dtau = 1/w2, d2Theta/dtau2 = -2 tau/w2^2), at most twice
-            # the Newton step; converged when the Newton step is small (the error after the
-            # Halley step is then of the order of its cube)
-            newton = -h * w2 / h1
-            tn = t0 + newton / max(1.0 - h * (h2 - 2.0 * t0 * h1) / (2.0 * h1 * h1), 0.5)
-            small = abs(newton) <= _FAST_STEP
-            inside = (h1 < 0.0) & (l < tn) & (tn < u)
-            # a step out of the bracket: 0.9 (first sweep: typically a first step from Theta_tr
-            # over a root near pi/3) or 0.5 of the way to the end it overshot
-            frac = 0.9 if sweep == 0 else 0.5
-            alt = t0 + frac * ((u if tn >= u else l) - t0)
-            alt = alt if (l < alt) & (alt < u) else 0.5 * (l + u)
-            tn = min(max(tn, l), u) if small | inside else alt
-            conv = small | (h == 0.0) | (u - l <= _TOL_THETA)
-            fin = done[j]
-            tau[j] = t0 if fin | (h == 0.0) else tn
-            lo[j] = lo[j] if fin else l
-            hi[j] = hi[j] if fin else u
-            done[j] = fin | conv
-            n_open += 0 if fin | conv else 1
-        # done; or only a few points (e.g. bound for the apex) still open after 6 sweeps: the
-        # robust return is then cheaper than more sweeps of the whole block
-        if n_open == 0 or (sweep >= 5 and 64 * n_open <= m):
+        n_open = _fast_sweep(m, sweep, q_tr, ct, st, f, tau, lo, hi, done, cst, hyperbolic)
+        if n_open == 0:
+            return
+        if sweep >= 5 and 64 * n_open <= m and sweep + 1 < _FAST_MAXIT:
             break
+    else:
+        return
+    rows = np.empty(n_open, dtype=np.int64)
+    k = 0
+    for j in range(m):
+        if not done[j]:
+            rows[k] = j
+            k += 1
+    sq, sct, sst, sf = q_tr[rows], ct[rows], st[rows], f[rows]
+    stau, slo, shi, sdone = tau[rows], lo[rows], hi[rows], done[rows]
+    for later in range(sweep + 1, _FAST_MAXIT):
+        if _fast_sweep(n_open, later, sq, sct, sst, sf, stau, slo, shi, sdone, cst,
+                       hyperbolic) == 0:
+            break
+    for k in range(n_open):
+        j = rows[k]
+        tau[j], lo[j], hi[j], done[j] = stau[k], slo[k], shi[k], sdone[k]
+
+
+@_jit
+def _fast_sweep(m, sweep, q_tr, ct, st, f, tau, lo, hi, done, cst, hyperbolic):
+    """Sweep number ``sweep`` of the Halley iteration over the points 0..m-1; returns the number
+    still open."""
+    n_open = 0
+    for j in range(m):
+        t0 = tau[j]
+        h, h1, h2, w2 = _fast_eval(t0, q_tr[j], ct[j], st[j], f[j], cst, hyperbolic)[:4]
+        l = t0 if h > 0.0 else lo[j]
+        u = t0 if h < 0.0 else hi[j]
+        # Halley step in tau (dTheta/dtau = 1/w2, d2Theta/dtau2 = -2 tau/w2^2), at most twice
+        # the Newton step; converged when the Newton step is small (the error after the
+        # Halley step is then of the order of its cube)
+        newton = -h * w2 / h1
+        tn = t0 + newton / max(1.0 - h * (h2 - 2.0 * t0 * h1) / (2.0 * h1 * h1), 0.5)
+        small = abs(newton) <= _FAST_STEP
+        inside = (h1 < 0.0) & (l < tn) & (tn < u)
+        # a step out of the bracket: 0.9 (first sweep: typically a first step from Theta_tr
+        # over a root near pi/3) or 0.5 of the way to the end it overshot
+        frac = 0.9 if sweep == 0 else 0.5
+        alt = t0 + frac * ((u if tn >= u else l) - t0)
+        alt = alt if (l < alt) & (alt < u) else 0.5 * (l + u)
+        tn = min(max(tn, l), u) if small | inside else alt
+        conv = small | (h == 0.0) | (u - l <= _TOL_THETA)
+        fin = done[j]
+        tau[j] = t0 if fin | (h == 0.0) else tn
+        lo[j] = lo[j] if fin else l
+        hi[j] = hi[j] if fin else u
+        done[j] = fin | conv
+        n_open += 0 if fin | conv else 1
+    return n_open
 
 
 @_jit

@@ -47,9 +47,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import geometry, markers, material, momentum
+import numba
+
+from . import geometry, markers, material, momentum, stepping
 from .config import HopperConfig
 from .mesh import HopperGrid, build_grid
+from .transport import material_rows
 
 GRAVITY = 9.81  # m/s^2
 
@@ -107,7 +110,7 @@ class HopperModel:
     """The hopper on its grid, with material, wall and numerics from a :class:`HopperConfig`."""
 
     def __init__(self, cfg: HopperConfig, grid: HopperGrid | None = None,
-                 kernels: str = "numba"):
+                 kernels: str = "numba", threads: int | None = None):
         from .material import update as material_update
         from .transport import Transport
 
@@ -157,8 +160,6 @@ class HopperModel:
         self.plate_list = _contact_list([(self.plate_nodes, self.plate_normal, self.mu_wall)])
         self.light_mass = 1e-12 * self.rho * g.h ** 3
         self.open_faces = self.face_area > 0
-        self._scratch = (np.empty((2, g.nz + 1, g.nr + 1)), np.empty((g.nz, g.nr, 4)),
-                         np.empty((g.nz, g.nr, 4)))
         self.hopper_cells = (g.z_cells[:, None] > 0.0) & np.ones((1, g.nr), bool)
         self.hourglass_base = (cfg.numerics.hourglass_coefficient * self.rho
                                * math.sqrt(GRAVITY * g.h)
@@ -167,10 +168,23 @@ class HopperModel:
         column = max(cfg.hopper.fill_level, g.h)
         self.fill_damping = math.pi * self.c_p / (2.0 * column)
         self._mass = None
+        self._mass_of = None
         self._zface_aperture = g.zface_aperture()
         self._rface_aperture = g.rface_aperture()
         n = g.nz * g.nr
-        self._scratch_points = (np.empty((n, 4)), np.empty(n))
+        # compiled steps (fipy_hopper.stepping): contacts grouped by node row, list order kept
+        self._contact_rows = _contact_rows(self.contact_list, g.nz + 1)
+        self._plate_rows = _contact_rows(self.plate_list, g.nz + 1)
+        self._face_sign = np.ascontiguousarray(self.face_sign, dtype=float)
+        self._work = (np.empty((n, 3), np.int64), np.empty((n, 3), np.int64),
+                      np.empty(n + 1, np.int64), np.zeros((8, g.nz, g.nr)), np.zeros(g.nz + 1))
+        self._open_face = self.open_faces.astype(float)
+        self._stacked = np.empty((len(TRANSPORTED), n))
+        self._carried = (np.empty((len(TRANSPORTED), n)),
+                         np.empty((len(TRANSPORTED), len(g.face_aperture))))
+        self._prm = self.material.kernel_parameters()
+        self._no_displacement = np.zeros((2, 1, 1))
+        self.threads = int(threads) if threads else numba.config.NUMBA_NUM_THREADS
 
     # ------------------------------------------------------------------ state
     def initial_state(self, n_layers: int = 8) -> State:
@@ -197,8 +211,10 @@ class HopperModel:
         return markers.seed(self.grid, self.cfg.hopper, alpha, layer, per_side=per_side)
 
     def node_mass(self, state: State) -> np.ndarray:
-        if self._mass is None:
+        # cached for the alpha array it was computed from (transport replaces the array)
+        if self._mass is None or self._mass_of is not state.alpha:
             self._mass = momentum.node_mass(self.rho, state.alpha, self.open_volume)
+            self._mass_of = state.alpha
         return self._mass
 
     def mass_in_hopper(self, state: State) -> float:
@@ -230,30 +246,63 @@ class HopperModel:
     # ------------------------------------------------------------------ step
     def step(self, state: State) -> State:
         """Advance ``state`` by one explicit step ``self.dt`` (in place) and return it."""
+        self.advance(state, 1)
+        return state
+
+    def advance(self, state: State, max_steps: int) -> int:
+        """Advance ``state`` by up to ``max_steps`` explicit steps, in place.
+
+        Stops early after a step at which a transport was due (the transport included), so a
+        caller that checks the state every ``k`` steps calls ``advance(state, k - done)``.
+        Returns the number of steps taken.  The compiled path runs the steps in one call of
+        :func:`fipy_hopper.stepping.material_steps`; the numpy path is the reference.
+        """
+        if max_steps < 1:
+            return 0
+        if self.kernels == "numpy":
+            for n in range(max_steps):
+                if self._step_numpy(state):
+                    self.transport_step(state)
+                    return n + 1
+            return max_steps
+        g, num = self.grid, self.cfg.numerics
+        if state.markers is not None:
+            displacement, with_markers = state.displacement, True
+        else:
+            displacement, with_markers = self._no_displacement, False
+        ramp = num.gravity_ramp_time if state.stage == "filling" else 0.0
+        damping = self.fill_damping if state.stage == "filling" else 0.0
+        clock = np.array([state.t, float(state.step), state.flux_time])
+        contact_ptr, contact_i, contact_normal, contact_mu = self._contact_rows
+        plate_ptr, plate_i, plate_normal, plate_mu = self._plate_rows
+        if numba.get_num_threads() != self.threads:
+            numba.set_num_threads(self.threads)
+        done, due = stepping.material_steps(
+            int(max_steps), clock, state.v, self.node_mass(state), state.alpha, state.sigma,
+            state.loose, state.eps_p, state.face_flux_sum, displacement, with_markers,
+            self.open_volume, self.r_c, g.r_nodes, g.h, self.hourglass_base, g.kappa,
+            self._zface_aperture, self._rface_aperture, self._face_sign, self._open_face,
+            self._prm, self.dt, GRAVITY, ramp, damping, self.light_mass, num.alpha_min,
+            num.transport_cfl, num.max_transport_interval, contact_ptr, contact_i,
+            contact_normal, contact_mu, plate_ptr, plate_i, plate_normal, plate_mu,
+            state.plate_closed, self._work)
+        state.t, state.flux_time = float(clock[0]), float(clock[2])
+        state.step += int(done)
+        if due:
+            self.transport_step(state)
+        return int(done)
+
+    def _step_numpy(self, state: State) -> bool:
+        """One step of the numpy reference; True when a transport is due."""
         g, dt = self.grid, self.dt
         alpha_min = self.cfg.numerics.alpha_min
         m = self.node_mass(state)
         damping = self.fill_damping if state.stage == "filling" else 0.0
-        if self.kernels == "numba":
-            force, d_eps, sigma = self._scratch
-            v = state.v
-            momentum.nodal_update_kernel(v, m, state.alpha[..., None] * state.sigma,
-                                         self.open_volume, self.r_c, g.h,
-                                         self.hourglass_base * state.alpha,
-                                         self.gravity(state), dt, damping, self.light_mass,
-                                         force)
-            momentum.contact_kernel(v, *self.contact_list)
-            if state.plate_closed:
-                momentum.contact_kernel(v, *self.plate_list)
-            v[0, :, 0] = 0.0
-            momentum.strain_rate_jaumann_kernel(v, state.sigma, self.r_c, g.h, dt, d_eps,
-                                                sigma)
-        else:
-            v = self._nodal_update_numpy(state, m, damping)
-            state.v = v
-            D, omega = momentum.strain_rate(v, self.r_c, g.h)
-            sigma = momentum.jaumann_rotate(state.sigma, omega, dt)
-            d_eps = D * dt
+        v = self._nodal_update_numpy(state, m, damping)
+        state.v = v
+        D, omega = momentum.strain_rate(v, self.r_c, g.h)
+        sigma = momentum.jaumann_rotate(state.sigma, omega, dt)
+        d_eps = D * dt
         # The volumetric strain of the stress update is the transport's: the divergence of
         # the nodal velocities over each cell's open volume (momentum.open_divergence; in full
         # cells the Q1 mean tr D, in cut cells what alpha sees through the face apertures).
@@ -261,31 +310,19 @@ class HopperModel:
         # loads the grains; returns to the stress-free apex record the volume the material
         # separates by (material.close_loose_volume / separation_strain).
         loaded = (state.alpha >= alpha_min).ravel()
-        if self.kernels == "numba":
-            momentum.open_volumetric_kernel(v, self._zface_aperture, self._rface_aperture,
-                                            g.kappa, g.r_nodes, g.h, dt, d_eps)
-            d_skeleton, loose = self._scratch_points
-            material.close_loose_volume_kernel(d_eps.reshape(-1, 4), state.loose.ravel(),
-                                               d_skeleton, loose)
-            sig_new, deps_p, status = self._material_update(
-                sigma.reshape(-1, 4), d_skeleton, self.material, return_status=True)
-            material.finish_update_kernel(sig_new, deps_p, status, loaded, loose,
-                                          state.eps_p.reshape(-1))
-            state.loose = loose.reshape(state.alpha.shape).copy()
-        else:
-            div = momentum.open_divergence(v, self._zface_aperture, self._rface_aperture,
-                                           g.kappa, g.r_nodes, g.h) * dt
-            d_eps[..., :3] += ((div - (d_eps[..., 0] + d_eps[..., 1] + d_eps[..., 2]))
-                               / 3.0)[..., None]
-            d_skeleton, loose = material.close_loose_volume(d_eps.reshape(-1, 4),
-                                                            state.loose.ravel())
-            sig_new, deps_p, status = self._material_update(
-                sigma.reshape(-1, 4), d_skeleton, self.material, return_status=True)
-            loose = np.where(loaded, loose + material.separation_strain(deps_p, status), 0.0)
-            sig_new[~loaded] = 0.0
-            state.eps_p += np.where(loaded, material.equivalent_plastic_strain(deps_p),
-                                    0.0).reshape(state.eps_p.shape)
-            state.loose = loose.reshape(state.alpha.shape)
+        div = momentum.open_divergence(v, self._zface_aperture, self._rface_aperture,
+                                       g.kappa, g.r_nodes, g.h) * dt
+        d_eps[..., :3] += ((div - (d_eps[..., 0] + d_eps[..., 1] + d_eps[..., 2]))
+                           / 3.0)[..., None]
+        d_skeleton, loose = material.close_loose_volume(d_eps.reshape(-1, 4),
+                                                        state.loose.ravel())
+        sig_new, deps_p, status = self._material_update(
+            sigma.reshape(-1, 4), d_skeleton, self.material, return_status=True)
+        loose = np.where(loaded, loose + material.separation_strain(deps_p, status), 0.0)
+        sig_new[~loaded] = 0.0
+        state.eps_p += np.where(loaded, material.equivalent_plastic_strain(deps_p),
+                                0.0).reshape(state.eps_p.shape)
+        state.loose = loose.reshape(state.alpha.shape)
         state.sigma = sig_new.reshape(state.sigma.shape)
 
         u_n = momentum.face_normal_velocity(v) * self.face_sign
@@ -295,9 +332,7 @@ class HopperModel:
         state.flux_time += dt
         state.t += dt
         state.step += 1
-        if self._transport_due(state, u_n):
-            self.transport_step(state)
-        return state
+        return self._transport_due(state, u_n)
 
     def _nodal_update_numpy(self, state: State, m: np.ndarray, damping: float) -> np.ndarray:
         """Reference (numpy) nodal update: forces, velocity, damping, contact, axis."""
@@ -331,15 +366,23 @@ class HopperModel:
             return
         dt_T = state.flux_time
         u_mean = state.face_flux_sum / dt_T
-        alpha = state.alpha
-        fields = {"alpha": alpha,
-                  "s_rr": alpha * state.sigma[..., 0], "s_zz": alpha * state.sigma[..., 1],
-                  "s_tt": alpha * state.sigma[..., 2], "s_rz": alpha * state.sigma[..., 3],
-                  "eps_p": alpha * state.eps_p, "layer": alpha * state.layer,
-                  "loose": alpha * state.loose}
-        stacked = np.stack([np.ascontiguousarray(fields[k]).ravel() for k in TRANSPORTED])
         transport = self.transport_closed if state.plate_closed else self.transport_open
-        new, face_flux = transport.step_stacked(stacked, u_mean, dt_T)
+        compiled = self.kernels != "numpy"
+        if compiled:
+            stacked = self._stacked
+            stepping.pack_fields(state.alpha, state.sigma, state.eps_p, state.layer,
+                                 state.loose, stacked)
+            new, face_flux = transport.step_stacked(
+                stacked, u_mean, dt_T, out=self._carried, rows=material_rows(state.alpha))
+        else:
+            alpha = state.alpha
+            fields = {"alpha": alpha,
+                      "s_rr": alpha * state.sigma[..., 0], "s_zz": alpha * state.sigma[..., 1],
+                      "s_tt": alpha * state.sigma[..., 2], "s_rz": alpha * state.sigma[..., 3],
+                      "eps_p": alpha * state.eps_p, "layer": alpha * state.layer,
+                      "loose": alpha * state.loose}
+            stacked = np.stack([np.ascontiguousarray(fields[k]).ravel() for k in TRANSPORTED])
+            new, face_flux = transport.step_stacked(stacked, u_mean, dt_T)
         # compaction above alpha = 1 (and round-off below 0) is moved to face neighbours with
         # room, conservatively; the alpha-weighted fields move with the same fractions
         moved = transport.redistribute_fields(new, room_min=REDISTRIBUTION_ROOM_MIN)
@@ -350,14 +393,23 @@ class HopperModel:
             more = transport.redistribute_fields(new, room_min=REDISTRIBUTION_ROOM_MIN_FALLBACK)
             if more.face_flux is not None:
                 alpha_flux = alpha_flux + more.face_flux
-        shape = alpha.shape
-        new_alpha = new[0].reshape(shape)
-        carried = {k: new[i].reshape(shape) for i, k in enumerate(TRANSPORTED)}
-        safe = np.where(new_alpha >= 1e-12, new_alpha, 1.0)
-        present = new_alpha >= 1e-12
-        sigma = np.stack([carried[k] for k in ("s_rr", "s_zz", "s_tt", "s_rz")], axis=-1)
-        sigma = np.where(present[..., None], sigma / safe[..., None], 0.0)
-        sigma[new_alpha < self.cfg.numerics.alpha_min] = 0.0
+        shape = state.alpha.shape
+        if compiled:
+            new_alpha, sigma = np.empty(shape), np.empty(shape + (4,))
+            eps_p, layer, loose = np.empty(shape), np.empty(shape), np.empty(shape)
+            stepping.unpack_fields(new, self.cfg.numerics.alpha_min, new_alpha, sigma, eps_p,
+                                   layer, loose)
+        else:
+            new_alpha = new[0].reshape(shape)
+            carried = {k: new[i].reshape(shape) for i, k in enumerate(TRANSPORTED)}
+            safe = np.where(new_alpha >= 1e-12, new_alpha, 1.0)
+            present = new_alpha >= 1e-12
+            sigma = np.stack([carried[k] for k in ("s_rr", "s_zz", "s_tt", "s_rz")], axis=-1)
+            sigma = np.where(present[..., None], sigma / safe[..., None], 0.0)
+            sigma[new_alpha < self.cfg.numerics.alpha_min] = 0.0
+            eps_p = np.where(present, carried["eps_p"] / safe, 0.0)
+            layer = np.where(present, carried["layer"] / safe, 0.0)
+            loose = np.where(present, np.maximum(carried["loose"] / safe, 0.0), 0.0)
 
         # outlet and outflow bookkeeping with the same face values
         nzf = g.n_zfaces
@@ -372,19 +424,30 @@ class HopperModel:
 
         # momentum on the dual grid
         mass_old = self.node_mass(state)
-        mass_new = momentum.node_mass(self.rho, new_alpha, self.open_volume)
         flux_z = oriented[:nzf].reshape(g.nz + 1, g.nr)
         flux_r = oriented[nzf:].reshape(g.nz, g.nr + 1)
-        state.v = momentum.dual_momentum_transport(state.v, mass_old, mass_new, flux_z, flux_r,
-                                                   self.rho)
-        # round-off traces of material (content ~1e-30) get no velocity, as in the nodal update
-        state.v[:, mass_new <= self.light_mass] = 0.0
+        if compiled:
+            mass_new = np.empty_like(mass_old)
+            momentum.node_mass_kernel(self.rho, new_alpha, self.open_volume, mass_new)
+            v_new = np.empty_like(state.v)
+            momentum.dual_momentum_kernel(state.v, mass_old, mass_new,
+                                          np.ascontiguousarray(flux_z),
+                                          np.ascontiguousarray(flux_r), self.rho,
+                                          self.light_mass, v_new)
+            state.v = v_new
+        else:
+            mass_new = momentum.node_mass(self.rho, new_alpha, self.open_volume)
+            state.v = momentum.dual_momentum_transport(state.v, mass_old, mass_new, flux_z,
+                                                       flux_r, self.rho)
+            # round-off traces of material (content ~1e-30) get no velocity, as in the
+            # nodal update
+            state.v[:, mass_new <= self.light_mass] = 0.0
         state.alpha = new_alpha
         state.sigma = sigma
-        state.eps_p = np.where(present, carried["eps_p"] / safe, 0.0)
-        state.layer = np.where(present, carried["layer"] / safe, 0.0)
-        state.loose = np.where(present, np.maximum(carried["loose"] / safe, 0.0), 0.0)
-        self._mass = mass_new
+        state.eps_p = eps_p
+        state.layer = layer
+        state.loose = loose
+        self._mass, self._mass_of = mass_new, new_alpha
         if state.markers is not None:
             state.markers = markers.advance(state.markers, state.displacement, g,
                                             self.cfg.hopper)
@@ -395,6 +458,16 @@ class HopperModel:
             bad = np.argwhere(~np.isfinite(state.sigma).all(axis=-1))
             raise InstabilityError(f"non-finite field at step {state.step}, t = {state.t:.6g} s,"
                                    f" cell(s) {bad[:3].tolist()}")
+
+
+def _contact_rows(contact_list, n_rows):
+    """A contact list ``(j, i, normals, mu)`` grouped by node row, in list order within a row:
+    ``(row pointer (n_rows + 1,), i, normals, mu)``."""
+    j, i, normals, mu = contact_list
+    order = np.argsort(j, kind="stable")
+    ptr = np.searchsorted(j[order], np.arange(n_rows + 1)).astype(np.int64)
+    return (ptr, np.ascontiguousarray(i[order]), np.ascontiguousarray(normals[order]),
+            np.ascontiguousarray(mu[order]))
 
 
 def _contact_list(passes):

@@ -339,3 +339,75 @@ def open_volumetric_kernel(v, zface_aperture, rface_aperture, kappa, r_nodes, h,
             d_eps[j, i, 0] += corr
             d_eps[j, i, 1] += corr
             d_eps[j, i, 2] += corr
+
+
+@njit(cache=True, error_model="numpy")
+def node_mass_kernel(rho, alpha, open_volume, out):
+    """:func:`node_mass` into ``out`` (nz + 1, nr + 1), each node's four cells added in the
+    order of :func:`scatter_to_nodes` (so the sums are the same to the last bit)."""
+    nz, nr = alpha.shape
+    for j in range(nz + 1):
+        for i in range(nr + 1):
+            m = 0.0
+            if j < nz and i < nr:
+                m += 0.25 * (rho * alpha[j, i] * open_volume[j, i])
+            if j < nz and i > 0:
+                m += 0.25 * (rho * alpha[j, i - 1] * open_volume[j, i - 1])
+            if j > 0 and i < nr:
+                m += 0.25 * (rho * alpha[j - 1, i] * open_volume[j - 1, i])
+            if j > 0 and i > 0:
+                m += 0.25 * (rho * alpha[j - 1, i - 1] * open_volume[j - 1, i - 1])
+            out[j, i] = m
+
+
+@njit(cache=True, error_model="numpy")
+def dual_momentum_kernel(v, mass_old, mass_new, flux_z, flux_r, rho, light_mass, out):
+    """:func:`dual_momentum_transport` (with the bottom outflow) into ``out``, the same
+    operations in the same order for every node; nodes of mass ``<= light_mass`` get zero."""
+    nz1, nr = flux_z.shape
+    nz = nz1 - 1
+    gz = np.empty((nz, nr + 1))
+    for j in range(nz):
+        for a in range(nr + 1):
+            s = 0.0
+            if a < nr:
+                s += 0.25 * (rho * flux_z[j, a] + rho * flux_z[j + 1, a])
+            if a > 0:
+                s += 0.25 * (rho * flux_z[j, a - 1] + rho * flux_z[j + 1, a - 1])
+            gz[j, a] = s
+    gr = np.empty((nz + 1, nr))
+    for k in range(nz + 1):
+        for i in range(nr):
+            s = 0.0
+            if k < nz:
+                s += 0.25 * (rho * flux_r[k, i] + rho * flux_r[k, i + 1])
+            if k > 0:
+                s += 0.25 * (rho * flux_r[k - 1, i] + rho * flux_r[k - 1, i + 1])
+            gr[k, i] = s
+    for c in range(2):
+        for k in range(nz + 1):
+            for a in range(nr + 1):
+                p = mass_old[k, a] * v[c, k, a]
+                if k < nz:
+                    g = gz[k, a]
+                    p -= g * (v[c, k, a] if g > 0 else v[c, k + 1, a])
+                if k > 0:
+                    g = gz[k - 1, a]
+                    p += g * (v[c, k - 1, a] if g > 0 else v[c, k, a])
+                if a < nr:
+                    g = gr[k, a]
+                    p -= g * (v[c, k, a] if g > 0 else v[c, k, a + 1])
+                if a > 0:
+                    g = gr[k, a - 1]
+                    p += g * (v[c, k, a - 1] if g > 0 else v[c, k, a])
+                if k == 0:
+                    node_out = 0.0
+                    if a < nr:
+                        node_out += 0.5 * (rho * flux_z[0, a])
+                    if a > 0:
+                        node_out += 0.5 * (rho * flux_z[0, a - 1])
+                    p += node_out * v[c, 0, a]
+                m = mass_new[k, a]
+                out[c, k, a] = p / m if m > 0 else 0.0
+                if m <= light_mass:
+                    out[c, k, a] = 0.0

@@ -97,19 +97,19 @@ class Simulation:
     def add_wall_time_callback(self, fn: Callable, interval: float):
         """Call ``fn(sim, state)`` every ``interval`` seconds of wall time (e.g. checkpoints).
 
-        They are called last in a check, after the samples and the stop rules, and only when
-        the run goes on: a checkpoint written there holds the state at the top of the loop,
-        where :meth:`restore` continues, so a resumed run repeats the uninterrupted one step
-        for step (a checkpoint written from a simulated-time callback would skip the rest of
-        its check on resume).
+        They are called last in a check, after the samples and the stop rules, when the run goes
+        on, and once more when it stops for its wall-time limit: a checkpoint written there
+        holds the state at the top of the loop, where :meth:`restore` continues, so a resumed
+        run repeats the uninterrupted one step for step (a checkpoint written from a
+        simulated-time callback would skip the rest of its check on resume).
         """
         self.wall_schedules.append([fn, interval, time.perf_counter()])
 
-    def _call_wall_schedules(self):
+    def _call_wall_schedules(self, force=False):
         now = time.perf_counter()
         for entry in self.wall_schedules:
             fn, interval, last = entry
-            if now - last >= interval:
+            if force or now - last >= interval:
                 fn(self, self.state)
                 entry[2] = time.perf_counter()
 
@@ -153,15 +153,19 @@ class Simulation:
         threshold = num.settle_kinetic_energy * mass * GRAVITY * depth
         check_every = max(1, int(0.005 / m.dt))
         while st.stage == "filling":
-            m.step(st)
+            m.advance(st, check_every - st.step % check_every)
             if st.step % check_every == 0:
                 self._check_stable()
                 self._call_schedules()
                 if st.t >= num.gravity_ramp_time and m.kinetic_energy(st) < threshold:
                     self.record.fill_at_rest = True
                     break
-                if st.t >= num.max_fill_time or self._out_of_wall_time():
+                if st.t >= num.max_fill_time:
                     break
+                if self._out_of_wall_time():
+                    self.record.stop_reason = "wall_time_limit"
+                    self._call_wall_schedules(force=True)
+                    return False
                 # last: a checkpoint here resumes exactly (see add_wall_time_callback)
                 self._call_wall_schedules()
                 self._progress(f"filling t={st.t:.3f} s  KE/MgL={m.kinetic_energy(st) / (mass * GRAVITY * depth):.2e}")
@@ -187,7 +191,7 @@ class Simulation:
         stage_marks = {"early_discharge": 0.9, "mid_discharge": 0.5}
         reason = ""
         while not reason:
-            m.step(st)
+            m.advance(st, check_every - st.step % check_every)
             if st.step % check_every:
                 continue
             self._check_stable()
@@ -210,9 +214,11 @@ class Simulation:
                 reason = "max_time"
             elif self._out_of_wall_time():
                 reason = "wall_time_limit"
+            # last: a checkpoint here resumes exactly (see add_wall_time_callback)
             if not reason:
-                # last: a checkpoint here resumes exactly (see add_wall_time_callback)
                 self._call_wall_schedules()
+            elif reason == "wall_time_limit":
+                self._call_wall_schedules(force=True)
             if self.progress:
                 self._progress(f"discharge t={t_dis:.3f} s  step {st.step}  "
                                f"left {mass:.3g} kg  W={rec.rate[-1] if rec.rate else 0:.3g} kg/s"
@@ -224,10 +230,12 @@ class Simulation:
     def run(self) -> RunRecord:
         """Fill, then discharge; returns the :class:`RunRecord`."""
         self._started = time.perf_counter()
+        self.record.stop_reason = ""
         try:
             if self.state.stage == "filling":
                 self.fill()
-            self.discharge()
+            if self.record.stop_reason != "wall_time_limit":
+                self.discharge()
         finally:
             self.record.wall_time = time.perf_counter() - self._started
             self.record.steps = self.state.step

@@ -491,7 +491,7 @@ def _face_flux(flux, dt, p1, p2, normal_grad_1, normal_grad_2, distance, volume_
 def _grid_step_kernel(phi, flux_h, flux_v, dt, volume, gradient_volume, kappa_volume,
                       projection_h, projection_v, ratio_h, ratio_v, distance_h, distance_v,
                       reach_h, reach_v, outflow_coeff, face_h, face_v, grad_r, grad_z,
-                      phi_new, face_flux):
+                      phi_new, face_flux, j0, j1):
     """Compiled step (2) on the index grid; fields ``phi`` (nF, nz, nr).
 
     Writes ``phi_new`` (nF, nz, nr) and ``dt F phi_f`` on interior faces into ``face_flux``
@@ -500,51 +500,59 @@ def _grid_step_kernel(phi, flux_h, flux_v, dt, volume, gradient_volume, kappa_vo
     component contribute; the other two add FiPy's exact zeros), limited face fluxes,
     divergence and the diagonal solve.  ``error_model="numpy"`` lets LLVM vectorise the
     divisions (no Python zero-division checks; no interior face has zero area).
+
+    Only the cell rows ``j0 <= j < j1`` are computed: the caller guarantees that every field
+    is zero in the three rows beyond each end of the range and that no velocity crosses its
+    end faces (nothing there), so the other cells stay zero and the end faces carry nothing;
+    the numbers inside are those of the whole-grid step (``j0 = 0, j1 = nz``).
     """
     n_fields, nz, nr = phi.shape
     n_h = (nz + 1) * nr
     for k in range(n_fields):
         p = phi[k]
         ff = face_flux[k]
-        for i in range(nr):
-            face_h[0, i] = p[0, i]
-            face_h[nz, i] = p[nz - 1, i]
-        for j in range(1, nz):
-            for i in range(nr):
-                p1 = p[j - 1, i]
-                face_h[j, i] = (p[j, i] - p1) * ratio_h[j, i] + p1
+        for f in range(ff.shape[0]):
+            ff[f] = 0.0
         for j in range(nz):
+            if j < j0 or j >= j1:
+                for i in range(nr):
+                    phi_new[k, j, i] = p[j, i]
+        for j in range(j0, j1 + 1):
+            for i in range(nr):
+                if j == 0:
+                    face_h[0, i] = p[0, i]
+                elif j == nz:
+                    face_h[nz, i] = p[nz - 1, i]
+                else:
+                    p1 = p[j - 1, i]
+                    face_h[j, i] = (p[j, i] - p1) * ratio_h[j, i] + p1
+        for j in range(j0, j1):
             face_v[j, 0] = p[j, 0]
             face_v[j, nr] = p[j, nr - 1]
             for i in range(1, nr):
                 p1 = p[j, i - 1]
                 face_v[j, i] = (p[j, i] - p1) * ratio_v[j, i] + p1
-        for j in range(nz):
+        for j in range(j0, j1):
             for i in range(nr):
                 grad_r[j, i] = (projection_v[j, i + 1] * face_v[j, i + 1]
                                 - projection_v[j, i] * face_v[j, i]) / gradient_volume[j, i]
                 grad_z[j, i] = (-(projection_h[j, i] * face_h[j, i])
                                 + projection_h[j + 1, i] * face_h[j + 1, i]) / gradient_volume[j, i]
         # F phi_f on z-normal faces (index j nr + i), then r-normal faces (n_h + j (nr+1) + i)
-        for i in range(nr):
-            ff[i] = 0.0
-            ff[nz * nr + i] = 0.0
-        for j in range(1, nz):
+        for j in range(max(j0 + 1, 1), min(j1, nz)):
             for i in range(nr):
                 ff[j * nr + i] = _face_flux(
                     flux_h[j, i], dt, p[j - 1, i], p[j, i], grad_z[j - 1, i], -grad_z[j, i],
                     distance_h[j, i], volume[j - 1, i], volume[j, i], reach_h[0, j, i],
                     reach_h[1, j, i])
-        for j in range(nz):
+        for j in range(j0, j1):
             row = n_h + j * (nr + 1)
-            ff[row] = 0.0
-            ff[row + nr] = 0.0
             for i in range(1, nr):
                 ff[row + i] = _face_flux(
                     flux_v[j, i], dt, p[j, i - 1], p[j, i], grad_r[j, i - 1], -grad_r[j, i],
                     distance_v[j, i], volume[j, i - 1], volume[j, i], reach_v[0, j, i],
                     reach_v[1, j, i])
-        for j in range(nz):
+        for j in range(j0, j1):
             row = n_h + j * (nr + 1)
             for i in range(nr):
                 net_out = (ff[(j + 1) * nr + i] - ff[j * nr + i]
@@ -552,16 +560,24 @@ def _grid_step_kernel(phi, flux_h, flux_v, dt, volume, gradient_volume, kappa_vo
                 transient = kappa_volume[j, i] / dt
                 phi_new[k, j, i] = ((transient * p[j, i] - net_out)
                                     / (transient + outflow_coeff[j, i]))
-        for f in range(ff.shape[0]):
-            ff[f] *= dt
+        for j in range(j0, j1 + 1):
+            for i in range(nr):
+                ff[j * nr + i] *= dt
+        for j in range(j0, j1):
+            row = n_h + j * (nr + 1)
+            for i in range(nr + 1):
+                ff[row + i] *= dt
 
 
-def vanleer_step_grid(geom, grid, phi, u_n, dt, out=None):
+def vanleer_step_grid(geom, grid, phi, u_n, dt, out=None, rows=None):
     """One explicit step (2) for stacked fields ``phi`` (nF, nCells), compiled (numba) on the
     index grid ``grid`` (``GridArrays``); same result as ``vanleer_step_numpy``.
 
     ``out=(phi_new, face_flux)`` reuses caller-owned C-contiguous arrays (nF, nCells) and
     (nF, nFaces) instead of allocating (large fresh arrays cost page faults every call).
+    ``rows=(j0, j1)`` computes only the cell rows ``j0 <= j < j1``, for fields that are zero
+    in the three rows beyond each end and a velocity that is zero there (see
+    ``_grid_step_kernel``; :func:`material_rows` finds such a range).
     """
     nr, nz, n_h = grid.nr, grid.nz, grid.nr * (grid.nz + 1)
     phi = np.ascontiguousarray(phi, dtype=float)
@@ -584,9 +600,19 @@ def vanleer_step_grid(geom, grid, phi, u_n, dt, out=None):
                       grid.projection_v, grid.ratio_h, grid.ratio_v, grid.distance_h,
                       grid.distance_v, grid.reach_h, grid.reach_v,
                       outflow_coeff.reshape(nz, nr), *grid.scratch,
-                      phi_new.reshape(n_fields, nz, nr), face_flux)
+                      phi_new.reshape(n_fields, nz, nr), face_flux,
+                      *((0, nz) if rows is None else rows))
     face_flux[:, out_faces] = dt * volume_flux[out_faces] * phi_new[:, out_cells]
     return phi_new, face_flux
+
+
+def material_rows(alpha, margin=3):
+    """Cell rows ``(j0, j1)`` that hold every nonzero ``alpha`` (nz, nr) with ``margin`` empty
+    rows beyond each end (clipped to the grid); ``(0, 0)`` when there is none."""
+    rows = np.flatnonzero(np.any(alpha != 0.0, axis=1))
+    if rows.size == 0:
+        return 0, 0
+    return max(int(rows[0]) - margin, 0), min(int(rows[-1]) + margin + 1, alpha.shape[0])
 
 
 class Transport:
@@ -614,16 +640,17 @@ class Transport:
         self._neighbours = None
         self._kappa_volume = None
 
-    def step_stacked(self, phi, u_n, dt, out=None):
+    def step_stacked(self, phi, u_n, dt, out=None, rows=None):
         """Advance stacked fields ``phi`` (nF, nCells) by ``dt``; returns (phi_new, face_flux).
 
-        ``out=(phi_new, face_flux)``: optional arrays to write into (numba backend).
+        ``out=(phi_new, face_flux)``: optional arrays to write into; ``rows=(j0, j1)``: only
+        these cell rows hold material (:func:`vanleer_step_grid`; numba backend).
         """
         if not dt > 0.0:
             raise ValueError(f"dt must be positive, not {dt!r}")
         if self.grid is None:
             return vanleer_step_numpy(self.geometry, phi, u_n, dt)
-        return vanleer_step_grid(self.geometry, self.grid, phi, u_n, dt, out=out)
+        return vanleer_step_grid(self.geometry, self.grid, phi, u_n, dt, out=out, rows=rows)
 
     def step(self, fields, u_n, dt):
         """Advance every field by ``dt`` (s) with face normal velocity ``u_n`` (m/s, nFaces).

@@ -261,17 +261,17 @@ def test_force_overwrites(tmp_path):
 def test_unstable_run_exits_1_and_keeps_its_outputs(tmp_path, monkeypatch, capsys):
     from fipy_hopper.model import HopperModel
 
-    original = HopperModel.step
+    original = HopperModel.advance
 
-    def blow_up(self, state):             # a NaN appears 0.05 s into the discharge
-        original(self, state)
+    def blow_up(self, state, max_steps):     # a NaN appears 0.05 s into the discharge
+        done = original(self, state, max_steps)
         if state.stage == "discharge":
-            self._steps_open = getattr(self, "_steps_open", 0) + 1
+            self._steps_open = getattr(self, "_steps_open", 0) + done
             if self._steps_open * self.dt > 0.05:
                 state.v[1, 20, 3] = np.nan
-        return state
+        return done
 
-    monkeypatch.setattr(HopperModel, "step", blow_up)
+    monkeypatch.setattr(HopperModel, "advance", blow_up)
     out = tmp_path / "run"
     code = main(["run", str(coarse_config(tmp_path)), "--out", str(out), "--quiet"])
     err = capsys.readouterr().err

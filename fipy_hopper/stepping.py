@@ -1,0 +1,481 @@
+"""Compiled material steps of the Eulerian model: many explicit steps in one call.
+
+:meth:`fipy_hopper.model.HopperModel.advance` runs the material part of the operator split
+(stage 1 of :mod:`fipy_hopper.model`) for up to ``max_steps`` steps in one compiled call of
+:func:`material_steps`, stopping after the step at which a transport is due.  A step is the
+numpy reference's (``HopperModel(..., kernels="numpy")``), with the same arithmetic in the
+same order, so that each number is the same to the last bit as that of the sequence of
+compiled kernels it replaces:
+
+1. nodal forces ``-f_int(alpha sigma) + f_hg``: each cell's corner forces, then each node's
+   sum of its four cells' in the order in which a cell-by-cell scatter adds them; velocity
+   ``v += dt (f / m - g e_z)``, mass-proportional damping, light nodes at rest; then, node row
+   by node row, the wall contacts in the order of the model's contact list, the outlet plate
+   and the axis (``v_r = 0``);
+2. per *loaded* cell (``alpha >= alpha_min``): the Q1 strain increment and spin, the Jaumann
+   rotation, the open-volume divergence as volumetric strain, the closing of loose volume
+   (first pass, over runs of cells along a row), then the elastic predictor, the Mohr-Coulomb
+   return (the fast lockstep solve of :mod:`fipy_hopper.material` for a block of up to
+   ``BLOCK`` cells, the robust return for the points it does not accept) and the plastic and
+   loose strains (second pass);
+3. face velocities, the face-flux integral of the transport, the nodal displacement of the
+   markers and the transport rule (the material has crossed ``transport_cfl`` of a cell, or
+   ``max_transport_interval`` steps have passed).
+
+What is skipped changes nothing but the cost.  Cells that are not loaded carry no stress and
+no loose strain (the reference zeroes them in every step); cells with ``alpha = 0`` push no
+node; nodes outside the rows of material have no mass and stay at rest, and their faces carry
+nothing.  In discharge about half of the grid is empty or behind the wall.
+
+Work is organised in *runs*, ``(j, i0, i1)``: the cells ``i0 <= i < i1`` of row ``j`` (no
+integer division per cell, contiguous inner loops).  The loops over runs, node rows and
+blocks are ``prange`` loops (numba threads; the caller sets their number with
+``numba.set_num_threads``; one thread runs them in order).  Each sum has a fixed order, no two
+threads write the same place and a return does not depend on which points share its block, so
+the results do not depend on the number of threads.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+from numba import prange
+
+from . import material as mc
+
+#: largest number of loaded cells in a block of the Mohr-Coulomb solve
+BLOCK = mc._BLOCK
+
+_PLASTIC, _APEX = mc.PLASTIC, mc.APEX
+
+_jit = numba.njit(cache=True, error_model="numpy")
+_jit_parallel = numba.njit(cache=True, error_model="numpy", parallel=True)
+
+
+@_jit
+def _runs(alpha, alpha_min, sigma, loose, v, contrib, carry_runs, load_runs, block_ptr):
+    """Runs of carrying (``alpha != 0``) and of loaded cells, the loaded runs cut into blocks
+    of at most ``BLOCK`` cells (``block_ptr``: first run of each block, and the end).  Zeroes
+    stress and loose strain where not loaded, corner forces where nothing is carried and the
+    velocity of node rows outside the material.  Returns ``(carry runs, load runs, blocks,
+    first node row, end node row)``."""
+    nz, nr = alpha.shape
+    n_carry = 0
+    n_load = 0
+    n_blocks = 0
+    in_block = BLOCK
+    j_lo, j_hi = nz + 1, -1
+    for j in range(nz):
+        start_c = -1
+        start_l = -1
+        for i in range(nr + 1):
+            a = alpha[j, i] if i < nr else 0.0
+            carries = a != 0.0             # round-off traces below zero push the nodes too
+            loads = a >= alpha_min
+            if i < nr and not loads:
+                sigma[j, i, 0] = 0.0
+                sigma[j, i, 1] = 0.0
+                sigma[j, i, 2] = 0.0
+                sigma[j, i, 3] = 0.0
+                loose[j, i] = 0.0
+            if i < nr and not carries:
+                for k in range(8):
+                    contrib[k, j, i] = 0.0
+            if carries and start_c < 0:
+                start_c = i
+            elif not carries and start_c >= 0:
+                carry_runs[n_carry, 0], carry_runs[n_carry, 1] = j, start_c
+                carry_runs[n_carry, 2] = i
+                n_carry += 1
+                start_c = -1
+                j_lo, j_hi = min(j_lo, j), j
+            if loads and start_l < 0:
+                start_l = i
+            elif not loads and start_l >= 0:
+                while start_l < i:         # cut at block boundaries
+                    if in_block == BLOCK:
+                        block_ptr[n_blocks] = n_load
+                        n_blocks += 1
+                        in_block = 0
+                    end = min(i, start_l + BLOCK - in_block)
+                    load_runs[n_load, 0], load_runs[n_load, 1] = j, start_l
+                    load_runs[n_load, 2] = end
+                    n_load += 1
+                    in_block += end - start_l
+                    start_l = end
+                start_l = -1
+    block_ptr[n_blocks] = n_load
+    if j_hi < 0:
+        j_lo, j_hi = 0, -1
+    for j in range(nz + 1):
+        if j < j_lo or j > j_hi + 1:
+            for i in range(nr + 1):
+                v[0, j, i] = 0.0
+                v[1, j, i] = 0.0
+    return n_carry, n_load, n_blocks, j_lo, j_hi + 2
+
+
+@_jit_parallel
+def _cell_forces(carry_runs, n_carry, alpha, sigma, v, open_volume, r_c, h, hg_base, contrib):
+    """Corner forces ``-f_int + f_hg`` of the carrying cells into ``contrib`` (8, nz, nr):
+    (r, z) at SW, SE, NE, NW, each as ``momentum.nodal_update_kernel`` computes it."""
+    g = 1.0 / (2.0 * h)
+    for run in prange(n_carry):
+        j, i0, i1 = carry_runs[run, 0], carry_runs[run, 1], carry_runs[run, 2]
+        for i in range(i0, i1):
+            a = alpha[j, i]
+            w = open_volume[j, i]
+            s_rr = (a * sigma[j, i, 0]) * w
+            s_zz = (a * sigma[j, i, 1]) * w
+            s_tt = (a * sigma[j, i, 2]) * w
+            s_rz = (a * sigma[j, i, 3]) * w
+            hoop = s_tt / (4.0 * r_c[i])
+            c = hg_base[j, i] * a
+            mode_r = v[0, j, i] - v[0, j, i + 1] + v[0, j + 1, i + 1] - v[0, j + 1, i]
+            mode_z = v[1, j, i] - v[1, j, i + 1] + v[1, j + 1, i + 1] - v[1, j + 1, i]
+            contrib[0, j, i] = -(g * (-s_rr - s_rz) + hoop) - c * mode_r
+            contrib[1, j, i] = -(g * (-s_rz - s_zz)) - c * mode_z
+            contrib[2, j, i] = -(g * (s_rr - s_rz) + hoop) + c * mode_r
+            contrib[3, j, i] = -(g * (s_rz - s_zz)) + c * mode_z
+            contrib[4, j, i] = -(g * (s_rr + s_rz) + hoop) - c * mode_r
+            contrib[5, j, i] = -(g * (s_rz + s_zz)) - c * mode_z
+            contrib[6, j, i] = -(g * (-s_rr + s_rz) + hoop) + c * mode_r
+            contrib[7, j, i] = -(g * (-s_rz + s_zz)) + c * mode_z
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def _contact(v, j, i, n_r, n_z, mu):
+    """Impulse Coulomb contact of node (j, i) against a wall of normal (n_r, n_z), in place
+    (``momentum.contact_kernel`` for one node)."""
+    vr = v[0, j, i]
+    vz = v[1, j, i]
+    vn = vr * n_r + vz * n_z
+    if vn > 0.0:
+        vr -= vn * n_r
+        vz -= vn * n_z
+        tn = vr * n_r + vz * n_z
+        t_r = vr - tn * n_r
+        t_z = vz - tn * n_z
+        speed = math.sqrt(t_r * t_r + t_z * t_z)
+        scale = 0.0
+        if speed > 0.0:
+            scale = max(0.0, 1.0 - mu * vn / speed)
+        v[0, j, i] = (vr - t_r) + scale * t_r
+        v[1, j, i] = (vz - t_z) + scale * t_z
+
+
+@_jit_parallel
+def _node_update(j0, j1, v, mass, contrib, gravity, dt, damping, light_mass, contact_ptr,
+                 contact_i, contact_normal, contact_mu, plate_ptr, plate_i, plate_normal,
+                 plate_mu, plate_closed):
+    """Velocities of the nodes of rows ``j0 <= j < j1`` from the corner forces (summed in the
+    scatter's order: NE of the cell below left, NW below, SE left, SW own); contact, plate and
+    axis row by row (each node meets its contacts in the contact list's order)."""
+    nz1, nr1 = mass.shape
+    nz, nr = nz1 - 1, nr1 - 1
+    scale = 1.0 / (1.0 + damping * dt)
+    for j in prange(j0, j1):
+        for i in range(nr1):
+            fr = 0.0
+            fz = 0.0
+            if j > 0 and i > 0:
+                fr += contrib[4, j - 1, i - 1]
+                fz += contrib[5, j - 1, i - 1]
+            if j > 0 and i < nr:
+                fr += contrib[6, j - 1, i]
+                fz += contrib[7, j - 1, i]
+            if j < nz and i > 0:
+                fr += contrib[2, j, i - 1]
+                fz += contrib[3, j, i - 1]
+            if j < nz and i < nr:
+                fr += contrib[0, j, i]
+                fz += contrib[1, j, i]
+            m = mass[j, i]
+            if m > light_mass:
+                v[0, j, i] = (v[0, j, i] + dt * fr / m) * scale
+                v[1, j, i] = (v[1, j, i] + dt * (fz / m - gravity)) * scale
+            else:
+                v[0, j, i] = 0.0
+                v[1, j, i] = 0.0
+        for e in range(contact_ptr[j], contact_ptr[j + 1]):
+            _contact(v, j, contact_i[e], contact_normal[e, 0], contact_normal[e, 1],
+                     contact_mu[e])
+        if plate_closed:
+            for e in range(plate_ptr[j], plate_ptr[j + 1]):
+                _contact(v, j, plate_i[e], plate_normal[e, 0], plate_normal[e, 1],
+                         plate_mu[e])
+        v[0, j, 0] = 0.0
+
+
+@_jit
+def _strain_run(j, i0, i1, out, v, sigma, loose, r_c, r_nodes, h, dt, kappa, zface_aperture,
+                rface_aperture, scratch):
+    """First pass over the run ``(j, i0, i1)`` into ``scratch[:, out:out + i1 - i0]``: the
+    rotated stress (rows 0-3), the strain increment that loads the skeleton (rows 4-7) and the
+    loose strain left (row 8), as ``momentum.strain_rate_jaumann_kernel``,
+    ``momentum.open_volumetric_kernel`` and ``material.close_loose_volume_kernel``."""
+    g = 1.0 / (2.0 * h)
+    for i in range(i0, i1):
+        q = out + i - i0
+        vr_sw = v[0, j, i]
+        vr_se = v[0, j, i + 1]
+        vr_ne = v[0, j + 1, i + 1]
+        vr_nw = v[0, j + 1, i]
+        vz_sw = v[1, j, i]
+        vz_se = v[1, j, i + 1]
+        vz_ne = v[1, j + 1, i + 1]
+        vz_nw = v[1, j + 1, i]
+        dvr_dr = g * (vr_se + vr_ne - vr_sw - vr_nw)
+        dvr_dz = g * (vr_nw + vr_ne - vr_sw - vr_se)
+        dvz_dr = g * (vz_se + vz_ne - vz_sw - vz_nw)
+        dvz_dz = g * (vz_nw + vz_ne - vz_sw - vz_se)
+        hoop = 0.25 * (vr_sw + vr_se + vr_ne + vr_nw) / r_c[i]
+        d0 = dvr_dr * dt
+        d1 = dvz_dz * dt
+        d2 = hoop * dt
+        d3 = 0.5 * (dvr_dz + dvz_dr) * dt
+        w = 0.5 * (dvr_dz - dvz_dr) * dt
+        s_rr = sigma[j, i, 0]
+        s_zz = sigma[j, i, 1]
+        s_rz = sigma[j, i, 3]
+        scratch[0, q] = s_rr + 2.0 * w * s_rz
+        scratch[1, q] = s_zz - 2.0 * w * s_rz
+        scratch[2, q] = sigma[j, i, 2]
+        scratch[3, q] = s_rz + w * (s_zz - s_rr)
+        # volumetric part: the net flux of the face velocities over the open volume
+        kap = kappa[j, i]
+        w_b = 0.5 * (vz_sw + vz_se) * zface_aperture[j, i]
+        w_t = 0.5 * (vz_nw + vz_ne) * zface_aperture[j + 1, i]
+        u_l = 0.5 * (vr_sw + vr_nw) * rface_aperture[j, i] * r_nodes[i]
+        u_r = 0.5 * (vr_se + vr_ne) * rface_aperture[j, i + 1] * r_nodes[i + 1]
+        r_mid = 0.5 * (r_nodes[i] + r_nodes[i + 1])
+        div = ((w_t - w_b) / h + (u_r - u_l) / (r_mid * h)) / kap if kap > 0.0 else 0.0
+        corr = (div * dt - (d0 + d1 + d2)) / 3.0
+        d0 += corr
+        d1 += corr
+        d2 += corr
+        # compression first closes loose volume
+        compression = -(d0 + d1 + d2)
+        old = loose[j, i]
+        closed = min(old, max(compression, 0.0))
+        share = 1.0 - closed / compression if closed > 0.0 else 1.0
+        scratch[4, q] = d0 * share
+        scratch[5, q] = d1 * share
+        scratch[6, q] = d2 * share
+        scratch[7, q] = d3 * share
+        scratch[8, q] = old - closed
+
+
+@_jit
+def _stress_block(r0, r1, load_runs, v, sigma, loose, eps_p, r_c, r_nodes, h, dt, kappa,
+                  zface_aperture, rface_aperture, prm, cst):
+    """Stress update of the loaded cells of the runs ``r0 <= run < r1`` (one block), in place:
+    :func:`_strain_run`, then the elastic predictor, the return and the plastic and loose
+    strains as ``material._update_kernel`` and ``material.finish_update_kernel``."""
+    lam, mu, K, E, nu, sp, cp, tp, tpsi, c, a, e, rc3 = mc._unpack(prm)
+    n = 0
+    for run in range(r0, r1):
+        n += load_runs[run, 2] - load_runs[run, 1]
+    scratch = np.empty((9, n))
+    cell_j = np.empty(n, dtype=np.int64)
+    cell_i = np.empty(n, dtype=np.int64)
+    q = 0
+    for run in range(r0, r1):
+        j, i0, i1 = load_runs[run, 0], load_runs[run, 1], load_runs[run, 2]
+        _strain_run(j, i0, i1, q, v, sigma, loose, r_c, r_nodes, h, dt, kappa, zface_aperture,
+                    rface_aperture, scratch)
+        for i in range(i0, i1):
+            cell_j[q] = j
+            cell_i[q] = i
+            q += 1
+    plastic = np.empty(n, dtype=np.int64)
+    pos = np.empty(n, dtype=np.int8)
+    trial = np.empty((6, n))
+    S = np.empty((4, n))
+    m = 0
+    for q in range(n):
+        j, i = cell_j[q], cell_i[q]
+        rr, zz, tt, rz = mc._elastic_trial_nb(scratch[0, q], scratch[1, q], scratch[2, q],
+                                              scratch[3, q], scratch[4, q], scratch[5, q],
+                                              scratch[6, q], scratch[7, q], lam, mu)
+        mid = 0.5 * (rr + zz)
+        dd = 0.5 * (rr - zz)
+        rad = mc._radius_nb(dd, rz)
+        la, lb = mid + rad, mid - rad
+        if tt >= la:
+            ps, s1, s2, s3 = 0, tt, la, lb
+        elif tt >= lb:
+            ps, s1, s2, s3 = 1, la, tt, lb
+        else:
+            ps, s1, s2, s3 = 2, la, lb, tt
+        f = ((s1 - s3) + (s1 + s3) * sp) / (2.0 * cp) - c
+        loose[j, i] = scratch[8, q]
+        if not f > 0.0:
+            sigma[j, i, 0] = rr
+            sigma[j, i, 1] = zz
+            sigma[j, i, 2] = tt
+            sigma[j, i, 3] = rz
+            continue
+        if rad > 0.0:
+            cw, sw = dd / rad, rz / rad
+        else:
+            cw, sw = 1.0, 0.0
+        plastic[m] = q
+        pos[m] = ps
+        trial[0, m], trial[1, m], trial[2, m], trial[3, m] = rr, zz, tt, rz
+        trial[4, m], trial[5, m] = cw, sw
+        S[0, m], S[1, m], S[2, m], S[3, m] = s1, s2, s3, f
+        m += 1
+    W = np.empty((mc._W_ROWS, m))
+    flags = np.empty((3, m), dtype=np.bool_)
+    mc._fast_block(m, S, W, flags, cst)
+    for k in range(m):
+        q = plastic[k]
+        j, i = cell_j[q], cell_i[q]
+        if flags[mc._F_OK, k]:
+            n1, n2, n3, status = W[mc._W_N1, k], W[mc._W_N2, k], W[mc._W_N3, k], _PLASTIC
+        else:
+            n1, n2, n3, status = mc._return_sorted(S[0, k], S[1, k], S[2, k], prm)
+        if pos[k] == 0:
+            na, nb_, ntt = n2, n3, n1
+        elif pos[k] == 1:
+            na, nb_, ntt = n1, n3, n2
+        else:
+            na, nb_, ntt = n1, n2, n3
+        rr, zz, tt, rz = trial[0, k], trial[1, k], trial[2, k], trial[3, k]
+        nrr, nzz, nrz = mc._rebuild_inplane_nb(na, nb_, trial[4, k], trial[5, k])
+        sigma[j, i, 0] = nrr
+        sigma[j, i, 1] = nzz
+        sigma[j, i, 2] = ntt
+        sigma[j, i, 3] = nrz
+        e0, e1, e2, e3 = mc._compliance_nb(rr - nrr, zz - nzz, tt - ntt, rz - nrz, E, nu, mu)
+        if status == _APEX:
+            loose[j, i] += max(e0 + e1 + e2, 0.0)
+        eps_p[j, i] += math.sqrt(2.0 / 3.0 * (e0 ** 2 + e1 ** 2 + e2 ** 2 + 2.0 * e3 ** 2))
+
+
+@_jit_parallel
+def _stress_update(block_ptr, n_blocks, load_runs, v, sigma, loose, eps_p, r_c, r_nodes, h,
+                   dt, kappa, zface_aperture, rface_aperture, prm, cst):
+    """:func:`_stress_block` for every block (threads share out the blocks)."""
+    for b in prange(n_blocks):
+        _stress_block(block_ptr[b], block_ptr[b + 1], load_runs, v, sigma, loose, eps_p, r_c,
+                      r_nodes, h, dt, kappa, zface_aperture, rface_aperture, prm, cst)
+
+
+@_jit_parallel
+def _faces(j0, j1, v, dt, face_sign, open_face, face_flux_sum, displacement, with_markers,
+           row_speed):
+    """For the node rows ``j0 <= j < j1``: the face normal velocities (edge means, FiPy's
+    orientation) of the z-faces of the row and of the r-faces above it, added to the flux
+    integral; the largest open-face speed per row (``open_face`` is 1 or 0); the markers'
+    displacement."""
+    nz1, nr1 = v.shape[1], v.shape[2]
+    nz, nr = nz1 - 1, nr1 - 1
+    n_h = nz1 * nr
+    for j in prange(j0, j1):
+        top = 0.0
+        for i in range(nr):
+            f = j * nr + i
+            u = 0.5 * (v[1, j, i] + v[1, j, i + 1]) * face_sign[f]
+            face_flux_sum[f] += u * dt
+            top = max(top, abs(u) * open_face[f])
+        if j < nz:
+            for i in range(nr1):
+                f = n_h + j * nr1 + i
+                u = 0.5 * (v[0, j, i] + v[0, j + 1, i]) * face_sign[f]
+                face_flux_sum[f] += u * dt
+                top = max(top, abs(u) * open_face[f])
+        row_speed[j] = top
+        if with_markers:
+            for i in range(nr1):
+                displacement[0, j, i] += dt * v[0, j, i]
+                displacement[1, j, i] += dt * v[1, j, i]
+
+
+@_jit
+def material_steps(max_steps, clock, v, mass, alpha, sigma, loose, eps_p, face_flux_sum,
+                   displacement, with_markers, open_volume, r_c, r_nodes, h, hg_base, kappa,
+                   zface_aperture, rface_aperture, face_sign, open_face, prm, dt, g_full,
+                   ramp_time, damping, light_mass, alpha_min, transport_cfl,
+                   max_transport_interval, contact_ptr, contact_i, contact_normal, contact_mu,
+                   plate_ptr, plate_i, plate_normal, plate_mu, plate_closed, work):
+    """Up to ``max_steps`` material steps, in place.
+
+    ``clock = [t, step, flux_time]`` (s, -, s) is advanced; gravity is ``g_full`` ramped over
+    ``ramp_time`` s (0: none).  ``work = (carry runs (n, 3), load runs (n, 3), block pointers
+    (n + 1,), corner forces (8, nz, nr), row speeds (nz + 1,))``, sized by the model.
+    Returns ``(steps done, transport due)``: the loop stops after the step at which a
+    transport is due (the caller transports; alpha is constant until then).
+    """
+    carry_runs, load_runs, block_ptr, contrib, row_speed = work
+    cst = mc._fast_constants(prm)
+    n_carry, n_load, n_blocks, j0, j1 = _runs(alpha, alpha_min, sigma, loose, v, contrib,
+                                              carry_runs, load_runs, block_ptr)
+    jf = max(j0 - 1, 0)         # the r-faces below the lowest node row with material move too
+    for n in range(max_steps):
+        t = clock[0]
+        gravity = g_full * min(1.0, t / ramp_time) if ramp_time > 0.0 else g_full
+        _cell_forces(carry_runs, n_carry, alpha, sigma, v, open_volume, r_c, h, hg_base,
+                     contrib)
+        _node_update(j0, j1, v, mass, contrib, gravity, dt, damping, light_mass, contact_ptr,
+                     contact_i, contact_normal, contact_mu, plate_ptr, plate_i, plate_normal,
+                     plate_mu, plate_closed)
+        _stress_update(block_ptr, n_blocks, load_runs, v, sigma, loose, eps_p, r_c, r_nodes,
+                       h, dt, kappa, zface_aperture, rface_aperture, prm, cst)
+        _faces(jf, j1, v, dt, face_sign, open_face, face_flux_sum, displacement, with_markers,
+               row_speed)
+        clock[2] += dt
+        clock[0] += dt
+        clock[1] += 1.0
+        if round(clock[2] / dt) >= max_transport_interval:
+            return n + 1, True
+        speed = 0.0
+        for j in range(jf, j1):
+            speed = max(speed, row_speed[j])
+        if (speed + 1e-30) * (clock[2] + dt) > transport_cfl * h:
+            return n + 1, True
+    return max_steps, False
+
+
+@_jit
+def pack_fields(alpha, sigma, eps_p, layer, loose, out):
+    """The transported fields ``(alpha, alpha sigma_rr, alpha sigma_zz, alpha sigma_tt,
+    alpha sigma_rz, alpha eps_p, alpha layer, alpha e_l)`` of (nz, nr) cells into ``out``
+    (8, nz nr), row-major (``model.TRANSPORTED``)."""
+    nz, nr = alpha.shape
+    for j in range(nz):
+        for i in range(nr):
+            c = j * nr + i
+            a = alpha[j, i]
+            out[0, c] = a
+            out[1, c] = a * sigma[j, i, 0]
+            out[2, c] = a * sigma[j, i, 1]
+            out[3, c] = a * sigma[j, i, 2]
+            out[4, c] = a * sigma[j, i, 3]
+            out[5, c] = a * eps_p[j, i]
+            out[6, c] = a * layer[j, i]
+            out[7, c] = a * loose[j, i]
+
+
+@_jit
+def unpack_fields(carried, alpha_min, alpha, sigma, eps_p, layer, loose):
+    """The cell fields from the transported ones (:func:`pack_fields`), into the outputs:
+    each carried field over ``alpha`` where ``alpha >= 1e-12`` (else 0), no stress where
+    ``alpha < alpha_min``, the loose strain not below 0."""
+    nz, nr = alpha.shape
+    for j in range(nz):
+        for i in range(nr):
+            c = j * nr + i
+            a = carried[0, c]
+            alpha[j, i] = a
+            present = a >= 1e-12
+            safe = a if present else 1.0
+            stressed = present and a >= alpha_min
+            for k in range(4):
+                sigma[j, i, k] = carried[1 + k, c] / safe if stressed else 0.0
+            eps_p[j, i] = carried[5, c] / safe if present else 0.0
+            layer[j, i] = carried[6, c] / safe if present else 0.0
+            loose[j, i] = max(carried[7, c] / safe, 0.0) if present else 0.0

@@ -1,0 +1,177 @@
+"""The compiled step (fipy_hopper.stepping and the compiled parts of the transport step) equals
+the numpy reference, and the number of threads does not change a single bit."""
+
+import warnings
+
+import numba
+import numpy as np
+import pytest
+
+from fipy_hopper import geometry, markers, momentum, stepping
+from fipy_hopper.config import HopperConfig
+from fipy_hopper.model import TRANSPORTED, HopperModel
+from fipy_hopper.transport import material_rows
+
+
+@pytest.fixture(scope="module")
+def small_cfg():
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return HopperConfig.from_dict({
+            "hopper": {"bin_diameter": 0.2, "outlet_diameter": 0.06, "bin_height": 0.25,
+                       "fill_height": 0.15},
+            "numerics": {"cell_size": 0.01, "gravity_ramp_time": 0.02}})
+
+
+@pytest.fixture(scope="module")
+def discharging(small_cfg):
+    """A model and a state 0.1 s into the discharge (flowing, plastic, loose, with markers)."""
+    model = HopperModel(small_cfg)
+    state = model.initial_state()
+    model.advance(state, 500)
+    while state.step < 500:
+        model.advance(state, 500 - state.step)
+    model.transport_step(state)
+    model.open_outlet(state)
+    t_end = state.t + 0.1
+    while state.t < t_end:
+        model.advance(state, 50)
+    return model, state
+
+
+def _run(model, state, steps, threads):
+    saved = numba.get_num_threads()
+    model.threads = threads
+    try:
+        done = 0
+        while done < steps:
+            done += model.advance(state, steps - done)
+    finally:
+        numba.set_num_threads(saved)
+    return state
+
+
+def test_threads_do_not_change_a_bit(small_cfg, discharging):
+    """Two threads and one give the same state to the last bit (sums in a fixed order, one
+    writer per place, returns independent of their block)."""
+    if numba.config.NUMBA_NUM_THREADS < 2:
+        pytest.skip("needs two threads")
+    model, state = discharging
+    one = _run(model, state.copy(), 300, threads=1)
+    two = _run(model, state.copy(), 300, threads=2)
+    for name in ("v", "alpha", "sigma", "eps_p", "loose", "layer", "face_flux_sum", "markers"):
+        assert np.array_equal(getattr(one, name), getattr(two, name)), name
+    assert one.discharged == two.discharged and one.t == two.t
+
+
+def test_compiled_steps_equal_the_numpy_reference_in_discharge(small_cfg, discharging):
+    """300 steps of flowing discharge (with transports): the compiled path and the numpy
+    reference agree to round-off (1e-9 relative: the returns of the two paths differ by
+    their 1e-12 tolerance, and a few hundred steps of flow amplify it)."""
+    model, state = discharging
+    ref = HopperModel(small_cfg, kernels="numpy")
+    a = _run(model, state.copy(), 300, threads=1)
+    b = state.copy()
+    done = 0
+    while done < 300:
+        done += ref.advance(b, 300 - done)
+    assert np.max(np.abs(a.v - b.v)) <= 1e-9 * np.max(np.abs(b.v))
+    assert np.max(np.abs(a.sigma - b.sigma)) <= 1e-9 * np.max(np.abs(b.sigma))
+    assert np.max(np.abs(a.alpha - b.alpha)) <= 1e-12
+    assert a.discharged == pytest.approx(b.discharged, rel=1e-9)
+
+
+def test_skipping_empty_cells_changes_nothing(small_cfg, discharging):
+    """A step skips cells that carry nothing; the nodes and faces there stay at rest."""
+    model, state = discharging
+    st = state.copy()
+    model.advance(st, 1)
+    empty = st.alpha == 0.0
+    assert empty.any()
+    assert np.all(st.sigma[st.alpha < model.cfg.numerics.alpha_min] == 0.0)
+    mass = model.node_mass(st)
+    assert np.all(st.v[:, mass == 0.0] == 0.0)
+
+
+def test_node_mass_and_dual_momentum_kernels_equal_numpy(small_cfg, discharging):
+    """Bit for bit: the kernels add in the order of the numpy functions."""
+    model, state = discharging
+    rng = np.random.default_rng(3)
+    alpha = np.clip(state.alpha + 0.01 * rng.normal(size=state.alpha.shape), 0, 1)
+    ref = momentum.node_mass(model.rho, alpha, model.open_volume)
+    out = np.empty_like(ref)
+    momentum.node_mass_kernel(model.rho, alpha, model.open_volume, out)
+    assert np.array_equal(out, ref)
+    g = model.grid
+    flux_z = 1e-6 * rng.normal(size=(g.nz + 1, g.nr))
+    flux_r = 1e-6 * rng.normal(size=(g.nz, g.nr + 1))
+    mass_old = model.node_mass(state)
+    v_ref = momentum.dual_momentum_transport(state.v, mass_old, ref, flux_z, flux_r, model.rho)
+    v_ref[:, ref <= model.light_mass] = 0.0
+    v_new = np.empty_like(state.v)
+    momentum.dual_momentum_kernel(state.v, mass_old, ref, flux_z, flux_r, model.rho,
+                                  model.light_mass, v_new)
+    assert np.array_equal(v_new, v_ref)
+
+
+def test_pack_and_unpack_are_the_numpy_expressions(discharging):
+    model, state = discharging
+    n = state.alpha.size
+    packed = np.empty((len(TRANSPORTED), n))
+    stepping.pack_fields(state.alpha, state.sigma, state.eps_p, state.layer, state.loose,
+                         packed)
+    a = state.alpha
+    assert np.array_equal(packed[0], a.ravel())
+    assert np.array_equal(packed[2], (a * state.sigma[..., 1]).ravel())
+    assert np.array_equal(packed[7], (a * state.loose).ravel())
+    shape = a.shape
+    outs = [np.empty(shape), np.empty(shape + (4,)), np.empty(shape), np.empty(shape),
+            np.empty(shape)]
+    stepping.unpack_fields(packed, model.cfg.numerics.alpha_min, *outs)
+    present = a >= 1e-12
+    safe = np.where(present, a, 1.0)
+    sigma = np.where(present[..., None], (a[..., None] * state.sigma) / safe[..., None], 0.0)
+    sigma[a < model.cfg.numerics.alpha_min] = 0.0
+    assert np.array_equal(outs[1], sigma)
+    assert np.array_equal(outs[4], np.where(present, np.maximum((a * state.loose) / safe, 0),
+                                            0.0))
+
+
+def test_transport_of_material_rows_equals_the_whole_grid(discharging):
+    """Transport restricted to the rows that hold material (plus three empty rows each side)
+    gives the whole-grid step's numbers exactly."""
+    model, discharged = discharging
+    state = discharged.copy()
+    while state.flux_time == 0.0:             # velocities of a run: only where there is mass
+        model.advance(state, 1)
+    n = state.alpha.size
+    packed = np.empty((len(TRANSPORTED), n))
+    stepping.pack_fields(state.alpha, state.sigma, state.eps_p, state.layer, state.loose,
+                         packed)
+    u = state.face_flux_sum / state.flux_time
+    assert np.any(u != 0.0)
+    rows = material_rows(state.alpha)
+    assert rows[1] - rows[0] < model.grid.nz           # the test restricts something
+    full_new, full_flux = model.transport_open.step_stacked(packed, u, 1e-4)
+    part_new, part_flux = model.transport_open.step_stacked(packed, u, 1e-4, rows=rows)
+    assert np.array_equal(full_new, part_new)
+    assert np.array_equal(full_flux, part_flux)
+
+
+def test_compiled_marker_advance_equals_reference(small_cfg, discharging):
+    model, state = discharging
+    rng = np.random.default_rng(1)
+    disp = 0.8 * model.grid.h * rng.normal(size=state.v.shape)
+    pts = state.markers.copy()
+    pts[:20, 0] *= -1.0                                   # across the axis too
+    fast = markers.advance(pts, disp, model.grid, small_cfg.hopper)
+    ref = markers.advance_reference(pts, disp, model.grid, small_cfg.hopper)
+    assert np.array_equal(fast, ref)
+    # the case includes markers that the midpoint rule put inside the wall
+    geom, g = small_cfg.hopper, model.grid
+    r_mid, z_mid = np.empty(len(pts)), np.empty(len(pts))
+    vertices, normals = markers._wall_segments(geom)
+    markers._midpoint_kernel(pts, disp, g.r_nodes, g.z_nodes, geom.outlet_radius,
+                             geom.bin_radius, geom.cone_height, np.tan(geom.half_angle),
+                             vertices, normals, 0.0, 0, r_mid, z_mid)
+    assert np.count_nonzero(geometry.in_solid(r_mid, z_mid, geom)) >= 5
