@@ -128,6 +128,7 @@ def test_pack_and_unpack_are_the_numpy_expressions(discharging):
     outs = [np.empty(shape), np.empty(shape + (4,)), np.empty(shape), np.empty(shape),
             np.empty(shape)]
     stepping.unpack_fields(packed, model.cfg.numerics.alpha_min, *outs)
+    assert np.array_equal(outs[0], a)
     present = a >= 1e-12
     safe = np.where(present, a, 1.0)
     sigma = np.where(present[..., None], (a[..., None] * state.sigma) / safe[..., None], 0.0)
