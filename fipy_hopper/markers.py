@@ -29,7 +29,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from . import geometry
 
@@ -247,12 +247,13 @@ def _push_point(r, z, vertices, normals, gap, inside):
     return r + (d - gap) * n_r, z + (d - gap) * n_z
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", parallel=True)
 def _midpoint_kernel(markers, displacement, r_nodes, z_nodes, r_outlet, r_bin, cone_height,
                      tan_cone, vertices, normals, gap, passes, r_new, z_new):
     """:func:`advance` of every marker into ``r_new, z_new``: the midpoint rule with the axis
-    reflection, then up to ``passes`` pushes out of the wall (:func:`_push_point`)."""
-    for k in range(markers.shape[0]):
+    reflection, then up to ``passes`` pushes out of the wall (:func:`_push_point`); the
+    markers are shared out among numba's threads."""
+    for k in prange(markers.shape[0]):
         r = markers[k, 0]
         z = markers[k, 1]
         d0r, d0z = _interpolate_point(displacement, r_nodes, z_nodes, abs(r), z)

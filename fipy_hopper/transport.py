@@ -91,7 +91,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 __all__ = [
     "TransportGeometry",
@@ -406,7 +406,6 @@ class GridArrays:
     distance_v: np.ndarray
     reach_h: np.ndarray           # (2, nz+1, nr) divisors of the cell-1 / cell-2 extrapolation
     reach_v: np.ndarray           # (2, nz, nr+1)
-    scratch: tuple                # work arrays of the kernel (face values, gradients)
 
     @classmethod
     def from_geometry(cls, geom, nr, nz):
@@ -452,9 +451,7 @@ class GridArrays:
                    projection_h=projection_h, projection_v=projection_v,
                    ratio_h=ratio_h, ratio_v=ratio_v,
                    distance_h=distance_h, distance_v=distance_v,
-                   reach_h=reach_h, reach_v=reach_v,
-                   scratch=(np.empty((nz + 1, nr)), np.empty((nz, nr + 1)),
-                            np.empty(cells), np.empty(cells)))
+                   reach_h=reach_h, reach_v=reach_v)
 
 
 def grid_shape(mesh):
@@ -487,15 +484,14 @@ def _face_flux(flux, dt, p1, p2, normal_grad_1, normal_grad_2, distance, volume_
     return flux * (p2 + 0.5 * limited * (volume_2 - cfl_volume) / reach_2)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", parallel=True)
 def _grid_step_kernel(phi, flux_h, flux_v, dt, volume, gradient_volume, kappa_volume,
                       projection_h, projection_v, ratio_h, ratio_v, distance_h, distance_v,
-                      reach_h, reach_v, outflow_coeff, face_h, face_v, grad_r, grad_z,
-                      phi_new, face_flux):
+                      reach_h, reach_v, outflow_coeff, phi_new, face_flux):
     """Compiled step (2) on the index grid; fields ``phi`` (nF, nz, nr).
 
     Writes ``phi_new`` (nF, nz, nr) and ``dt F phi_f`` on interior faces into ``face_flux``
-    (nF, nFaces; exterior entries zero).  ``face_h, face_v, grad_r, grad_z`` are scratch.  Per
+    (nF, nFaces; exterior entries zero); the fields are shared out among numba's threads.  Per
     field: arithmetic face values, Gauss gradient (only the two faces whose normal has the
     component contribute; the other two add FiPy's exact zeros), limited face fluxes,
     divergence and the diagonal solve.  ``error_model="numpy"`` lets LLVM vectorise the
@@ -503,9 +499,13 @@ def _grid_step_kernel(phi, flux_h, flux_v, dt, volume, gradient_volume, kappa_vo
     """
     n_fields, nz, nr = phi.shape
     n_h = (nz + 1) * nr
-    for k in range(n_fields):
+    for k in prange(n_fields):              # the fields are independent: shared out to threads
         p = phi[k]
         ff = face_flux[k]
+        face_h = np.empty((nz + 1, nr))
+        face_v = np.empty((nz, nr + 1))
+        grad_r = np.empty((nz, nr))
+        grad_z = np.empty((nz, nr))
         for i in range(nr):
             face_h[0, i] = p[0, i]
             face_h[nz, i] = p[nz - 1, i]
@@ -593,8 +593,8 @@ def vanleer_step_grid(geom, grid, phi, u_n, dt, out=None, rows=None):
                           grid.gradient_volume, grid.kappa_volume, grid.projection_h,
                           grid.projection_v, grid.ratio_h, grid.ratio_v, grid.distance_h,
                           grid.distance_v, grid.reach_h, grid.reach_v,
-                          outflow_coeff.reshape(nz, nr), *grid.scratch,
-                          phi_new.reshape(n_fields, nz, nr), face_flux)
+                          outflow_coeff.reshape(nz, nr), phi_new.reshape(n_fields, nz, nr),
+                          face_flux)
     else:
         phi_new[:] = phi
         face_flux[:] = 0.0
@@ -619,8 +619,6 @@ def _rows_step(grid, cells, flux_h, flux_v, dt, outflow_coeff, phi_new, face_flu
 
     sub_new = np.empty((n_fields, m, nr))
     sub_flux = np.empty((n_fields, m_h + m * (nr + 1)))
-    scratch = (np.empty((m + 1, nr)), np.empty((m, nr + 1)), np.empty((m, nr)),
-               np.empty((m, nr)))
     _grid_step_kernel(part(cells, j0, j1, 1), part(flux_h, j0, j1 + 1),
                       part(flux_v, j0, j1), dt, part(grid.cell_volume, j0, j1),
                       part(grid.gradient_volume, j0, j1), part(grid.kappa_volume, j0, j1),
@@ -628,7 +626,7 @@ def _rows_step(grid, cells, flux_h, flux_v, dt, outflow_coeff, phi_new, face_flu
                       part(grid.ratio_h, j0, j1 + 1), part(grid.ratio_v, j0, j1),
                       part(grid.distance_h, j0, j1 + 1), part(grid.distance_v, j0, j1),
                       part(grid.reach_h, j0, j1 + 1, 1), part(grid.reach_v, j0, j1, 1),
-                      part(outflow_coeff, j0, j1), *scratch, sub_new, sub_flux)
+                      part(outflow_coeff, j0, j1), sub_new, sub_flux)
     phi_new[:, j0:j1] = sub_new
     # interior z-faces of the part (its end faces carry nothing) and its r-faces
     face_flux[:, (j0 + 1) * nr:j1 * nr] = sub_flux[:, nr:m * nr]
