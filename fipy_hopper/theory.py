@@ -10,28 +10,39 @@ from the vertical.  Pressures are positive in compression.
 
 What is verified
 ----------------
-Each docstring carries the tag the project's physics reference (``shared/design/theory.md``,
-which this module never reads) gives the formula:
+Each docstring carries a tag; ``docs/theory.md`` lists every formula with its tag, source
+and a worked value:
 
-* **[V]** checked against the source that is named;
-* **[D]** re-derived (slice equilibrium, a Mohr circle, or a numerical check);
+* **[V]** checked against the source that is named (``[V: X]`` names where it was read
+  when that is a transcription or a quotation rather than the original);
+* **[D]** re-derived (slice equilibrium, a Mohr circle, dimensional analysis, or a
+  numerical check);
 * **[M]** quoted from memory and not verified against a source; treat as provisional.
 
 Contents
 --------
 Discharge rate
     :func:`beverloo_rate`, :func:`rose_tanaka_factor`, :func:`johanson_rate`,
-    :func:`brown_coefficient`, :func:`brown_rate`.
+    :func:`brown_coefficient`, :func:`brown_rate`; plane flow (slots):
+    :func:`beverloo_slot_rate` (and :func:`johanson_rate` with ``m = 0``).
 Flow mode
-    :func:`jenike_critical_half_angle`, :func:`jenike_flow_mode`.
+    :func:`jenike_critical_half_angle`, :func:`jenike_critical_half_angle_plane`,
+    :func:`jenike_flow_mode`.
 Vertical-walled section (Janssen)
     :func:`janssen_z0`, :func:`janssen_vertical_stress`, :func:`janssen_wall_pressure`,
-    :func:`janssen_wall_shear`, :func:`janssen_asymptotic_wall_pressure`.
+    :func:`janssen_wall_shear`, :func:`janssen_asymptotic_wall_pressure`; long rectangular
+    (plane) bins: :func:`janssen_plane_z0`, :func:`janssen_plane_vertical_stress`,
+    :func:`janssen_plane_wall_pressure`, :func:`janssen_plane_asymptotic_wall_pressure`.
 Lateral pressure ratios
     :func:`k_jaky`, :func:`k_en1991`, :func:`k_rankine_active`, :func:`k_walker_wall`.
 Hopper slice method (Walker 1966 / Walters 1973 with distribution factor D = 1)
     :func:`hopper_n`, :func:`hopper_vertical_stress`, :func:`walker_discharge_ratio`,
-    :func:`walker_hopper_wall_pressure`, :func:`walker_switch_pressure`.
+    :func:`walker_hopper_wall_pressure`, :func:`walker_switch_pressure`; ``S = 1`` gives the
+    plane-flow (wedge) slice.
+Cohesive powders: arching and ratholing (Jenike's method)
+    :func:`unconfined_yield_strength`, :func:`jenike_arching_H`,
+    :func:`jenike_critical_outlet`, :func:`critical_outlet_simplified`,
+    :func:`jenike_rathole_G`, :func:`jenike_rathole_diameter`.
 EN 1991-4:2006 (Eurocode 1, part 4)
     :func:`en1991_filling_vertical_walls`, :func:`en1991_h0`, :func:`en1991_intermediate_n`,
     :func:`en1991_intermediate_zV`, :func:`en1991_filling_intermediate`,
@@ -48,8 +59,16 @@ References
 * H.E. Rose, T. Tanaka (1956), as used by R.M. Nedderman et al. (1982), Chem. Eng. Sci. 37:1597.
 * J.R. Johanson (1965), mass-flow hopper discharge.
 * R.L. Brown (1961); R.L. Brown, J.C. Richards (1970), *Principles of Powder Mechanics*.
-* S.M. Leung et al. (2019), J. Pharm. Sci. 108:464, eqs. 5-6 (closed fit of Jenike's chart).
+* L.Y. Leung et al. (2019), A proposed complete methodology to predict gravity flow
+  obstruction of pharmaceutical powders in drug product manufacturing, J. Pharm. Sci.
+  108:464-475, eqs. 5-6 (closed fit of Jenike's chart), 2-3 (arching), 22 (ratholing).
 * H.A. Janssen (1895); EN 1991-4:2006 eq. (5.75) for z0 = A/(U K mu).
+* A.W. Jenike (1964), Storage and flow of solids, Bulletin 123, Utah Engineering Experiment
+  Station (H(theta), G(phi)); M. Rhodes, Introduction to Particle Technology, hopper-design
+  worked example (as reproduced in public lecture slides); D. Schulze, Powders and Bulk
+  Solids, ch. 10 (simplified outlet rules, f(phi_i)).
+* G.I. Tardos (1999), Stresses in bins and hoppers, Educational Resources for Particle
+  Technology 992Q (slice method with m = 1 plane, m = 2 conical).
 * J. Jaky (1944) for K0 = 1 - sin(phi).
 * D.M. Walker (1966), Chem. Eng. Sci. 21:975-997; J.K. Walters (1973).
 * EN 1991-4:2006, Eurocode 1: Actions on structures, Part 4: Silos and tanks; worked example
@@ -69,13 +88,19 @@ __all__ = [
     "johanson_rate",
     "brown_coefficient",
     "brown_rate",
+    "beverloo_slot_rate",
     "jenike_critical_half_angle",
+    "jenike_critical_half_angle_plane",
     "jenike_flow_mode",
     "janssen_z0",
     "janssen_vertical_stress",
     "janssen_wall_pressure",
     "janssen_wall_shear",
     "janssen_asymptotic_wall_pressure",
+    "janssen_plane_z0",
+    "janssen_plane_vertical_stress",
+    "janssen_plane_wall_pressure",
+    "janssen_plane_asymptotic_wall_pressure",
     "k_jaky",
     "k_en1991",
     "k_rankine_active",
@@ -106,6 +131,12 @@ __all__ = [
     "en1991_shallow_n",
     "en1991_hopper_vertical_stress",
     "en1991_hopper_pressures",
+    "unconfined_yield_strength",
+    "jenike_arching_H",
+    "jenike_critical_outlet",
+    "critical_outlet_simplified",
+    "jenike_rathole_G",
+    "jenike_rathole_diameter",
 ]
 
 #: Standard gravity used as the default ``g`` (m/s^2).
@@ -246,10 +277,22 @@ def rose_tanaka_factor(theta_deg, beta_deg=45.0):
     beta_deg : angle to the *horizontal* of the stagnant-zone boundary that the same
         material forms in a flat-bottomed bin, **degrees**, in (0, 90); default 45.
 
-    Source: Rose & Tanaka (1956) as used by Nedderman et al. (1982), Chem. Eng. Sci. 37:1597.
-    Tag: [M] - the exponent -0.35, the switch at ``theta = 90 - beta`` and the definition of
-    beta are unverified.  [D]: the two branches join continuously at ``theta = 90 - beta``
-    (``tan(theta) tan(beta) = 1`` there).
+    With the default ``beta = 45`` the factor is ``tan(theta)^(-0.35)`` for theta < 45 deg
+    (1.424 at the reference hopper's 20 deg): the default is a choice of this package, not
+    a measured stagnant-zone angle [M].
+
+    Source: H.E. Rose, T. Tanaka (1956), *The Engineer* 202:465-469, in the form used by
+    R.M. Nedderman, U. Tuzun, S.B. Savage, G.T. Houlsby (1982), Chem. Eng. Sci. 37:1597, and
+    R.M. Nedderman (1992), *Statics and kinematics of granular materials*, ch. 10.
+    Tag: **[M]**, re-checked 2026-11 and still unverified: no readable copy of any of the
+    three sources (nor of a paper quoting the formula) was found, so the exponent -0.35, the
+    switch at ``theta = 90 - beta`` and beta being measured from the *horizontal* rest on
+    memory.  What is checked [D]: the implementation is the formula above; the two branches
+    join continuously at ``theta = 90 - beta`` (``tan(theta) tan(beta) = 1``); and the
+    switch is the geometric condition for beta measured from the horizontal (a hopper wall
+    at more than ``90 - beta`` from the vertical lies outside the flat-bottom stagnant zone,
+    so the flat-bottom rate applies).  Comparisons of a simulated rate with
+    Beverloo x Rose-Tanaka therefore inherit an unverified factor (+42 % at 20 deg).
     """
     th_d = _check("theta_deg", theta_deg, 0.0, 90.0, lo_open=True, unit=" deg")
     be_d = _check("beta_deg", beta_deg, 0.0, 90.0, lo_open=True, hi_open=True, unit=" deg")
@@ -331,6 +374,48 @@ def brown_rate(rho_b, D0, alpha_deg, g=G):
     return _out(brown_coefficient(alpha_deg) * rho_b * np.sqrt(g) * D0**2.5)
 
 
+def beverloo_slot_rate(rho_b, B, C=1.03, k=1.5, d=0.0, g=G):
+    """Beverloo-type discharge rate per unit slot length, kg/(s m), through a long slot.
+
+    ``W' = C' rho_b sqrt(g) (B - k d)^(3/2)`` for a slot of width B in a flat bottom, much
+    longer than it is wide (plane flow; end effects neglected).  For a continuum with no
+    particle size (d = 0) the rate per unit length scales exactly as ``B^(3/2)`` [D:
+    dimensional analysis: ``W' / (rho_b sqrt(g) B^(3/2))`` can depend only on angles and
+    ratios].
+
+    Parameters
+    ----------
+    rho_b : bulk density (kg/m^3), > 0.
+    B : slot width (m), > 0.
+    C : slot discharge coefficient C', > 0; default 1.03 (the value attributed to Myers &
+        Sellers for slots [M]).  Per unit length the plane coefficient is of a different size
+        from the circular C = 0.58 because the geometry differs (W' ~ B^1.5, not D^2.5).
+    k : particle-size correction, >= 0; default 1.5 [M] (as for circular orifices).
+    d : particle diameter (m), >= 0; default 0 (continuum).
+    g : gravitational acceleration (m/s^2), > 0.
+
+    No angles are involved.  No hopper (converging-wall) factor for plane flow is offered:
+    none was found in a source that could be read.  For a plane mass-flow hopper use
+    :func:`johanson_rate` with ``m = 0``.
+
+    Source: the plane (slot) analogue of Beverloo, Leniger & van de Velde (1961); C' after
+    Myers & Sellers (quoted from memory, citation not checked).  Tag: the 3/2 power [D:
+    dimensional analysis]; C' = 1.03 and k = 1.5 [M].
+
+    Raises ValueError if ``B <= k d``.
+    """
+    rho_b = _positive("rho_b", rho_b, " kg/m^3")
+    B = _positive("B", B, " m")
+    C = _positive("C", C)
+    k = _nonneg("k", k)
+    d = _nonneg("d", d, " m")
+    g = _positive("g", g, " m/s^2")
+    B_eff = B - k * d
+    if np.any(B_eff <= 0):
+        raise ValueError("B must exceed k*d (effective slot width B - k d is not positive)")
+    return _out(C * rho_b * np.sqrt(g) * B_eff**1.5)
+
+
 # ---------------------------------------------------------------------------------------
 # c. flow mode
 # ---------------------------------------------------------------------------------------
@@ -353,8 +438,11 @@ def jenike_critical_half_angle(delta_deg, phi_w_deg):
     Returns NaN where ``phi_w >= delta``: no mass flow by this criterion.
 
     Source: closed fit of Jenike's chart, Leung et al. (2019), J. Pharm. Sci. 108:464,
-    eqs. 5-6.  Tag: [V] for the fit (as implemented in Tornado128/hoppers_performance_checking);
-    its accuracy against Jenike's chart is **not verified**.
+    eqs. 5-6.  Tag: [V] for the fit (as implemented in Tornado128/hoppers_performance_checking,
+    MassFlow_or_FunnelFlow.py).  Accuracy against Jenike's chart: one chart point only
+    [V: the Rhodes hopper-design worked example reads theta_c = 30.5 deg from Jenike's
+    conical chart at delta = 30, phi_w = 19 deg; the fit gives 30.2 deg].  Elsewhere not
+    verified; the same expression is attributed to Schulze's textbook [M].
     """
     de = _deg("delta_deg", delta_deg, _JENIKE_DELTA_MIN_DEG, 90.0, hi_open=True)
     pw = _deg("phi_w_deg", phi_w_deg, 0.0, 90.0, hi_open=True)
@@ -367,8 +455,48 @@ def jenike_critical_half_angle(delta_deg, phi_w_deg):
     return _out(np.where(no_mass, np.nan, np.degrees(theta_c)))
 
 
-def jenike_flow_mode(theta_deg, delta_deg, phi_w_deg, margin_deg=0.0):
-    """Classify a conical hopper as ``"mass"`` or ``"funnel"`` flow by Jenike's boundary.
+def jenike_critical_half_angle_plane(delta_deg, phi_w_deg, offset_deg=10.0):
+    """Critical half-angle (degrees) of a plane-flow (wedge) hopper, by the rule of thumb.
+
+    ``theta_c,plane = theta_c,cone + offset`` with theta_c,cone from
+    :func:`jenike_critical_half_angle` and ``offset = 10 deg`` by default: Jenike's
+    plane-flow mass-flow boundary is commonly said to be about 8-12 deg more generous than
+    the conical one.  Mass flow for ``theta < theta_c,plane`` (theta the angle of the
+    inclined walls from the vertical).  NaN where ``phi_w >= delta``, as for the cone.
+
+    **This is not a closed form of Jenike's plane-flow chart.**  No documented closed form
+    or fit of that chart boundary could be found and read (2026-11), and no plane-flow chart
+    point was available to test this rule against; use it to place a plane-flow study, not
+    to decide a design.
+
+    Parameters
+    ----------
+    delta_deg : effective angle of internal friction, **degrees**, in [30, 70] (the range
+        for which Jenike published charts: delta = 30, 40, ..., 70 deg [V: as listed in the
+        Rhodes hopper-design worked example]).
+    phi_w_deg : wall friction angle, **degrees**, in [0, 90).
+    offset_deg : the plane-flow allowance, **degrees**, in [0, 20]; default 10.
+
+    Source: Jenike (1964), Bulletin 123 (plane-flow charts); the offset rule of thumb.
+    Tag: **[M]** (the 8-12 deg allowance is quoted from memory; the conical part is as
+    :func:`jenike_critical_half_angle`).
+    """
+    _check("delta_deg", delta_deg, 30.0, 70.0, unit=" deg")
+    off = _check("offset_deg", offset_deg, 0.0, 20.0, unit=" deg")
+    return _out(_arr(jenike_critical_half_angle(delta_deg, phi_w_deg)) + off)
+
+
+_GEOMETRIES = ("conical", "plane")
+
+
+def _geometry(geometry):
+    if geometry not in _GEOMETRIES:
+        raise ValueError(f"geometry must be 'conical' or 'plane'; got {geometry!r}")
+    return geometry
+
+
+def jenike_flow_mode(theta_deg, delta_deg, phi_w_deg, margin_deg=0.0, geometry="conical"):
+    """Classify a hopper as ``"mass"`` or ``"funnel"`` flow by Jenike's boundary.
 
     ``"mass"`` where ``theta < theta_c - margin``, ``"funnel"`` otherwise (including where
     theta_c is NaN, i.e. ``phi_w >= delta``).  See :func:`jenike_critical_half_angle`.
@@ -378,14 +506,20 @@ def jenike_flow_mode(theta_deg, delta_deg, phi_w_deg, margin_deg=0.0):
     theta_deg : hopper half-angle from the vertical, **degrees**, in (0, 90].
     delta_deg, phi_w_deg : as in :func:`jenike_critical_half_angle`, **degrees**.
     margin_deg : design margin subtracted from theta_c, **degrees**, >= 0 (default 0).
+    geometry : ``"conical"`` (default; :func:`jenike_critical_half_angle`) or ``"plane"``
+        (:func:`jenike_critical_half_angle_plane` with its default offset, [M]).
 
     Returns a str for scalar input, an array of str otherwise.
 
-    Source and tag as :func:`jenike_critical_half_angle` ([V] fit, accuracy not verified).
+    Source and tag as the critical-angle function used.
     """
+    _geometry(geometry)
     th = _check("theta_deg", theta_deg, 0.0, 90.0, lo_open=True, unit=" deg")
     margin = _nonneg("margin_deg", margin_deg, " deg")
-    tc = _arr(jenike_critical_half_angle(delta_deg, phi_w_deg))
+    if geometry == "conical":
+        tc = _arr(jenike_critical_half_angle(delta_deg, phi_w_deg))
+    else:
+        tc = _arr(jenike_critical_half_angle_plane(delta_deg, phi_w_deg))
     with np.errstate(invalid="ignore"):
         mass = th < tc - margin  # NaN compares False -> funnel
     return _label(np.where(mass, 0, 1), ["mass", "funnel"])
@@ -477,6 +611,76 @@ def janssen_asymptotic_wall_pressure(rho_b, D, mu, g=G):
     return _out(rho_b * g * D / (4.0 * mu))
 
 
+def janssen_plane_z0(B, K, mu):
+    """Janssen characteristic depth of a long rectangular (plane) bin, ``z0 = B/(2 K mu)`` (m).
+
+    The bin is B wide between two parallel walls and much longer than wide: per unit length
+    the section has area B and wetted perimeter 2, so ``A/U = B/2`` (the limit of
+    ``A/U = B L / (2 (B + L))`` as the length L grows) and ``z0 = A/(U K mu) = B/(2 K mu)``.
+
+    Parameters: width B (m), > 0; lateral pressure ratio K, > 0; wall friction coefficient
+    mu = tan(phi_w) (not an angle), > 0.
+
+    Source: Janssen (1895) with the A/U form of EN 1991-4 eq. (5.75).  Tag: A/U form
+    [V: EN 1991-4 as quoted by Dlubal; as coded for rectangular silos in
+    arturopala/encalmo RectangularSilos.scala]; A/U = B/2 [D].
+    """
+    B = _positive("B", B, " m")
+    K = _positive("K", K)
+    mu = _positive("mu", mu)
+    return _out(B / (2.0 * K * mu))
+
+
+def janssen_plane_vertical_stress(z, rho_b, B, K, mu, q0=0.0, g=G):
+    """Janssen mean vertical stress (Pa) in a long rectangular (plane) bin of width B.
+
+    ``sigma_v = rho_b g z0 (1 - exp(-z/z0)) + q0 exp(-z/z0)``, ``z0 = B/(2 K mu)``
+    (:func:`janssen_plane_z0`); it solves the slice equilibrium per unit length
+    ``B dsigma_v/dz = rho_b g B - 2 mu K sigma_v`` [D].
+
+    Parameters: depth z (m) below the levelled surface, >= 0; rho_b (kg/m^3); width B (m);
+    K; mu = tan(phi_w) (a coefficient); surcharge q0 (Pa), >= 0; g (m/s^2).  No angles.
+
+    Source: Janssen (1895).  Tag: [D] (same solution as :func:`janssen_vertical_stress`
+    with ``D/4`` replaced by ``B/2``).
+    """
+    z = _nonneg("z", z, " m")
+    rho_b = _positive("rho_b", rho_b, " kg/m^3")
+    q0 = _nonneg("q0", q0, " Pa")
+    g = _positive("g", g, " m/s^2")
+    z0 = _arr(janssen_plane_z0(B, K, mu))
+    x = z / z0
+    return _out(-rho_b * g * z0 * np.expm1(-x) + q0 * np.exp(-x))
+
+
+def janssen_plane_wall_pressure(z, rho_b, B, K, mu, q0=0.0, g=G):
+    """Janssen normal wall pressure ``p_h = K sigma_v`` (Pa) in a long rectangular bin.
+
+    Arguments as :func:`janssen_plane_vertical_stress`.  Tends to ``rho_b g B / (2 mu)``
+    at depth, independent of K (:func:`janssen_plane_asymptotic_wall_pressure`).  The wall
+    shear is ``mu p_h``.
+
+    Source: Janssen (1895).  Tag: [D].
+    """
+    return _out(_arr(K) * _arr(janssen_plane_vertical_stress(z, rho_b, B, K, mu, q0, g)))
+
+
+def janssen_plane_asymptotic_wall_pressure(rho_b, B, mu, g=G):
+    """Deep-bed wall pressure of a long rectangular (plane) bin, ``rho_b g B / (2 mu)`` (Pa).
+
+    Independent of K: at depth the wall friction on the two walls, ``2 mu p_h`` per unit
+    length, carries the whole weight ``rho_b g B`` of each further metre of depth [D].
+    Parameters: rho_b (kg/m^3), width B (m), mu = tan(phi_w) (not an angle), g (m/s^2).
+
+    Source: limit z -> infinity of Janssen (1895).  Tag: [D].
+    """
+    rho_b = _positive("rho_b", rho_b, " kg/m^3")
+    B = _positive("B", B, " m")
+    mu = _positive("mu", mu)
+    g = _positive("g", g, " m/s^2")
+    return _out(rho_b * g * B / (2.0 * mu))
+
+
 # ---------------------------------------------------------------------------------------
 # lateral pressure ratios
 # ---------------------------------------------------------------------------------------
@@ -549,24 +753,39 @@ def k_walker_wall(phi, phi_w):
 
 
 def hopper_n(F, mu, beta_deg, S=2):
-    """Exponent of the hopper slice solution ``n = S (F mu cot(beta) + F) - 2``.
+    """Exponent of the hopper slice solution ``n = S (F mu cot(beta) + F - 1)``.
+
+    For a cone (S = 2) this is the EN 1991-4 form ``S (F mu cot(beta) + F) - 2``.  For a
+    wedge (plane, S = 1) it is ``F mu cot(beta) + F - 1``, which is what vertical
+    equilibrium of a wedge slice gives; the form with ``- 2`` for every S is *not*: it
+    fails the hydrostatic check (F = 1, mu = 0 must give n = 0, a fluid) for S = 1.
+
+    Derivation [D]: a slice of cross-section ``A ~ x^S`` (x up from the apex; S = 2 cone,
+    S = 1 wedge per unit length), wall pressure ``p_n = F sigma_v`` and friction
+    ``mu p_n`` acting up the wall, gives ``A' = S A / x`` and
+    ``d(sigma_v A)/dx = -gamma A + (S A / x) F (1 + mu cot(beta)) sigma_v``, i.e.
+    ``d sigma_v/dx = -gamma + n sigma_v / x`` with n above (the plane form is Walker's
+    slice with m = 1 as written by G.I. Tardos, *Stresses in bins and hoppers*, ERPT 1999,
+    eqs. 11-12 [V]).
 
     Parameters
     ----------
     F : wall-normal / mean vertical stress ratio (p_n / sigma_v), > 0.
     mu : wall friction coefficient (not an angle), >= 0.
     beta_deg : hopper half-angle from the vertical, **degrees**, in (0, 90).
-    S : 2 for a cone, 1 for a wedge (plane) hopper.
+    S : 2 for a cone, 1 for a wedge (plane) hopper, per unit length of the wedge.
 
     Source: vertical equilibrium of a slice, Walker (1966) with distribution factor D = 1 as
-    in EN 1991-4 (general hopper n); the same ODE as the Motzkus/Schulze form in
-    Tornado128/hoppers_performance_checking.  Tag: [D].
+    in EN 1991-4 (general hopper n, cone); the same ODE as the Motzkus/Schulze form in
+    Tornado128/hoppers_performance_checking.  Tag: [D].  (Before 2026-11 this function
+    returned ``S (F mu cot(beta) + F) - 2`` for every S: 1 too low for S = 1; unchanged
+    for cones.)
     """
     F = _positive("F", F)
     mu = _nonneg("mu", mu)
     be = _deg("beta_deg", beta_deg, 0.0, 90.0, lo_open=True, hi_open=True)
     S = _positive("S", S)
-    return _out(S * (F * mu / np.tan(be) + F) - 2.0)
+    return _out(S * (F * mu / np.tan(be) + F - 1.0))
 
 
 def hopper_vertical_stress(x, h, gamma, n, sigma_vt):
@@ -644,7 +863,8 @@ def walker_hopper_wall_pressure(
     """Normal wall pressure p_n (Pa) in a hopper by the slice method (Walker, D = 1).
 
     ``p_n = F sigma_v(x)`` with ``sigma_v`` from :func:`hopper_vertical_stress`,
-    ``n = S (F mu cot(beta) + F) - 2``, ``mu = tan(phi_w)``, ``gamma = rho_b g`` and
+    ``n = S (F mu cot(beta) + F - 1)`` (:func:`hopper_n`), ``mu = tan(phi_w)``,
+    ``gamma = rho_b g`` and
 
     * ``mode="filling"``: ``F = F_f = 1 - b / (1 + tan(beta)/mu)`` (EN 1991-4, b = 0.2);
     * ``mode="discharge"``: ``F = F_e`` from :func:`walker_discharge_ratio`.
@@ -653,7 +873,8 @@ def walker_hopper_wall_pressure(
     ----------
     x : height above the cone apex (m), in [0, h].
     h : apex-to-transition height (m), > 0; for a cone running to its apex from a cylinder
-        of diameter D, ``h = D / (2 tan(beta))``.
+        of diameter D, ``h = D / (2 tan(beta))``; for a wedge (S = 1) from a bin of width B,
+        ``h = B / (2 tan(beta))``.
     beta_deg : hopper half-angle from the vertical, **degrees**, in (0, 90).
     rho_b : bulk density (kg/m^3).
     phi : internal friction angle, **degrees** (used by the discharge ratio).
@@ -661,7 +882,7 @@ def walker_hopper_wall_pressure(
     sigma_vt : mean vertical stress at the transition (Pa), e.g. from Janssen.
     mode : "filling" or "discharge".
     g : gravitational acceleration (m/s^2).
-    S : 2 cone, 1 wedge.
+    S : 2 cone, 1 wedge (plane flow, per unit length; the plane-flow Walker slice).
     b : EN wall-friction reduction constant for F_f (default 0.2).
 
     Sources: Walker (1966); EN 1991-4:2006 (F_f [V: kei-mp/blog silo.md, arturopala/encalmo];
@@ -917,9 +1138,9 @@ def en1991_steep_filling_F(beta_deg, mu_h, b=EN1991_B):
 def en1991_steep_filling_n(beta_deg, mu_h, b=EN1991_B, S=2):
     """EN 1991-4 steep-hopper filling exponent ``n = S (1 - b) mu_h cot(beta)``.
 
-    With ``F = F_f`` the general ``S (F mu_h cot(beta) + F) - 2`` equals
-    ``S (1 - b) mu_h cot(beta) + S - 2`` [D]: identical for a cone (S = 2), lower by 1 for
-    a wedge (S = 1).  This function returns the code's form.
+    With ``F = F_f`` the slice exponent ``S (F mu_h cot(beta) + F - 1)`` of
+    :func:`hopper_n` equals ``S (1 - b) mu_h cot(beta)`` exactly, for a cone and a wedge
+    alike [D], since ``F_f (1 + mu_h cot(beta)) = 1 + (1 - b) mu_h cot(beta)``.
 
     ``beta_deg`` in **degrees**, in (0, 90); ``mu_h`` coefficient; ``S`` 2 cone / 1 wedge.
 
@@ -948,10 +1169,12 @@ def en1991_steep_discharge_F(beta_deg, mu_h, phi_i):
 
 
 def en1991_steep_discharge_n(beta_deg, mu_h, phi_i, S=2):
-    """EN 1991-4 steep-hopper discharge exponent ``n = S (F_e mu_h cot(beta) + F_e) - 2``.
+    """EN 1991-4 steep-hopper discharge exponent ``n = S (F_e mu_h cot(beta) + F_e - 1)``.
 
+    For a cone (S = 2) this is the code's ``2 (F_e mu_h cot(beta) + F_e) - 2``; for a wedge
+    (S = 1) it is the slice-equilibrium form of :func:`hopper_n`.
     Angles in **degrees**; ``mu_h`` a coefficient.  Source: EN 1991-4:2006 §6.3.3.
-    Tag: [V: kei-mp/blog silo.md].
+    Tag: cone [V: kei-mp/blog silo.md]; wedge [D] (see :func:`hopper_n`).
     """
     Fe = en1991_steep_discharge_F(beta_deg, mu_h, phi_i)
     return hopper_n(Fe, mu_h, beta_deg, S=S)
@@ -1021,7 +1244,7 @@ def en1991_hopper_pressures(
     The class (:func:`en1991_hopper_class`) picks the formulas:
 
     * steep, filling: ``F = F_f``, ``n = S (1 - b) mu_h cot(beta)``, ``p_t = mu_h p_n``;
-    * steep, discharge: ``F = F_e`` (needs ``phi_i``), ``n = S (F_e mu_h cot beta + F_e) - 2``,
+    * steep, discharge: ``F = F_e`` (needs ``phi_i``), ``n = S (F_e mu_h cot beta + F_e - 1)``,
       ``p_t = mu_h p_n``;
     * shallow (filling and discharge alike): ``F = F_s``, ``n = S (1 - b) mu_heff cot(beta)``,
       ``p_t = mu_heff p_n`` [M];
@@ -1066,3 +1289,163 @@ def en1991_hopper_pressures(
     p_v = _arr(hopper_vertical_stress(x, h_h, gamma, n, p_vft))
     p_n = F * p_v
     return HopperPressures(_out(p_n), _out(mu_eff * p_n), _out(p_v), cls)
+
+
+# ---------------------------------------------------------------------------------------
+# g. cohesive powders: arching and ratholing (Jenike's method)
+# ---------------------------------------------------------------------------------------
+
+
+def unconfined_yield_strength(c, phi_deg):
+    """Unconfined yield strength ``sigma_c = 2 c cos(phi) / (1 - sin(phi))`` (Pa).
+
+    The uniaxial compressive strength of a Mohr-Coulomb material with cohesion c and
+    friction angle phi; the same as ``2 c tan(45 + phi/2)``.
+
+    Parameters
+    ----------
+    c : cohesion (Pa), >= 0.
+    phi_deg : friction angle, **degrees**, in [0, 90).
+
+    Source: the Mohr-Coulomb criterion ``sigma_1 - sigma_3 = (sigma_1 + sigma_3) sin(phi)
+    + 2 c cos(phi)`` at ``sigma_3 = 0``.  Tag: [D] (also the uniaxial-compression point,
+    Theta = pi/3, of the Abaqus form ``R_mc q - p tan(phi) - c = 0`` that the simulation
+    uses: a test checks both).
+    """
+    c = _nonneg("c", c, " Pa")
+    ph = _deg("phi_deg", phi_deg, 0.0, 90.0, hi_open=True)
+    return _out(2.0 * c * np.cos(ph) / (1.0 - np.sin(ph)))
+
+
+def jenike_arching_H(theta_deg, geometry="conical"):
+    """Jenike's arching function H(theta) in ``D_crit = H(theta) sigma_c / (rho_b g)``.
+
+    * ``geometry="conical"`` (circular outlet): ``H = 2 + theta/60`` (theta in degrees).
+    * ``geometry="plane"`` (slot outlet, B the slot width): ``H = 1 + theta/180``.
+
+    Parameters
+    ----------
+    theta_deg : hopper half-angle from the vertical, **degrees**, in [0, 90).  Jenike's
+        function is drawn for mass-flow hopper angles (up to about 60 deg for plane flow,
+        less for cones); the linear fits are not checked beyond that [M].
+    geometry : ``"conical"`` or ``"plane"``.
+
+    Source: Jenike (1964), Bulletin 123 (the H(theta) chart).  Tag: conical fit
+    [V: the Rhodes hopper-design worked example, "H(theta) = 2.0 + theta/60 = 2.46" at
+    theta = 27.5 deg; also as coded in Tornado128/hoppers_performance_checking,
+    D_arch_passive_estimation.py, after Leung et al. 2019; another file of that repository
+    uses (130 + theta)/65 = 2 + theta/65, within 1.6 % of it for theta <= 30 deg];
+    plane fit [M] (its end value H(0) = 1 matches Schulze's simplified slot rule, see
+    :func:`critical_outlet_simplified`; the slope is unverified).
+    """
+    _geometry(geometry)
+    th = _check("theta_deg", theta_deg, 0.0, 90.0, hi_open=True, unit=" deg")
+    if geometry == "conical":
+        return _out(2.0 + th / 60.0)
+    return _out(1.0 + th / 180.0)
+
+
+def jenike_critical_outlet(sigma_c, rho_b, theta_deg, geometry="conical", g=G):
+    """Jenike's critical outlet size (m) against a cohesive arch in a mass-flow hopper.
+
+    ``D_crit = H(theta) sigma_c / (rho_b g)`` (:func:`jenike_arching_H`): the outlet
+    diameter (cone) or slot width (plane) above which no stable arch forms.  sigma_c is the
+    unconfined yield strength *at the critical consolidation stress* (where the flow function
+    meets the hopper flow factor); for a Mohr-Coulomb continuum with a constant cohesion it
+    does not depend on the stress, and :func:`unconfined_yield_strength` gives it.
+
+    Parameters
+    ----------
+    sigma_c : unconfined yield strength (Pa), >= 0.
+    rho_b : bulk density (kg/m^3), > 0.
+    theta_deg : hopper half-angle from the vertical, **degrees**, in [0, 90).
+    geometry : ``"conical"`` or ``"plane"``.
+    g : gravitational acceleration (m/s^2), > 0.
+
+    Source: Jenike (1964), Bulletin 123.  Tag: the form [V: Rhodes worked example,
+    ``B_min = H(theta) sigma_crit / (rho_b g) = 2.46 x 0.83 kPa / (1300 x 9.81) = 0.16 m``;
+    Leung et al. 2019 as coded in Tornado128]; H as :func:`jenike_arching_H`.
+    Jenike's arching criterion is known to be conservative.
+    """
+    sigma_c = _nonneg("sigma_c", sigma_c, " Pa")
+    rho_b = _positive("rho_b", rho_b, " kg/m^3")
+    g = _positive("g", g, " m/s^2")
+    H = _arr(jenike_arching_H(theta_deg, geometry))
+    return _out(H * sigma_c / (rho_b * g))
+
+
+def critical_outlet_simplified(sigma_c, rho_b, geometry="conical", g=G):
+    """Simplified critical outlet size (m): ``2 sigma_c/(rho_b g)`` (circular),
+    ``sigma_c/(rho_b g)`` (slot width).
+
+    Jenike's rule with H at its theta = 0 value (H = 2 for a circular outlet, 1 for a slot);
+    no hopper angle enters, so it is the estimate for a flat-bottomed bin or a quick check.
+    A frictionless cohesive solid (sigma_c = 2 tau_0) gives ``4 tau_0 / (rho_b g)`` for a
+    circular outlet [D].
+
+    Parameters
+    ----------
+    sigma_c : unconfined yield strength (Pa), >= 0.
+    rho_b : bulk density (kg/m^3), > 0.
+    geometry : ``"conical"`` (circular outlet) or ``"plane"`` (slot).
+    g : gravitational acceleration (m/s^2), > 0.
+
+    Source: D. Schulze, *Powders and Bulk Solids*, eqs. (10.6a) slot and (10.6b) circular.
+    Tag: [V: as transcribed in tli2025/silo_design, pages/4_Results.py]; its use for
+    flat-bottomed bins [M].
+    """
+    sigma_c = _nonneg("sigma_c", sigma_c, " Pa")
+    rho_b = _positive("rho_b", rho_b, " kg/m^3")
+    g = _positive("g", g, " m/s^2")
+    H = 2.0 if _geometry(geometry) == "conical" else 1.0
+    return _out(H * sigma_c / (rho_b * g))
+
+
+#: Range of the friction angle (deg) over which the rathole G fit has been checked.
+_RATHOLE_PHI_RANGE = (30.0, 70.0)
+
+
+def jenike_rathole_G(phi_deg):
+    """Jenike's rathole function G(phi) (cubic fit of the Bulletin 123 chart).
+
+    ``G = -6.86712 + 0.58911 phi - 0.012966 phi^2 + 0.00011939 phi^3`` (phi in degrees).
+
+    Parameters
+    ----------
+    phi_deg : static angle of internal friction (Jenike's phi_t; phi for a Mohr-Coulomb
+        material), **degrees**, in [30, 70], the range over which the fit is checked.
+
+    Source: Jenike (1964), Bulletin 123, p. 67 (chart).  Tag: the cubic [V: as coded in
+    Tornado128/hoppers_performance_checking, rathole_diameter_estimation.py, after Leung et
+    al. 2019]; [D: within 1.4 % of a digitisation of the same function in Schulze's
+    *Powders and Bulk Solids* Fig. 10.19, f(phi_i), at phi = 30, 35, ..., 70 deg
+    (tli2025/silo_design, app_utils.py)].  G(30) = 2.36, G(40) = 3.59.
+    """
+    ph = _check("phi_deg", phi_deg, *_RATHOLE_PHI_RANGE, unit=" deg")
+    return _out(-6.86712 + ph * (0.58911 + ph * (-0.012966 + ph * 0.00011939)))
+
+
+def jenike_rathole_diameter(sigma_c, rho_b, phi_deg, g=G):
+    """Jenike's critical rathole diameter (m): ``D_f = G(phi) sigma_c / (rho_b g)``.
+
+    A funnel-flow bin whose outlet (or flow channel) is smaller than D_f can leave a stable
+    empty rathole; an outlet larger than D_f clears it.  sigma_c is the unconfined yield
+    strength at the consolidation stress in the bin (constant for a Mohr-Coulomb continuum,
+    :func:`unconfined_yield_strength`).
+
+    Parameters
+    ----------
+    sigma_c : unconfined yield strength (Pa), >= 0.
+    rho_b : bulk density (kg/m^3), > 0.
+    phi_deg : static angle of internal friction, **degrees**, in [30, 70].
+    g : gravitational acceleration (m/s^2), > 0.
+
+    Source: Jenike (1964), Bulletin 123; Leung et al. (2019) eq. 22.  Tag: form
+    [V: as coded in Tornado128/hoppers_performance_checking, and the same form with
+    Schulze's f(phi_i) in tli2025/silo_design]; G as :func:`jenike_rathole_G`.  Jenike's
+    rathole criterion is known to be conservative (more so than the arching one).
+    """
+    sigma_c = _nonneg("sigma_c", sigma_c, " Pa")
+    rho_b = _positive("rho_b", rho_b, " kg/m^3")
+    g = _positive("g", g, " m/s^2")
+    return _out(_arr(jenike_rathole_G(phi_deg)) * sigma_c / (rho_b * g))

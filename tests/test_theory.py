@@ -1,9 +1,10 @@
 """Tests of fipy_hopper.theory.
 
-Part 1 reproduces every worked value of the project's physics reference
-(shared/design/theory.md) to the precision it is printed with: a value printed with k
-decimals must lie within half a unit of its last printed digit.  The expected numbers are
-literals copied from the named table of that document.
+Part 1 reproduces every worked value of the project's theory reference (docs/theory.md)
+to the precision it is printed with: a value printed with k decimals must lie within half a
+unit of its last printed digit.  The expected numbers are literals copied from the named
+section of that document; where a value comes from an outside source (the Rhodes
+hopper-design worked example, the Dlubal EN 1991-4 example) the test says so.
 
 Part 2 holds property tests (limits, continuity, the ODEs the closed forms solve,
 identities between forms) and part 3 input validation.
@@ -14,7 +15,7 @@ import pytest
 
 from fipy_hopper import theory as th
 
-RHO_B = 1500.0  # kg/m^3, theory.md §b worked values
+RHO_B = 1500.0  # kg/m^3, docs/theory.md §b worked values
 D0 = 0.05  # m
 
 
@@ -26,7 +27,7 @@ def assert_printed(value, printed, decimals):
 
 
 # =======================================================================================
-# Part 1: worked values of theory.md
+# Part 1: worked values of docs/theory.md
 # =======================================================================================
 
 # --- §b, table "Worked values (rho_b = 1500 kg/m^3, D0 = 0.05 m), in kg/s" --------------
@@ -73,12 +74,21 @@ def test_rose_tanaka_worked_values():
     assert_printed(th.rose_tanaka_factor(30.0, 45.0), 1.212, 3)
     for theta in (45.0, 50.0, 60.0, 89.0, 90.0):
         assert th.rose_tanaka_factor(theta, 45.0) == 1.0
+    # the reference hopper's 20 deg with the default beta = 45: F = tan(20)^-0.35 = 1.424
+    assert_printed(th.rose_tanaka_factor(20.0), 1.424, 3)
 
 
 def test_brown_flat_bottom_coefficient():
     # §b Brown: flat bottom (alpha = 90) coefficient (pi/4)/sqrt(2) = 0.555
     assert_printed(th.brown_coefficient(90.0), 0.555, 3)
     assert th.brown_coefficient(90.0) == pytest.approx(np.pi / 4.0 / np.sqrt(2.0), rel=1e-14)
+    # "a minimum of 0.534 near alpha = 61 deg"
+    from scipy.optimize import minimize_scalar
+
+    res = minimize_scalar(lambda a: float(th.brown_coefficient(a)), bounds=(30.0, 89.0),
+                          method="bounded", options={"xatol": 1e-6})
+    assert_printed(res.fun, 0.534, 3)
+    assert res.x == pytest.approx(61.0, abs=0.5)
 
 
 # --- §c, table "theta_c in degrees" -----------------------------------------------------
@@ -214,6 +224,90 @@ def test_en1991_discharge_factors():
     assert p_he == pytest.approx(11.5e3) and p_we == pytest.approx(4.4e3)
     p_he, p_we = th.en1991_discharge_vertical_walls(10e3, 4e3, top_emptied=True)
     assert p_he == pytest.approx(10e3) and p_we == pytest.approx(4e3)
+
+
+
+# --- §c Jenike chart point (outside source) ---------------------------------------------
+def test_jenike_fit_against_rhodes_chart_point():
+    # Rhodes' hopper-design worked example reads theta_c = 30.5 deg off Jenike's conical
+    # chart at delta = 30, phi_w = 19; the closed fit gives 30.19 deg.
+    assert th.jenike_critical_half_angle(30.0, 19.0) == pytest.approx(30.5, abs=0.35)
+    assert_printed(th.jenike_critical_half_angle(30.0, 19.0), 30.2, 1)
+
+
+# --- §g cohesive arching and ratholing ---------------------------------------------------
+def test_cohesive_worked_values():
+    # phi = 30, c = 100 Pa -> sigma_c = 346.4 Pa; rho_b = 1500, theta = 20:
+    # H = 2.333 (cone), 1.111 (slot); D_crit = 0.0549 m (cone), B_crit = 0.0262 m (slot);
+    # simplified 0.0471 m (circular), 0.0235 m (slot); G(30) = 2.36, D_f = 0.0556 m.
+    sc = th.unconfined_yield_strength(100.0, 30.0)
+    assert_printed(sc, 346.4, 1)
+    assert_printed(th.jenike_arching_H(20.0), 2.333, 3)
+    assert_printed(th.jenike_arching_H(20.0, "plane"), 1.111, 3)
+    assert_printed(th.jenike_critical_outlet(sc, RHO_B, 20.0), 0.0549, 4)
+    assert_printed(th.jenike_critical_outlet(sc, RHO_B, 20.0, "plane"), 0.0262, 4)
+    assert_printed(th.critical_outlet_simplified(sc, RHO_B), 0.0471, 4)
+    assert_printed(th.critical_outlet_simplified(sc, RHO_B, "plane"), 0.0235, 4)
+    assert_printed(th.jenike_rathole_G(30.0), 2.36, 2)
+    assert_printed(th.jenike_rathole_G(40.0), 3.59, 2)
+    assert_printed(th.jenike_rathole_diameter(sc, RHO_B, 30.0), 0.0556, 4)
+
+
+def test_arching_rhodes_worked_example():
+    # Rhodes: theta = 27.5 deg, sigma_crit = 0.83 kPa, rho_b = 1300 kg/m^3:
+    # "H(theta) = 2.0 + theta/60 = 2.46", "B_min = 2.46 x 0.83 / (1300 x 9.81) = 0.16 m"
+    assert_printed(th.jenike_arching_H(27.5), 2.46, 2)
+    assert_printed(th.jenike_critical_outlet(830.0, 1300.0, 27.5), 0.16, 2)
+
+
+# Schulze, Powders and Bulk Solids, Fig. 10.19 f(phi_i), as digitised in
+# tli2025/silo_design (app_utils.py)
+SCHULZE_F_PHI = {30: 2.39141, 35: 2.94697, 40: 3.55303, 45: 4.28535, 50: 5.05556,
+                 55: 6.09091, 60: 7.56818, 65: 9.46212, 70: 11.6843}
+
+
+def test_rathole_G_against_schulze_digitisation():
+    phi = np.array(sorted(SCHULZE_F_PHI), dtype=float)
+    f = np.array([SCHULZE_F_PHI[k] for k in sorted(SCHULZE_F_PHI)])
+    np.testing.assert_allclose(th.jenike_rathole_G(phi), f, rtol=0.015)
+
+
+# --- §h plane flow ----------------------------------------------------------------------
+def test_plane_flow_worked_values():
+    # slot B = 0.05 m, rho_b = 1500: W' = 54.10 kg/(s m) (d = 0), 51.69 (d = 1 mm, k = 1.5)
+    assert_printed(th.beverloo_slot_rate(RHO_B, 0.05), 54.10, 2)
+    assert_printed(th.beverloo_slot_rate(RHO_B, 0.05, d=1e-3), 51.69, 2)
+    # §b Johanson, plane (m = 0): B = 0.05 m, theta = 30 deg: 48.88 kg/(s m)
+    assert_printed(th.johanson_rate(RHO_B, 0.05, 30.0, m=0), 48.88, 2)
+    # plane critical half-angle by the +10 deg rule: delta = 40, phi_w = 20 -> 37.0 deg
+    assert_printed(th.jenike_critical_half_angle_plane(40.0, 20.0), 37.0, 1)
+    # plane bin B = 0.2 m, phi_w = 20 deg, K = 0.5: z0 = 0.549 m, asymptote 4043 Pa,
+    # sigma_v(0.3 m) = 3402 Pa, p_h(0.3 m) = 1701 Pa
+    mu = np.tan(np.radians(20.0))
+    assert_printed(th.janssen_plane_z0(0.2, 0.5, mu), 0.549, 3)
+    assert_printed(th.janssen_plane_asymptotic_wall_pressure(RHO_B, 0.2, mu), 4043, 0)
+    assert_printed(th.janssen_plane_vertical_stress(0.3, RHO_B, 0.2, 0.5, mu), 3402, 0)
+    assert_printed(th.janssen_plane_wall_pressure(0.3, RHO_B, 0.2, 0.5, mu), 1701, 0)
+
+
+def test_plane_walker_worked_example():
+    # wedge from a bin of width B = 0.2 m, beta = 30, phi = 30, phi_w = 20, K = 0.5,
+    # sigma_vt from the plane Janssen at z = 0.3 m (3402 Pa): n = 0.5693 (half the cone's
+    # 1.1386); sigma_v at x/h = 0, 1/4, 1/2, 3/4, 1: 0, 2753, 3322, 3473, 3402 Pa;
+    # discharge wall pressure at the transition F_e sigma_vt = 3274 Pa.
+    B, K, beta, phi, phi_w = 0.2, 0.5, 30.0, 30.0, 20.0
+    mu = np.tan(np.radians(phi_w))
+    svt = th.janssen_plane_vertical_stress(0.3, RHO_B, B, K, mu)
+    h = B / 2.0 / np.tan(np.radians(beta))
+    Fe = th.walker_discharge_ratio(phi, phi_w, beta)
+    n = th.hopper_n(Fe, mu, beta, S=1)
+    assert_printed(n, 0.5693, 4)
+    xi = np.array([0.0, 0.25, 0.5, 0.75, 1.0])
+    assert_printed(th.hopper_vertical_stress(xi * h, h, RHO_B * th.G, n, svt),
+                   [0, 2753, 3322, 3473, 3402], 0)
+    pn = th.walker_hopper_wall_pressure(xi * h, h, beta, RHO_B, phi, phi_w, svt,
+                                        mode="discharge", S=1)
+    assert_printed(pn[-1], 3274, 0)
 
 
 # =======================================================================================
@@ -394,7 +488,7 @@ def test_hopper_vertical_stress_small_and_negative_n():
 
 
 def test_filling_n_identity():
-    # S (F_f mu cot beta + F_f) - 2 == S (1 - b) mu cot beta + S - 2
+    # S (F_f mu cot beta + F_f - 1) == S (1 - b) mu cot beta, for a cone and a wedge alike
     beta = np.array([10.0, 20.0, 30.0])
     mu = 0.4
     Ff = th.en1991_steep_filling_F(beta, mu)
@@ -402,7 +496,28 @@ def test_filling_n_identity():
         th.hopper_n(Ff, mu, beta, S=2), th.en1991_steep_filling_n(beta, mu, S=2)
     )
     np.testing.assert_allclose(
-        th.hopper_n(Ff, mu, beta, S=1), th.en1991_steep_filling_n(beta, mu, S=1) - 1.0
+        th.hopper_n(Ff, mu, beta, S=1), th.en1991_steep_filling_n(beta, mu, S=1)
+    )
+
+
+def test_hopper_n_cone_form_unchanged():
+    # the cone (S = 2) exponent is EN 1991-4's S (F mu cot beta + F) - 2
+    F, mu, beta = np.array([0.8, 0.96, 1.3]), 0.36, np.array([15.0, 30.0, 40.0])
+    cot = 1.0 / np.tan(np.radians(beta))
+    np.testing.assert_allclose(
+        th.hopper_n(F, mu, beta, S=2), 2 * (F * mu * cot + F) - 2, rtol=1e-14
+    )
+
+
+@pytest.mark.parametrize("S", [1, 2, 1.5])
+def test_hopper_n_hydrostatic(S):
+    # a fluid (F = 1, no wall friction) must give hydrostatic sigma_v: n = 0 for every S
+    assert th.hopper_n(1.0, 0.0, 25.0, S=S) == pytest.approx(0.0, abs=1e-14)
+    h, gamma = 0.4, 15e3
+    x = np.linspace(0.0, h, 9)
+    np.testing.assert_allclose(
+        th.hopper_vertical_stress(x, h, gamma, th.hopper_n(1.0, 0.0, 25.0, S=S), 0.0),
+        gamma * (h - x), atol=1e-9,
     )
 
 
@@ -507,6 +622,120 @@ def test_en1991_hopper_classes_and_pressures():
         th.en1991_hopper_pressures(x, h_h, 20.0, gamma, K, mu_h, pvft, "discharge")
 
 
+def test_slot_rate_scaling():
+    w1 = th.beverloo_slot_rate(RHO_B, 0.04)
+    assert th.beverloo_slot_rate(RHO_B, 0.08) / w1 == pytest.approx(2**1.5, rel=1e-13)
+    assert th.beverloo_slot_rate(RHO_B, 0.04, d=1e-3) == pytest.approx(
+        th.beverloo_slot_rate(RHO_B, 0.04 - 1.5e-3), rel=1e-13)
+    assert th.beverloo_slot_rate(RHO_B, np.array([0.02, 0.04])).shape == (2,)
+
+
+def test_plane_critical_angle_rule_and_mode():
+    d, pw = np.array([[30.0], [40.0], [50.0]]), np.array([10.0, 20.0, 30.0])
+    tp = th.jenike_critical_half_angle_plane(d, pw)
+    tc = th.jenike_critical_half_angle(d, pw)
+    np.testing.assert_array_equal(np.isnan(tp), np.isnan(tc))
+    np.testing.assert_allclose(tp[np.isfinite(tc)], tc[np.isfinite(tc)] + 10.0, rtol=1e-14)
+    assert th.jenike_critical_half_angle_plane(40.0, 20.0, offset_deg=8.0) == pytest.approx(
+        th.jenike_critical_half_angle(40.0, 20.0) + 8.0)
+    # 30 deg is funnel flow in a cone (theta_c = 27.0) but mass flow in a wedge (37.0)
+    assert th.jenike_flow_mode(30.0, 40.0, 20.0) == "funnel"
+    assert th.jenike_flow_mode(30.0, 40.0, 20.0, geometry="plane") == "mass"
+    assert th.jenike_flow_mode(30.0, 40.0, 45.0, geometry="plane") == "funnel"
+
+
+def test_plane_janssen_is_circular_janssen_with_D_2B():
+    # A/U = B/2 for the plane bin and D/4 for the circle: the plane bin of width B is the
+    # circular formula with D = 2 B
+    B, K, mu, q0 = 0.25, 0.45, 0.4, 300.0
+    z = np.linspace(0.0, 3.0, 31)
+    np.testing.assert_allclose(
+        th.janssen_plane_vertical_stress(z, RHO_B, B, K, mu, q0=q0),
+        th.janssen_vertical_stress(z, RHO_B, 2 * B, K, mu, q0=q0), rtol=1e-14)
+    assert th.janssen_plane_z0(B, K, mu) == pytest.approx(th.janssen_z0(2 * B, K, mu))
+
+
+def test_plane_janssen_solves_slice_equilibrium():
+    # per unit length: B d sigma_v/dz = rho g B - 2 mu K sigma_v (two walls)
+    B, K, mu = 0.3, 0.45, 0.4
+    z = np.linspace(0.05, 2.0, 40)
+    dz = 1e-5
+    s = lambda zz: th.janssen_plane_vertical_stress(zz, RHO_B, B, K, mu)  # noqa: E731
+    deriv = (s(z + dz) - s(z - dz)) / (2 * dz)
+    np.testing.assert_allclose(deriv, RHO_B * th.G - 2 * mu * K / B * s(z), rtol=1e-6, atol=1e-6)
+    for K in (0.3, 0.5, 0.8):  # the asymptote does not depend on K
+        deep = 200.0 * th.janssen_plane_z0(B, K, mu)
+        assert th.janssen_plane_wall_pressure(deep, RHO_B, B, K, mu) == pytest.approx(
+            th.janssen_plane_asymptotic_wall_pressure(RHO_B, B, mu), rel=1e-12)
+
+
+@pytest.mark.parametrize("S", [1, 2])
+def test_slice_solution_against_direct_integration(S):
+    # Integrate the slice equilibrium written with the geometry itself,
+    # d(sigma_v A)/dx = -gamma A + P (p_n tan(beta) + mu p_n), A = c x^S, P = S A / (x tan beta),
+    # from the transition down, and compare with hopper_vertical_stress(hopper_n(S)).
+    from scipy.integrate import solve_ivp
+
+    beta, mu, F, gamma, h, svt = 25.0, 0.35, 0.9, 15e3, 0.3, 2500.0
+    tb = np.tan(np.radians(beta))
+
+    def rhs(x, y):  # y = sigma_v A / c with A/c = x^S
+        A = x**S
+        sv = y[0] / A
+        perimeter = S * A / (x * tb)
+        return [-gamma * A + perimeter * F * sv * (tb + mu)]
+
+    xs = np.linspace(h, 0.05, 12)
+    sol = solve_ivp(rhs, (h, 0.05), [svt * h**S], t_eval=xs, rtol=1e-11, atol=1e-9)
+    direct = sol.y[0] / xs**S
+    n = th.hopper_n(F, mu, beta, S=S)
+    np.testing.assert_allclose(th.hopper_vertical_stress(xs, h, gamma, n, svt), direct, rtol=1e-7)
+
+
+def test_unconfined_yield_strength_forms():
+    c, phi = 250.0, np.array([0.0, 15.0, 30.0, 45.0])
+    ph = np.radians(phi)
+    sc = th.unconfined_yield_strength(c, phi)
+    np.testing.assert_allclose(sc, 2 * c * np.tan(np.pi / 4 + ph / 2), rtol=1e-13)
+    # classical criterion at sigma_3 = 0: sigma_1 = sigma_1 sin(phi) + 2 c cos(phi)
+    np.testing.assert_allclose(sc, sc * np.sin(ph) + 2 * c * np.cos(ph), rtol=1e-13)
+    # Abaqus form F = R_mc q - p tan(phi) - c = 0 in uniaxial compression (Theta = pi/3):
+    # q = sigma_c, p = sigma_c / 3
+    Th = np.pi / 3
+    R = np.sin(Th + np.pi / 3) / (np.sqrt(3) * np.cos(ph)) + np.cos(Th + np.pi / 3) * np.tan(ph) / 3
+    np.testing.assert_allclose(R * sc - sc / 3 * np.tan(ph) - c, 0.0, atol=1e-10)
+    assert th.unconfined_yield_strength(0.0, 30.0) == 0.0
+    assert th.unconfined_yield_strength(c, 0.0) == pytest.approx(2 * c)  # Tresca
+
+
+def test_critical_outlets_scale_linearly_with_cohesion():
+    # a rate-independent continuum: D_crit / (c / (rho g)) is a constant at fixed angles
+    c = np.array([10.0, 100.0, 1000.0])
+    sc = th.unconfined_yield_strength(c, 30.0)
+    for d in (th.jenike_critical_outlet(sc, RHO_B, 20.0),
+              th.critical_outlet_simplified(sc, RHO_B, "plane"),
+              th.jenike_rathole_diameter(sc, RHO_B, 35.0)):
+        ratio = d / (c / (RHO_B * th.G))
+        np.testing.assert_allclose(ratio, ratio[0], rtol=1e-13)
+    # the simplified rule is Jenike's at theta = 0
+    for geom in ("conical", "plane"):
+        assert th.critical_outlet_simplified(500.0, RHO_B, geom) == pytest.approx(
+            th.jenike_critical_outlet(500.0, RHO_B, 0.0, geom), rel=1e-14)
+    # frictionless cohesive solid: sigma_c = 2 tau0 -> 4 tau0 / (rho g)
+    tau0 = 80.0
+    assert th.critical_outlet_simplified(th.unconfined_yield_strength(tau0, 0.0), RHO_B) == (
+        pytest.approx(4 * tau0 / (RHO_B * th.G)))
+
+
+def test_arching_H_shapes():
+    t = np.linspace(0.0, 60.0, 7)
+    np.testing.assert_allclose(th.jenike_arching_H(t), 2 + t / 60, rtol=1e-14)
+    np.testing.assert_allclose(th.jenike_arching_H(t, "plane"), 1 + t / 180, rtol=1e-14)
+    assert np.all(th.jenike_arching_H(t, "plane") < th.jenike_arching_H(t))
+    # the rathole function rises steeply with phi over its range
+    assert np.all(np.diff(th.jenike_rathole_G(np.linspace(30.0, 70.0, 41))) > 0)
+
+
 def test_scalar_in_scalar_out():
     assert np.ndim(th.beverloo_rate(RHO_B, D0)) == 0
     assert np.ndim(th.janssen_vertical_stress(1.0, RHO_B, 0.2, 0.5, 0.36)) == 0
@@ -556,6 +785,25 @@ def test_scalar_in_scalar_out():
         (lambda: th.en1991_h0(5.0, 95.0), "phi_r"),
         (lambda: th.en1991_hopper_class(0.0, 0.45, 0.4), "beta_deg"),
         (lambda: th.en1991_shallow_mu_heff(40.0, 1.5), "K"),
+        (lambda: th.beverloo_slot_rate(RHO_B, -0.05), "B"),
+        (lambda: th.beverloo_slot_rate(RHO_B, 0.001, d=1e-3), "B"),
+        (lambda: th.beverloo_slot_rate(0.0, 0.05), "rho_b"),
+        (lambda: th.jenike_critical_half_angle_plane(25.0, 10.0), "delta_deg"),
+        (lambda: th.jenike_critical_half_angle_plane(40.0, 10.0, offset_deg=25.0), "offset_deg"),
+        (lambda: th.jenike_critical_half_angle_plane(40.0, -2.0), "phi_w_deg"),
+        (lambda: th.jenike_flow_mode(20.0, 40.0, 10.0, geometry="cone"), "geometry"),
+        (lambda: th.janssen_plane_z0(0.0, 0.5, 0.3), "B"),
+        (lambda: th.janssen_plane_vertical_stress(-0.1, RHO_B, 0.2, 0.5, 0.3), "z"),
+        (lambda: th.janssen_plane_asymptotic_wall_pressure(RHO_B, 0.2, 0.0), "mu"),
+        (lambda: th.unconfined_yield_strength(-1.0, 30.0), "c"),
+        (lambda: th.unconfined_yield_strength(100.0, 90.0), "phi_deg"),
+        (lambda: th.jenike_arching_H(-5.0), "theta_deg"),
+        (lambda: th.jenike_arching_H(20.0, "wedge"), "geometry"),
+        (lambda: th.jenike_critical_outlet(-1.0, RHO_B, 20.0), "sigma_c"),
+        (lambda: th.jenike_critical_outlet(300.0, 0.0, 20.0), "rho_b"),
+        (lambda: th.critical_outlet_simplified(300.0, RHO_B, "slot"), "geometry"),
+        (lambda: th.jenike_rathole_G(25.0), "phi_deg"),
+        (lambda: th.jenike_rathole_diameter(300.0, RHO_B, np.array([40.0, 75.0])), "phi_deg"),
     ],
 )
 def test_validation(call, name):
