@@ -167,3 +167,130 @@ class WallSampler:
         p_n = np.where(ok, -(trac_r * n_r + trac_z * n_z), np.nan)
         tau = np.where(ok, trac_r * t_r + trac_z * t_z, np.nan)
         return self.centres, self.r, self.z, p_n, tau
+
+
+# ---------------------------------------------------------------- wall loads from the reaction
+class WallLoads:
+    """Wall loads from the wall's reaction: the contact impulses the model measures.
+
+    Every step, the contact of a node with a wall segment changes its velocity by ``dv``; the
+    impulse ``m dv`` is the wall's force on the material times ``dt`` (per radian), and the
+    model adds it up per contact entry (``State.wall_impulse``, ``State.plate_impulse``).
+    Over a window of duration ``T`` the difference ``I`` of those sums gives the mean force
+    ``F = I / T``.  Along the wall, each contact entry stands for the stretch of wall between
+    the midpoints to its neighbours on the same segment (its projection's arc length ``s``
+    from the outlet lip; entries of the outlet lip count on the cone at ``s = 0``, the
+    frictionless free-fall tube below the outlet is left out), so a bin of the profile gets
+    each entry's force in proportion to the wall area of that stretch inside the bin:
+
+        p_n = -sum_e w_be (F_e . n_e) / A_b,    tau = sum_e w_be (F_e . t_e) / A_b
+
+    with ``n`` the entry's normal into the wall, ``t`` the tangent up the wall, ``A_b`` the
+    bin's wall area per radian (``int r ds``) and ``w_be`` the fraction of the entry's stretch
+    (by area) in bin ``b``.  ``p_n`` is compressive (Pa), ``tau`` the shear the wall exerts on
+    the material, positive up the wall (resisting downward flow).  The bins are those of
+    :class:`WallSampler` (the stress-sampled second estimate).
+    """
+
+    def __init__(self, model, sampler: "WallSampler | None" = None):
+        geom, g = model.cfg.hopper, model.grid
+        self.model = model
+        self.sampler = sampler if sampler is not None else WallSampler(model)
+        j, i, normals, _ = model.contact_list
+        seg = model.contact_segment
+        r, z = g.r_nodes[i], g.z_nodes[j]
+        theta = geom.half_angle
+        s_t = float(geometry.transition_arc_length(geom))
+        on_cone = (seg == 1) | (seg == -1)
+        s = np.where(seg == 2, s_t + (z - geom.cone_height),
+                     np.where(seg == -1, 0.0,
+                              (r - geom.outlet_radius) * np.sin(theta)
+                              + (z * np.cos(theta) if geom.cone_height > 0 else 0.0)))
+        s = np.where(on_cone, np.clip(s, 0.0, s_t), np.maximum(s, s_t))
+        self.entries = np.flatnonzero(seg != 0)          # not the free-fall tube
+        self.s = s[self.entries]
+        self.normal = normals[self.entries]
+        self.tangent = np.stack([-self.normal[:, 1], self.normal[:, 0]], axis=1)
+        edges = self.sampler.edges
+        self.centres = self.sampler.centres
+        self.r_w, self.z_w = self.sampler.r, self.sampler.z
+        self.bin_area = self._area(edges[:-1], edges[1:], geom)
+        weights = np.zeros((len(self.centres), len(self.entries)))
+        groups = (on_cone[self.entries], ~on_cone[self.entries])
+        top = max(float(edges[-1]), float(np.max(self.s)) + g.h) if len(self.s) else edges[-1]
+        for group, (lo, hi) in zip(groups, ((0.0, s_t), (s_t, top))):
+            members = np.flatnonzero(group)
+            if members.size == 0:
+                continue
+            values = np.unique(self.s[members])
+            mids = 0.5 * (values[1:] + values[:-1])
+            bounds = np.concatenate([[lo], mids, [hi]])
+            k = np.searchsorted(values, self.s[members])
+            a, b = bounds[k], bounds[k + 1]
+            stretch = self._area(a, b, geom)
+            overlap = self._area(np.maximum(a[None, :], edges[:-1, None]),
+                                 np.minimum(b[None, :], edges[1:, None]), geom)
+            weights[:, members] = np.where(stretch > 0, overlap / np.where(stretch > 0,
+                                                                            stretch, 1.0), 0.0)
+        self.weights = weights
+
+    @staticmethod
+    def _area(a, b, geom):
+        """Wall area per radian ``int_a^b r(s) ds`` (m^2/rad) between arc lengths a <= b; 0 if
+        ``b <= a``."""
+        s_t = float(geometry.transition_arc_length(geom))
+        sin_t = math.sin(geom.half_angle) if geom.cone_height > 0 else 1.0
+
+        def primitive(s):
+            cone = np.minimum(s, s_t)
+            above = np.maximum(s - s_t, 0.0)
+            return (geom.outlet_radius * cone + 0.5 * sin_t * cone ** 2
+                    + geom.bin_radius * above)
+        a, b = np.asarray(a, float), np.asarray(b, float)
+        return np.where(b > a, primitive(b) - primitive(a), 0.0)
+
+    @staticmethod
+    def reading(model, state) -> dict:
+        """The cumulative measurements of ``state`` at this moment (copies): the impulses,
+        the momentum budget, the vertical momentum ``sum m v_z`` (per radian) and the time."""
+        mass = model.node_mass(state)
+        return {"t": state.t, "wall": state.wall_impulse.copy(),
+                "plate": state.plate_impulse.copy(),
+                "budget": state.momentum_budget.copy(),
+                "momentum": float(np.sum(mass * state.v[1]))}
+
+    def profile(self, start: dict, end: dict):
+        """``(s, r, z, p_n, tau)`` of the window between two :meth:`reading` s (Pa)."""
+        duration = end["t"] - start["t"]
+        if not duration > 0:
+            raise ValueError("a wall-load window needs a positive duration")
+        force = (end["wall"] - start["wall"])[self.entries] / duration       # N/rad
+        normal = np.einsum("ek,ek->e", force, self.normal)
+        shear = np.einsum("ek,ek->e", force, self.tangent)
+        p_n = -(self.weights @ normal) / self.bin_area
+        tau = (self.weights @ shear) / self.bin_area
+        return self.centres, self.r_w, self.z_w, p_n, tau
+
+    @staticmethod
+    def balance(start: dict, end: dict) -> dict:
+        """The vertical momentum balance of the whole grid over a window, as mean forces in N
+        (3D, upward positive): ``weight`` (positive), ``wall`` and ``outlet`` (the plate's
+        reaction), ``damping``, ``stopped`` (light nodes), ``outflow`` (momentum leaving
+        through the bottom, as a force), ``momentum_rate`` (``dP/dt``) and the ``residual``
+        of ``dP/dt = wall + outlet + damping + stopped + outflow - weight``, also relative to
+        the weight (``relative_residual``)."""
+        duration = end["t"] - start["t"]
+        if not duration > 0:
+            raise ValueError("a load window needs a positive duration")
+        to_n = 2.0 * math.pi / duration
+        budget = (end["budget"] - start["budget"]) * to_n
+        out = {"weight": -budget[0],
+               "wall": float(np.sum(end["wall"][:, 1] - start["wall"][:, 1])) * to_n,
+               "outlet": float(np.sum(end["plate"][:, 1] - start["plate"][:, 1])) * to_n,
+               "damping": budget[1], "stopped": budget[2], "outflow": budget[3],
+               "momentum_rate": (end["momentum"] - start["momentum"]) * to_n}
+        out["residual"] = (out["wall"] + out["outlet"] + out["damping"] + out["stopped"]
+                           + out["outflow"] - out["weight"] - out["momentum_rate"])
+        out["relative_residual"] = (abs(out["residual"]) / out["weight"]
+                                    if out["weight"] > 0 else math.nan)
+        return out

@@ -65,6 +65,8 @@ REDISTRIBUTION_ROOM_MIN = 1e-6
 REDISTRIBUTION_ROOM_MIN_FALLBACK = 1e-3
 
 TRANSPORTED = ("alpha", "s_rr", "s_zz", "s_tt", "s_rz", "eps_p", "layer", "loose")
+#: the terms of ``State.momentum_budget``: cumulative vertical impulses (kg m/s per radian)
+MOMENTUM_BUDGET = ("gravity", "damping", "stopped", "outflow")
 
 
 class InstabilityError(RuntimeError):
@@ -93,6 +95,13 @@ class State:
     loose: np.ndarray = None        # (nz, nr) loose volumetric strain (0 = dense), see step()
     markers: np.ndarray = None      # (n, 3) passive marker points (r, z, layer), fipy_hopper.markers
     displacement: np.ndarray = None  # (2, nz+1, nr+1) int v dt since the last transport, m
+    # measurements (read by diagnostics, never by the physics), cumulative since the start,
+    # per radian (kg m/s): the impulse m dv of every wall contact and of every contact with
+    # the outlet plate, in the order of HopperModel.contact_list / plate_list, and the vertical
+    # momentum budget (gravity, damping, light nodes stopped, outflow through the bottom)
+    wall_impulse: np.ndarray = None   # (n_contacts, 2)
+    plate_impulse: np.ndarray = None  # (n_plate, 2)
+    momentum_budget: np.ndarray = None  # (4,) see MOMENTUM_BUDGET
 
     def __post_init__(self):
         # states from before these fields existed (older checkpoints): dense, no pending motion
@@ -147,13 +156,21 @@ class HopperModel:
         RN, ZN = np.meshgrid(g.r_nodes, g.z_nodes)
         reach = 0.5 * g.h
         self.contact_passes = []
+        segments = []                 # the wall segment of each pass (-1: the lip)
         covered = np.zeros_like(RN, dtype=bool)
         for k, mask, n_r, n_z in geometry.segment_contacts(RN, ZN, cfg.hopper, reach):
             normal = np.array([n_r, n_z])[:, None, None] * np.ones((2,) + RN.shape)
             self.contact_passes.append((mask, normal, 0.0 if k == 0 else self.mu_wall))
+            segments.append(k)
             covered |= mask
         lip = (g.node_distance < reach) & ~covered
         self.contact_passes.append((lip, g.node_normal, self.mu_wall))
+        segments.append(-1)
+        #: wall segment of each entry of ``contact_list`` (0 tube, 1 cone or floor, 2 bin
+        #: wall, -1 the outlet lip)
+        self.contact_segment = np.concatenate([np.full(np.count_nonzero(mask), k) for
+                                               (mask, _, _), k in zip(self.contact_passes,
+                                                                      segments)])
         self.plate_nodes = (np.abs(ZN) < 1e-12) & (RN <= cfg.hopper.outlet_radius + 1e-12)
         self.plate_normal = np.array([0.0, -1.0])[:, None, None] * np.ones((2,) + RN.shape)
         self.contact_list = _contact_list(self.contact_passes)
@@ -177,7 +194,8 @@ class HopperModel:
         self._plate_rows = _contact_rows(self.plate_list, g.nz + 1)
         self._face_sign = np.ascontiguousarray(self.face_sign, dtype=float)
         self._work = (np.empty((n, 3), np.int64), np.empty((n, 3), np.int64),
-                      np.empty(n + 1, np.int64), np.zeros((8, g.nz, g.nr)), np.zeros(g.nz + 1))
+                      np.empty(n + 1, np.int64), np.zeros((8, g.nz, g.nr)), np.zeros(g.nz + 1),
+                      np.zeros((g.nz + 1, 3)))
         self._open_face = self.open_faces.astype(float)
         self._stacked = np.empty((len(TRANSPORTED), n))
         self._carried = (np.empty((len(TRANSPORTED), n)),
@@ -202,7 +220,14 @@ class HopperModel:
                      layer=layer, face_flux_sum=np.zeros(len(g.face_aperture)),
                      loose=np.zeros((g.nz, g.nr)),
                      markers=self._seed_markers(alpha, layer),
-                     displacement=np.zeros((2, g.nz + 1, g.nr + 1)))
+                     displacement=np.zeros((2, g.nz + 1, g.nr + 1)),
+                     **self._measurements())
+
+    def _measurements(self) -> dict:
+        """Zero load measurements of a state (:class:`State`)."""
+        return {"wall_impulse": np.zeros((len(self.contact_list[0]), 2)),
+                "plate_impulse": np.zeros((len(self.plate_list[0]), 2)),
+                "momentum_budget": np.zeros(len(MOMENTUM_BUDGET))}
 
     def _seed_markers(self, alpha, layer):
         per_side = self.cfg.run.markers_per_side
@@ -259,6 +284,9 @@ class HopperModel:
         """
         if max_steps < 1:
             return 0
+        if state.wall_impulse is None:     # a state from before the load measurements
+            for key, value in self._measurements().items():
+                setattr(state, key, value)
         if self.kernels == "numpy":
             for n in range(max_steps):
                 if self._step_numpy(state):
@@ -273,8 +301,6 @@ class HopperModel:
         ramp = num.gravity_ramp_time if state.stage == "filling" else 0.0
         damping = self.fill_damping if state.stage == "filling" else 0.0
         clock = np.array([state.t, float(state.step), state.flux_time])
-        contact_ptr, contact_i, contact_normal, contact_mu = self._contact_rows
-        plate_ptr, plate_i, plate_normal, plate_mu = self._plate_rows
         if numba.get_num_threads() != self.threads:
             numba.set_num_threads(self.threads)
         done, due = stepping.material_steps(
@@ -283,9 +309,9 @@ class HopperModel:
             self.open_volume, self.r_c, g.r_nodes, g.h, self.hourglass_base, g.kappa,
             self._zface_aperture, self._rface_aperture, self._face_sign, self._open_face,
             self._prm, self.dt, GRAVITY, ramp, damping, self.light_mass, num.alpha_min,
-            num.transport_cfl, num.max_transport_interval, contact_ptr, contact_i,
-            contact_normal, contact_mu, plate_ptr, plate_i, plate_normal, plate_mu,
-            state.plate_closed, self._work)
+            num.transport_cfl, num.max_transport_interval, *self._contact_rows,
+            *self._plate_rows, state.plate_closed, state.wall_impulse, state.plate_impulse,
+            state.momentum_budget, self._work)
         state.t, state.flux_time = float(clock[0]), float(clock[2])
         state.step += int(done)
         if due:
@@ -342,14 +368,30 @@ class HopperModel:
         force += momentum.hourglass_force(state.v, self.hourglass_base * state.alpha)
         force[1] -= m * self.gravity(state)
         heavy = m > self.light_mass
-        v = np.where(heavy[None], state.v + dt * force / np.where(heavy, m, 1.0)[None], 0.0)
-        v *= 1.0 / (1.0 + damping * dt)
+        free = np.where(heavy[None], state.v + dt * force / np.where(heavy, m, 1.0)[None], 0.0)
+        v = free * (1.0 / (1.0 + damping * dt))
+        budget = state.momentum_budget
+        budget[0] -= np.sum(np.where(heavy, m * self.gravity(state) * dt, 0.0))
+        budget[1] += np.sum(np.where(heavy, m * (v[1] - free[1]), 0.0))
+        budget[2] -= np.sum(np.where(heavy, 0.0, m * state.v[1]))
+        start = 0
         for mask, normal, mu in self.contact_passes:
-            momentum.apply_wall_contact(v, normal, mask, mu)
+            start = self._contact_with_impulse(v, m, mask, normal, mu, state.wall_impulse, start)
         if state.plate_closed:
-            momentum.apply_wall_contact(v, self.plate_normal, self.plate_nodes, self.mu_wall)
+            self._contact_with_impulse(v, m, self.plate_nodes, self.plate_normal, self.mu_wall,
+                                       state.plate_impulse, 0)
         v[0, :, 0] = 0.0
         return v
+
+    @staticmethod
+    def _contact_with_impulse(v, m, mask, normal, mu, impulse, start):
+        """``momentum.apply_wall_contact`` of one pass, adding each node's ``m dv`` to
+        ``impulse[start:]`` in the order of the pass's nodes; returns the next start."""
+        j, i = np.nonzero(mask)
+        before = v[:, j, i].copy()
+        momentum.apply_wall_contact(v, normal, mask, mu)
+        impulse[start:start + len(j)] += (m[j, i] * (v[:, j, i] - before)).T
+        return start + len(j)
 
     def _transport_due(self, state: State, u_n: np.ndarray) -> bool:
         num = self.cfg.numerics
@@ -430,18 +472,26 @@ class HopperModel:
             mass_new = np.empty_like(mass_old)
             momentum.node_mass_kernel(self.rho, new_alpha, self.open_volume, mass_new)
             v_new = np.empty_like(state.v)
-            momentum.dual_momentum_kernel(state.v, mass_old, mass_new,
-                                          np.ascontiguousarray(flux_z),
-                                          np.ascontiguousarray(flux_r), self.rho,
-                                          self.light_mass, v_new)
+            outflow, stopped = momentum.dual_momentum_kernel(
+                state.v, mass_old, mass_new, np.ascontiguousarray(flux_z),
+                np.ascontiguousarray(flux_r), self.rho, self.light_mass, v_new)
             state.v = v_new
         else:
             mass_new = momentum.node_mass(self.rho, new_alpha, self.open_volume)
+            v_old = state.v
             state.v = momentum.dual_momentum_transport(state.v, mass_old, mass_new, flux_z,
                                                        flux_r, self.rho)
+            leaving = 0.5 * self.rho * flux_z[0]
+            outflow = float(np.sum(np.concatenate([leaving, [0.0]]) * v_old[1, 0])
+                            + np.sum(np.concatenate([[0.0], leaving]) * v_old[1, 0]))
             # round-off traces of material (content ~1e-30) get no velocity, as in the
             # nodal update
-            state.v[:, mass_new <= self.light_mass] = 0.0
+            light = mass_new <= self.light_mass
+            stopped = -float(np.sum((mass_new * state.v[1])[light]))
+            state.v[:, light] = 0.0
+        if state.momentum_budget is not None:
+            state.momentum_budget[2] += stopped
+            state.momentum_budget[3] += outflow
         state.alpha = new_alpha
         state.sigma = sigma
         state.eps_p = eps_p
@@ -462,12 +512,12 @@ class HopperModel:
 
 def _contact_rows(contact_list, n_rows):
     """A contact list ``(j, i, normals, mu)`` grouped by node row, in list order within a row:
-    ``(row pointer (n_rows + 1,), i, normals, mu)``."""
+    ``(row pointer (n_rows + 1,), i, normals, mu, index in the list)``."""
     j, i, normals, mu = contact_list
     order = np.argsort(j, kind="stable")
     ptr = np.searchsorted(j[order], np.arange(n_rows + 1)).astype(np.int64)
     return (ptr, np.ascontiguousarray(i[order]), np.ascontiguousarray(normals[order]),
-            np.ascontiguousarray(mu[order]))
+            np.ascontiguousarray(mu[order]), order.astype(np.int64))
 
 
 def _contact_list(passes):

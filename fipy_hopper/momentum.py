@@ -363,7 +363,10 @@ def node_mass_kernel(rho, alpha, open_volume, out):
 @njit(cache=True, error_model="numpy")
 def dual_momentum_kernel(v, mass_old, mass_new, flux_z, flux_r, rho, light_mass, out):
     """:func:`dual_momentum_transport` (with the bottom outflow) into ``out``, the same
-    operations in the same order for every node; nodes of mass ``<= light_mass`` get zero."""
+    operations in the same order for every node; nodes of mass ``<= light_mass`` get zero.
+
+    Returns the vertical momentum (kg m/s per radian) that the bottom outflow carried into
+    the grid (negative: it left) and that stopping the light nodes added."""
     nz1, nr = flux_z.shape
     nz = nz1 - 1
     gz = np.empty((nz, nr + 1))
@@ -384,6 +387,8 @@ def dual_momentum_kernel(v, mass_old, mass_new, flux_z, flux_r, rho, light_mass,
             if k > 0:
                 s += 0.25 * (rho * flux_r[k - 1, i] + rho * flux_r[k - 1, i + 1])
             gr[k, i] = s
+    outflow = 0.0
+    stopped = 0.0
     for c in range(2):
         for k in range(nz + 1):
             for a in range(nr + 1):
@@ -407,7 +412,12 @@ def dual_momentum_kernel(v, mass_old, mass_new, flux_z, flux_r, rho, light_mass,
                     if a > 0:
                         node_out += 0.5 * (rho * flux_z[0, a - 1])
                     p += node_out * v[c, 0, a]
+                    if c == 1:
+                        outflow += node_out * v[c, 0, a]
                 m = mass_new[k, a]
                 out[c, k, a] = p / m if m > 0 else 0.0
                 if m <= light_mass:
                     out[c, k, a] = 0.0
+                    if c == 1:
+                        stopped -= p
+    return outflow, stopped

@@ -168,15 +168,25 @@ def _contact(v, j, i, n_r, n_z, mu):
 
 @_jit_parallel
 def _node_update(j0, j1, v, mass, contrib, gravity, dt, damping, light_mass, contact_ptr,
-                 contact_i, contact_normal, contact_mu, plate_ptr, plate_i, plate_normal,
-                 plate_mu, plate_closed):
+                 contact_i, contact_normal, contact_mu, contact_entry, plate_ptr, plate_i,
+                 plate_normal, plate_mu, plate_entry, plate_closed, contact_impulse,
+                 plate_impulse, row_budget):
     """Velocities of the nodes of rows ``j0 <= j < j1`` from the corner forces (summed in the
     scatter's order: NE of the cell below left, NW below, SE left, SW own); contact, plate and
-    axis row by row (each node meets its contacts in the contact list's order)."""
+    axis row by row (each node meets its contacts in the contact list's order).
+
+    Measured on the way, without changing a velocity: the impulse ``m dv`` (kg m/s per radian)
+    of every contact and plate entry is added to ``contact_impulse`` / ``plate_impulse`` at
+    the entry's place in the model's lists (``contact_entry``, ``plate_entry``), and each
+    row's vertical impulses of gravity (``-m g dt``), of the damping and of stopping light
+    nodes go to ``row_budget[j, 0:3]``."""
     nz1, nr1 = mass.shape
     nz, nr = nz1 - 1, nr1 - 1
     scale = 1.0 / (1.0 + damping * dt)
     for j in prange(j0, j1):
+        weight = 0.0
+        damped = 0.0
+        stopped = 0.0
         for i in range(nr1):
             fr = 0.0
             fz = 0.0
@@ -195,18 +205,33 @@ def _node_update(j0, j1, v, mass, contrib, gravity, dt, damping, light_mass, con
             m = mass[j, i]
             if m > light_mass:
                 v[0, j, i] = (v[0, j, i] + dt * fr / m) * scale
-                v[1, j, i] = (v[1, j, i] + dt * (fz / m - gravity)) * scale
+                free_z = v[1, j, i] + dt * (fz / m - gravity)
+                v[1, j, i] = free_z * scale
+                weight -= m * gravity * dt
+                damped += m * (v[1, j, i] - free_z)
             else:
+                stopped -= m * v[1, j, i]
                 v[0, j, i] = 0.0
                 v[1, j, i] = 0.0
         for e in range(contact_ptr[j], contact_ptr[j + 1]):
-            _contact(v, j, contact_i[e], contact_normal[e, 0], contact_normal[e, 1],
-                     contact_mu[e])
+            i = contact_i[e]
+            vr, vz = v[0, j, i], v[1, j, i]
+            _contact(v, j, i, contact_normal[e, 0], contact_normal[e, 1], contact_mu[e])
+            k = contact_entry[e]
+            contact_impulse[k, 0] += mass[j, i] * (v[0, j, i] - vr)
+            contact_impulse[k, 1] += mass[j, i] * (v[1, j, i] - vz)
         if plate_closed:
             for e in range(plate_ptr[j], plate_ptr[j + 1]):
-                _contact(v, j, plate_i[e], plate_normal[e, 0], plate_normal[e, 1],
-                         plate_mu[e])
+                i = plate_i[e]
+                vr, vz = v[0, j, i], v[1, j, i]
+                _contact(v, j, i, plate_normal[e, 0], plate_normal[e, 1], plate_mu[e])
+                k = plate_entry[e]
+                plate_impulse[k, 0] += mass[j, i] * (v[0, j, i] - vr)
+                plate_impulse[k, 1] += mass[j, i] * (v[1, j, i] - vz)
         v[0, j, 0] = 0.0
+        row_budget[j, 0] = weight
+        row_budget[j, 1] = damped
+        row_budget[j, 2] = stopped
 
 
 @_jit
@@ -401,16 +426,20 @@ def material_steps(max_steps, clock, v, mass, alpha, sigma, loose, eps_p, face_f
                    zface_aperture, rface_aperture, face_sign, open_face, prm, dt, g_full,
                    ramp_time, damping, light_mass, alpha_min, transport_cfl,
                    max_transport_interval, contact_ptr, contact_i, contact_normal, contact_mu,
-                   plate_ptr, plate_i, plate_normal, plate_mu, plate_closed, work):
+                   contact_entry, plate_ptr, plate_i, plate_normal, plate_mu, plate_entry,
+                   plate_closed, contact_impulse, plate_impulse, budget, work):
     """Up to ``max_steps`` material steps, in place.
 
     ``clock = [t, step, flux_time]`` (s, -, s) is advanced; gravity is ``g_full`` ramped over
-    ``ramp_time`` s (0: none).  ``work = (carry runs (n, 3), load runs (n, 3), block pointers
-    (n + 1,), corner forces (8, nz, nr), row speeds (nz + 1,))``, sized by the model.
-    Returns ``(steps done, transport due)``: the loop stops after the step at which a
-    transport is due (the caller transports; alpha is constant until then).
+    ``ramp_time`` s (0: none).  The measurements of :func:`_node_update` accumulate in
+    ``contact_impulse``, ``plate_impulse`` and ``budget[0:3]`` (vertical impulses of gravity,
+    damping and stopped light nodes; kg m/s per radian).  ``work = (carry runs (n, 3), load
+    runs (n, 3), block pointers (n + 1,), corner forces (8, nz, nr), row speeds (nz + 1,),
+    row budgets (nz + 1, 3))``, sized by the model.  Returns ``(steps done, transport due)``:
+    the loop stops after the step at which a transport is due (the caller transports; alpha is
+    constant until then).
     """
-    carry_runs, load_runs, block_ptr, contrib, row_speed = work
+    carry_runs, load_runs, block_ptr, contrib, row_speed, row_budget = work
     cst = mc._fast_constants(prm)
     n_carry, n_load, n_blocks, j0, j1 = _runs(alpha, alpha_min, sigma, loose, v, contrib,
                                               carry_runs, load_runs, block_ptr)
@@ -421,8 +450,13 @@ def material_steps(max_steps, clock, v, mass, alpha, sigma, loose, eps_p, face_f
         _cell_forces(carry_runs, n_carry, alpha, sigma, v, open_volume, r_c, h, hg_base,
                      contrib)
         _node_update(j0, j1, v, mass, contrib, gravity, dt, damping, light_mass, contact_ptr,
-                     contact_i, contact_normal, contact_mu, plate_ptr, plate_i, plate_normal,
-                     plate_mu, plate_closed)
+                     contact_i, contact_normal, contact_mu, contact_entry, plate_ptr, plate_i,
+                     plate_normal, plate_mu, plate_entry, plate_closed, contact_impulse,
+                     plate_impulse, row_budget)
+        for j in range(j0, j1):           # in row order: the sums do not depend on threads
+            budget[0] += row_budget[j, 0]
+            budget[1] += row_budget[j, 1]
+            budget[2] += row_budget[j, 2]
         _stress_update(block_ptr, n_blocks, load_runs, v, sigma, loose, eps_p, r_c, r_nodes,
                        h, dt, kappa, zface_aperture, rface_aperture, prm, cst)
         _faces(jf, j1, v, dt, face_sign, open_face, face_flux_sum, displacement, with_markers,
