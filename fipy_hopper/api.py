@@ -139,7 +139,8 @@ def run(config_or_path, out, force: bool = False, resume: bool = False, quiet: b
     model = HopperModel(cfg)
     progress = (not quiet) and sys.stderr.isatty()
     sim = Simulation(model, progress=progress)
-    fields = fio.FieldWriter(rundir.fields, model.grid)
+    fields = fio.FieldWriter(rundir.fields, model.grid, cfg.material.cohesion,
+                             cfg.material.friction_angle_deg)
 
     def snapshot(sim_, state):
         fields(sim_, state)
@@ -199,6 +200,7 @@ def run(config_or_path, out, force: bool = False, resume: bool = False, quiet: b
             plotting.plot_run(rundir.path)
         except Exception as exc:  # pictures are a convenience; the data are written
             warnings.warn(f"the pictures could not be drawn: {exc}", RuntimeWarning)
+    rundir.close()                           # release the run directory's lock
     if error is not None:
         raise error
     return fio._jsonable(summary)
@@ -207,6 +209,7 @@ def run(config_or_path, out, force: bool = False, resume: bool = False, quiet: b
 def _write_tables(rundir, record) -> None:
     fio.write_timeseries(rundir / rundir.TIMESERIES, record)
     fio.write_wall_pressure(rundir / rundir.WALL_PRESSURE, record)
+    fio.write_loads(rundir / rundir.LOADS, record)
 
 
 def _summary(sim, cfg, reason: str) -> dict:

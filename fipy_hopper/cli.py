@@ -8,14 +8,17 @@
     fipy-hopper validate CONFIG.toml
 
 Exit codes: 0 success; 2 bad input (a configuration error, a missing or non-TOML file, an
-output directory that would be overwritten), reported in one line on stderr; 1 a run that
+output directory that would be overwritten or that another run is using, a path the system
+refuses, a directory that ``plot`` cannot read), reported in one line on stderr; 1 a run that
 failed (unstable, or an internal error), with the reason, after writing everything measured so
-far; 130 a run interrupted with Ctrl-C or SIGTERM (continue it with ``--resume``).
+far; 130 a run interrupted with Ctrl-C or SIGTERM (continue it with ``--resume`` once a
+checkpoint has been written).
 """
 
 from __future__ import annotations
 
 import argparse
+import math
 import shlex
 import signal
 import sys
@@ -24,7 +27,8 @@ import warnings
 from pathlib import Path
 
 from . import __version__
-from .config import ConfigError, HopperConfig, ResolutionWarning
+from .config import ConfigError, HopperConfig, ResolutionWarning, SamplingWarning
+from .config import short_text as _short
 
 EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
 PROG = "fipy-hopper"
@@ -92,7 +96,11 @@ def _error(message: str, code: int) -> int:
 
 def _load(path: str) -> HopperConfig:
     from .api import load_config
-    return load_config(path)
+    try:
+        return load_config(path)
+    except OSError as exc:         # e.g. a name too long for the file system
+        raise ConfigError(f"cannot read configuration {_short(path)}: "
+                          f"{exc.strerror or exc}") from None
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None):
@@ -101,15 +109,15 @@ def _show_warning(message, category, filename, lineno, file=None, line=None):
 
 
 def _validate(args) -> int:
+    """Check a configuration and print what follows from it, without building the grid (the
+    grid's size and the time step follow from the configuration by the model's own rules)."""
     from .api import expected_quantities
-    from .model import HopperModel
 
     cfg = _load(args.config)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        model = HopperModel(cfg)
     e = expected_quantities(cfg)
-    g, geom, run = model.grid, cfg.hopper, cfg.run
+    geom, run = cfg.hopper, cfg.run
+    nr, nz = cfg.grid_shape()
+    h = cfg.numerics.cell_size
     theta_c = e["jenike_critical_half_angle_deg"]
     if e["jenike_flow_mode"] == "unknown":
         theta_c_text = "n/a (friction angle below the 19.5 deg range of the fit)"
@@ -120,10 +128,11 @@ def _validate(args) -> int:
     end = run.end_time if isinstance(run.end_time, str) else f"{run.end_time:g} s"
     lines = [
         f"{args.config}: valid",
-        f"  grid               {g.nr} x {g.nz} = {g.n_cells} cells of {g.h:g} m "
-        f"({geom.outlet_radius / g.h:.1f} across the outlet radius)",
+        f"  grid               {nr} x {nz} = {nr * nz} cells of {h:g} m "
+        f"({geom.outlet_radius / h:.1f} across the outlet radius), "
+        f"about {cfg.memory_estimate() / 1e9:.2g} GB",
         f"  P-wave speed c_p   {e['p_wave_speed_m_s']:.4g} m/s",
-        f"  time step          {model.dt:.4g} s",
+        f"  time step          {cfg.time_step:.4g} s (at most {cfg.step_estimate():.3g} steps)",
         f"  cone height        {geom.cone_height:.4g} m (transition to the bin)",
         f"  fill mass          {e['fill_mass_kg']:.4g} kg",
         f"  Beverloo rate      {e['beverloo_rate_kg_s']:.4g} kg/s = "
@@ -142,13 +151,19 @@ def _validate(args) -> int:
 
 def _plot(args) -> int:
     from . import plotting
-    from .io import RunDirectory
+    from .io import RunDirectoryError, check_run_files
 
     run = Path(args.dir)
-    if not (run / RunDirectory.CONFIG).is_file() or not (run / RunDirectory.TIMESERIES).is_file():
-        return _error(f"{run} is not a run directory (no {RunDirectory.CONFIG} and "
-                      f"{RunDirectory.TIMESERIES})", EXIT_BAD_INPUT)
-    for path in plotting.plot_run(run):
+    try:
+        check_run_files(run)
+    except RunDirectoryError as exc:
+        return _error(exc, EXIT_BAD_INPUT)
+    try:
+        paths = plotting.plot_run(run)
+    except Exception as exc:  # a file that passed the checks but cannot be drawn
+        return _error(f"cannot draw the pictures of {_short(run)}: {type(exc).__name__}: "
+                      f"{_short(exc, 300)}", EXIT_FAILED)
+    for path in paths:
         print(path)
     return EXIT_OK
 
@@ -157,13 +172,15 @@ def _run(args, config, source=None) -> int:
     from . import api
     from .io import RunDirectory, RunDirectoryError
 
-    if args.checkpoint_interval < 0:
+    if not (math.isfinite(args.checkpoint_interval) and args.checkpoint_interval >= 0):
         return _error(f"--checkpoint-interval = {args.checkpoint_interval:g}: expected "
-                      "seconds >= 0", EXIT_BAD_INPUT)
+                      "a finite number of seconds >= 0 (0: no checkpoints)", EXIT_BAD_INPUT)
+    if not args.out.strip():
+        return _error(f"--out = {args.out!r}: expected a directory name", EXIT_BAD_INPUT)
     command = " ".join(shlex.quote(a) for a in [PROG] + list(args.argv))
-    again = ("fipy-hopper demo" if args.command == "demo" else
-             f"fipy-hopper run {shlex.quote(args.config)}") + \
-        f" --out {shlex.quote(args.out)} --resume"
+    start = ("fipy-hopper demo" if args.command == "demo" else
+             f"fipy-hopper run {shlex.quote(args.config)}") + f" --out {shlex.quote(args.out)}"
+    again = start + " --resume"
     try:
         with _sigterm_as_interrupt():
             summary = api.run(config, args.out, force=args.force, resume=args.resume,
@@ -172,8 +189,7 @@ def _run(args, config, source=None) -> int:
     except (ConfigError, RunDirectoryError) as exc:
         return _error(exc, EXIT_BAD_INPUT)
     except KeyboardInterrupt:
-        return _error(f"interrupted; the outputs so far are in {args.out}; continue from the "
-                      f"last checkpoint with: {again}", EXIT_INTERRUPTED)
+        return _error(_interrupted_message(args.out, start, again), EXIT_INTERRUPTED)
     except Exception as exc:
         from .model import InstabilityError
         kind = "the run went unstable" if isinstance(exc, InstabilityError) else "the run failed"
@@ -184,8 +200,30 @@ def _run(args, config, source=None) -> int:
     if not args.quiet:
         _print_summary(summary, args.out)
         if summary.get("stop_reason") == "wall_time_limit":
-            print(f"  stopped at run.wall_time_limit; continue with: {again}")
+            if (Path(args.out) / RunDirectory.CHECKPOINT).is_file():
+                print(f"  stopped at run.wall_time_limit; continue with: {again}")
+            else:
+                print("  stopped at run.wall_time_limit without a checkpoint "
+                      "(--checkpoint-interval 0): it cannot be continued")
     return EXIT_OK
+
+
+def _interrupted_message(out: str, start: str, again: str) -> str:
+    """What to do after Ctrl-C: ``--resume`` only if a checkpoint exists to resume from."""
+    from .io import RunDirectory
+
+    folder = Path(out)
+    try:
+        if (folder / RunDirectory.CHECKPOINT).is_file():
+            return (f"interrupted; the outputs so far are in {out}; continue from the last "
+                    f"checkpoint with: {again}")
+        written = folder.is_dir() and any(p.name != RunDirectory.LOCK for p in folder.iterdir())
+    except OSError:
+        written = False
+    if written:
+        return (f"interrupted before the first checkpoint, so it cannot be resumed; the "
+                f"outputs so far are in {out}; start again with: {start} --force")
+    return f"interrupted before the run started; start it with: {start}"
 
 
 class _sigterm_as_interrupt:
@@ -239,6 +277,7 @@ def main(argv=None) -> int:
     with warnings.catch_warnings():
         warnings.showwarning = _show_warning
         warnings.filterwarnings("default", category=ResolutionWarning)
+        warnings.filterwarnings("default", category=SamplingWarning)
         return _dispatch(args)
 
 
@@ -253,6 +292,9 @@ def _dispatch(args) -> int:
         return _run(args, _load(args.config), str(Path(args.config).resolve()))
     except ConfigError as exc:
         return _error(exc, EXIT_BAD_INPUT)
+    except OSError as exc:        # a path the system refuses (too long, no permission, ...)
+        name = f"{_short(exc.filename)}: " if exc.filename else ""
+        return _error(f"{name}{exc.strerror or exc}", EXIT_BAD_INPUT)
     except KeyboardInterrupt:
         return _error("interrupted", EXIT_INTERRUPTED)
 

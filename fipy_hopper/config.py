@@ -36,28 +36,99 @@ class ResolutionWarning(UserWarning):
     """The grid resolves a feature of the hopper with few cells."""
 
 
-def _check_number(key: str, value: Any) -> float:
+class SamplingWarning(UserWarning):
+    """The discharge gets few outputs (a field interval longer than ``run.end_time``)."""
+
+
+def short_text(text, limit: int = 200) -> str:
+    """``text`` (e.g. a path) for a one-line message, shortened in the middle when long."""
+    text = str(text)
+    return text if len(text) <= limit else \
+        f"{text[:100]}...{text[-60:]} ({len(text)} characters)"
+
+
+def _show(value: Any, limit: int = 40) -> str:
+    """A value for a one-line message: repr, shortened (a 400-digit integer says so)."""
+    if isinstance(value, int) and not isinstance(value, bool) and abs(value) >= 10 ** 15:
+        digits = len(str(abs(value)))
+        return f"{'-' if value < 0 else ''}{str(abs(value))[:6]}... (an integer of {digits} digits)"
+    if isinstance(value, float):
+        return f"{value:g}"
+    text = repr(value)
+    return text if len(text) <= limit else text[:limit - 3] + "..."
+
+
+def _interval(low, high, low_open=False, high_open=False, unit: str = "") -> str:
+    lo = "-inf" if low is None else f"{low:g}"
+    hi = "inf" if high is None else f"{high:g}"
+    return (("(" if low_open or low is None else "[") + f"{lo}, {hi}"
+            + (")" if high_open or high is None else "]") + unit)
+
+
+def _check_number(key: str, value: Any, allowed: str = "") -> float:
+    """``value`` as a finite float; ``allowed`` (an interval) is named when it is not one."""
+    where = f" in {allowed}" if allowed else ""
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ConfigError(f"{key} = {value!r}: expected a number")
-    value = float(value)
-    if not math.isfinite(value):
-        raise ConfigError(f"{key} = {value!r}: expected a finite number")
-    return value
+        raise ConfigError(f"{key} = {_show(value)}: expected a number{where}")
+    try:
+        number = float(value)
+    except OverflowError:          # an integer beyond the float range
+        raise ConfigError(f"{key} = {_show(value)}: too large; expected a number{where}") \
+            from None
+    if not math.isfinite(number):
+        raise ConfigError(f"{key} = {_show(value)}: expected a finite number{where}")
+    return number
 
 
 def _check_range(key: str, value: Any, low=None, high=None, low_open=False, high_open=False,
                  unit: str = "") -> float:
     """Check ``low <(=) value <(=) high`` and return the value as float; error names the key."""
-    value = _check_number(key, value)
+    interval = _interval(low, high, low_open, high_open, unit)
+    value = _check_number(key, value, interval)
     bad = ((low is not None and (value < low or (low_open and value == low)))
            or (high is not None and (value > high or (high_open and value == high))))
     if bad:
-        lo = "-inf" if low is None else f"{low:g}"
-        hi = "inf" if high is None else f"{high:g}"
-        interval = ("(" if low_open or low is None else "[") + f"{lo}, {hi}" + (
-            ")" if high_open or high is None else "]")
-        raise ConfigError(f"{key} = {value:g}{unit}: allowed range is {interval}{unit}")
+        raise ConfigError(f"{key} = {value:g}{unit}: allowed range is {interval}")
     return value
+
+
+def _check_int(key: str, value: Any, low: int, high: int) -> int:
+    """An integer (not a bool, not a float) in ``[low, high]``."""
+    if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
+        raise ConfigError(f"{key} = {_show(value)}: expected an integer in [{low}, {high}]")
+    return value
+
+
+# Bounds of physically meaningful values (SI).  They keep every number the solver derives
+# from a configuration finite and refuse typing slips such as lengths in millimetres:
+#: Hopper lengths (m): below 1 mm a continuum of grains is meaningless; no silo is 100 m wide
+#: or tall.
+LENGTH_RANGE = (1e-3, 100.0)
+#: Bulk density (kg/m3): the lightest powders (aerogel, ~10) to beyond tungsten (~19,300).
+DENSITY_RANGE = (1.0, 2.0e4)
+#: Young's modulus (Pa): 1 kPa (loose, cohesive powder) to 1 TPa (stiffer than diamond).
+MODULUS_RANGE = (1e3, 1e12)
+#: Cohesion (Pa): up to 100 MPa, the strength of strong rock; granular media have kPa.
+COHESION_MAX = 1e8
+#: Cell size (m): 0.1 mm (the size of a sand grain) to 10 m.
+CELL_SIZE_RANGE = (1e-4, 10.0)
+#: Simulated times (s): at most 1e6 s (11.6 days; the largest silos empty in hours).
+TIME_MAX = 1e6
+#: Time-series samples are taken at most once per check (2 ms); field snapshots are files.
+OUTPUT_INTERVAL_MIN, FIELD_INTERVAL_MIN = 1e-4, 1e-3
+#: Largest grid, in cells.  Peak resident memory measured (fipy_hopper.model.HopperModel(cfg)
+#: of the reference hopper, resource.getrusage, one process): 0.40 GB at 72,346 cells, 1.17 GB
+#: at 286,770 and 3.89 GB at 1,141,858, i.e. 3.2-3.6 kB a cell on top of about 0.15-0.26 GB;
+#: the peak is the cut-cell sub-sampling of mesh.build_grid, and the initial state, ten steps,
+#: a transport, a field snapshot and a checkpoint add nothing beyond it.  2 million cells
+#: need about 7 GB (MEMORY_BASE + MEMORY_PER_CELL * cells, rounded up from the measurements).
+MAX_CELLS = 2_000_000
+MEMORY_PER_CELL = 3.5e3            # bytes a cell (measured, see MAX_CELLS)
+MEMORY_BASE = 0.2e9                # bytes: Python, FiPy, numba and the compiled kernels
+#: Most explicit time steps a run may need.  Even at the cost of a step on a tiny grid
+#: (measured: 2,937 steps of a 624-cell hopper in 0.43 s, 0.15 ms a step) 1e9 steps take
+#: about two days; on the reference grid (0.5 ms a step) a week.  More cannot finish.
+MAX_STEPS = 1e9
 
 
 @dataclass(frozen=True)
@@ -66,7 +137,8 @@ class HopperGeometry:
 
     ``fill_height`` and ``bin_height`` are measured above the cone-cylinder transition.
     ``half_angle_deg`` is the cone half-angle from the vertical, in ``(0, 90]``; 90 is a
-    flat-bottomed bin.
+    flat-bottomed bin.  Lengths are in ``[1 mm, 100 m]`` (:data:`LENGTH_RANGE`), the cone's
+    height too (which bounds how steep a narrow-outlet cone can be).
     """
 
     bin_diameter: float = 0.3
@@ -76,13 +148,13 @@ class HopperGeometry:
     fill_height: float = 0.3
 
     def __post_init__(self):
-        _check_range("hopper.bin_diameter", self.bin_diameter, 0, None, low_open=True, unit=" m")
+        lo, hi = LENGTH_RANGE
+        _check_range("hopper.bin_diameter", self.bin_diameter, lo, hi, unit=" m")
         _check_range("hopper.half_angle_deg", self.half_angle_deg, 0, 90, low_open=True,
                      unit=" deg")
-        _check_range("hopper.outlet_diameter", self.outlet_diameter, 0, None, low_open=True,
-                     unit=" m")
-        _check_range("hopper.bin_height", self.bin_height, 0, None, low_open=True, unit=" m")
-        _check_range("hopper.fill_height", self.fill_height, 0, None, low_open=True, unit=" m")
+        _check_range("hopper.outlet_diameter", self.outlet_diameter, lo, hi, unit=" m")
+        _check_range("hopper.bin_height", self.bin_height, lo, hi, unit=" m")
+        _check_range("hopper.fill_height", self.fill_height, lo, hi, unit=" m")
         if self.outlet_diameter >= self.bin_diameter:
             raise ConfigError(
                 f"hopper.outlet_diameter = {self.outlet_diameter:g} m is not narrower than the "
@@ -91,6 +163,14 @@ class HopperGeometry:
             raise ConfigError(
                 f"hopper.fill_height = {self.fill_height:g} m is above the top of the bin, "
                 f"hopper.bin_height = {self.bin_height:g} m")
+        # (R - R0) / tan(theta) <= 100 m, written so that a tiny angle cannot divide by zero
+        rise = (self.bin_radius - self.outlet_radius) / hi
+        if self.half_angle_deg < 90.0 and math.tan(math.radians(self.half_angle_deg)) < rise:
+            least = _ceil_digits(math.degrees(math.atan(rise)))
+            raise ConfigError(
+                f"hopper.half_angle_deg = {self.half_angle_deg:g} deg makes the cone higher "
+                f"than {hi:g} m (the largest length allowed); allowed range is "
+                f"[{least:.3g}, 90] deg for this bin and outlet")
 
     @property
     def bin_radius(self) -> float:
@@ -132,7 +212,11 @@ class HopperGeometry:
 
 @dataclass(frozen=True)
 class MaterialConfig:
-    """Bulk granular material (SI; angles in degrees)."""
+    """Bulk granular material (SI; angles in degrees).
+
+    Ranges: density ``[1, 20000]`` kg/m3 (:data:`DENSITY_RANGE`), Young's modulus
+    ``[1 kPa, 1 TPa]`` (:data:`MODULUS_RANGE`), cohesion ``[0, 100 MPa]``.
+    """
 
     density: float = 1500.0
     youngs_modulus: float = 5.0e6
@@ -142,15 +226,15 @@ class MaterialConfig:
     cohesion: float = 0.0
 
     def __post_init__(self):
-        _check_range("material.density", self.density, 0, None, low_open=True, unit=" kg/m3")
-        _check_range("material.youngs_modulus", self.youngs_modulus, 0, None, low_open=True,
+        _check_range("material.density", self.density, *DENSITY_RANGE, unit=" kg/m3")
+        _check_range("material.youngs_modulus", self.youngs_modulus, *MODULUS_RANGE,
                      unit=" Pa")
         _check_range("material.poisson_ratio", self.poisson_ratio, -1, 0.5, True, True)
         _check_range("material.friction_angle_deg", self.friction_angle_deg, 0, 90, True, True,
                      " deg")
         _check_range("material.dilation_angle_deg", self.dilation_angle_deg, 0,
                      self.friction_angle_deg, unit=" deg")
-        _check_range("material.cohesion", self.cohesion, 0, None, unit=" Pa")
+        _check_range("material.cohesion", self.cohesion, 0, COHESION_MAX, unit=" Pa")
 
     def mohr_coulomb(self):
         """The :class:`fipy_hopper.material.MohrCoulomb` of this material."""
@@ -197,12 +281,22 @@ class NumericsConfig:
       8%), while this one vanishes under refinement.
     - ``alpha_min``: cells with less material fraction carry no stress.
     - ``free_fall_depth``: depth of the free-fall zone below the outlet, in outlet diameters.
-    - ``gravity_ramp_time`` (s): gravity rises linearly during filling (avoids a dynamic overshoot
-      locked in by wall friction).
+    - ``gravity_ramp_time``: gravity rises linearly during filling over ``gravity_ramp_periods``
+      periods of the filled column's lowest elastic mode, ``4 L / c_p`` (``"auto"``, the
+      default), or over this many seconds.  In periods the fill is quasi-static whatever the
+      stiffness and the size of the silo, so that the filled loads are a property of the
+      hopper (measured on a 0.2 m hopper at 1 cm: E = 2 and 20 MPa give wall pressures within
+      0.02 % over 10 periods; a fixed time is a different number of periods for each).
     - ``settle_kinetic_energy``: filling is at rest when the kinetic energy falls below this
-      fraction of ``M g L`` (``L`` = fill depth) after the ramp.
+      fraction of ``M g L`` (``L`` = fill depth) after the ramp, and
+      ``settle_damping_fraction``: ... and the damping carries less than this fraction of the
+      weight (the wall and the plate hold the rest).
     - ``max_fill_time`` (s): filling stops (and says so) if not at rest by then.
     - ``min_open_fraction``: cut cells with a smaller open fraction are closed.
+
+    ``cell_size`` is in ``[0.1 mm, 10 m]``, times in ``[0, 1e6 s]``; the gravity ramp may not
+    exceed ``max_fill_time`` (filling would stop before gravity is complete; for ``"auto"``
+    this is checked with the material, by :class:`HopperConfig`).
     """
 
     cell_size: float = 0.005
@@ -212,38 +306,62 @@ class NumericsConfig:
     hourglass_coefficient: float = 0.1
     alpha_min: float = 1.0e-3
     free_fall_depth: float = 1.0
-    gravity_ramp_time: float = 0.2
+    gravity_ramp_time: Union[float, str] = "auto"
+    gravity_ramp_periods: float = 10.0
     settle_kinetic_energy: float = 1.0e-6
+    settle_damping_fraction: float = 1.0e-4
     max_fill_time: float = 2.0
     min_open_fraction: float = 0.05
 
     def __post_init__(self):
-        _check_range("numerics.cell_size", self.cell_size, 0, None, low_open=True, unit=" m")
+        _check_range("numerics.cell_size", self.cell_size, *CELL_SIZE_RANGE, unit=" m")
         _check_range("numerics.dt_safety", self.dt_safety, 0, 1, low_open=True)
         _check_range("numerics.transport_cfl", self.transport_cfl, 0, 0.5, low_open=True)
-        if isinstance(self.max_transport_interval, bool) or not isinstance(
-                self.max_transport_interval, int) or self.max_transport_interval < 1:
-            raise ConfigError(f"numerics.max_transport_interval = {self.max_transport_interval!r}:"
-                              " expected an integer >= 1")
+        _check_int("numerics.max_transport_interval", self.max_transport_interval, 1, 100_000)
         _check_range("numerics.hourglass_coefficient", self.hourglass_coefficient, 0, 100)
         _check_range("numerics.alpha_min", self.alpha_min, 0, 0.5, low_open=True)
         _check_range("numerics.free_fall_depth", self.free_fall_depth, 0.25, 10)
-        _check_range("numerics.gravity_ramp_time", self.gravity_ramp_time, 0, None, unit=" s")
+        if isinstance(self.gravity_ramp_time, str):
+            if self.gravity_ramp_time != "auto":
+                raise ConfigError(f"numerics.gravity_ramp_time = {_show(self.gravity_ramp_time)}"
+                                  f': expected a time in seconds in [0, {TIME_MAX:g}] or "auto"')
+        else:
+            _check_range("numerics.gravity_ramp_time", self.gravity_ramp_time, 0, TIME_MAX,
+                         unit=" s")
+        _check_range("numerics.gravity_ramp_periods", self.gravity_ramp_periods, 0, 1000)
+        _check_range("numerics.settle_damping_fraction", self.settle_damping_fraction, 0, 1,
+                     low_open=True)
         _check_range("numerics.settle_kinetic_energy", self.settle_kinetic_energy, 0, 1,
                      low_open=True)
-        _check_range("numerics.max_fill_time", self.max_fill_time, 0, None, low_open=True,
+        _check_range("numerics.max_fill_time", self.max_fill_time, 0, TIME_MAX, low_open=True,
                      unit=" s")
         _check_range("numerics.min_open_fraction", self.min_open_fraction, 0, 0.5)
+        if self.gravity_ramp_time != "auto" and self.gravity_ramp_time > self.max_fill_time:
+            raise ConfigError(
+                f"numerics.gravity_ramp_time = {self.gravity_ramp_time:g} s is longer than "
+                f"numerics.max_fill_time = {self.max_fill_time:g} s: filling would stop before "
+                f"gravity is complete; allowed range is [0, {self.max_fill_time:g}] s")
 
 
 @dataclass(frozen=True)
 class RunConfig:
-    """What to run: ``end_time`` in seconds of discharge, or ``"empty"``.
+    """What to run: ``end_time`` in seconds of discharge, or ``"empty"``; 0 stops when the fill
+    is at rest (the static design case: the filled loads, no discharge).
 
     ``"empty"`` stops when less than ``empty_fraction`` of the initial mass is left, or when
     nothing moves any more (a heel at rest), or at ``max_time`` seconds of discharge.
     ``wall_time_limit`` (s) stops any run; 0 means none.  ``markers_per_side``: passive
     marker points per cell side (``n x n`` per full cell) for the layer pictures; 0 = none.
+
+    ``load_window`` (s): the wall loads of a discharge stage are averaged over this time (from
+    the moment 90 % and 50 % of the mass is left), and the discharge envelope is the largest
+    of such windows per bin; ``"auto"`` (the default) is 0.1 s, or the whole discharge when
+    ``end_time`` is shorter (:attr:`load_window_s`).
+
+    Times are at most 1e6 s; ``end_time <= max_time``; ``output_interval`` and
+    ``load_window`` may not exceed the discharge (``end_time``, or ``max_time`` for
+    ``"empty"``): the steady rate needs samples; ``output_interval >= 0.1 ms``,
+    ``field_interval >= 1 ms``.
     """
 
     end_time: Union[float, str] = "empty"
@@ -253,25 +371,62 @@ class RunConfig:
     output_interval: float = 0.05
     field_interval: float = 0.25
     markers_per_side: int = 2
+    load_window: Union[float, str] = "auto"
 
     def __post_init__(self):
         if isinstance(self.end_time, str):
             if self.end_time != "empty":
-                raise ConfigError(f'run.end_time = {self.end_time!r}: expected a time in seconds'
-                                  ' or "empty"')
+                raise ConfigError(f'run.end_time = {_show(self.end_time)}: expected a time in '
+                                  f'seconds in [0, {TIME_MAX:g}] or "empty"')
         else:
-            _check_range("run.end_time", self.end_time, 0, None, low_open=True, unit=" s")
-        _check_range("run.max_time", self.max_time, 0, None, low_open=True, unit=" s")
+            _check_range("run.end_time", self.end_time, 0, TIME_MAX, unit=" s")
+        _check_range("run.max_time", self.max_time, 0, TIME_MAX, low_open=True, unit=" s")
         _check_range("run.empty_fraction", self.empty_fraction, 0, 1, True, True)
         _check_range("run.wall_time_limit", self.wall_time_limit, 0, None, unit=" s")
-        _check_range("run.output_interval", self.output_interval, 0, None, low_open=True,
+        _check_range("run.output_interval", self.output_interval, OUTPUT_INTERVAL_MIN,
+                     TIME_MAX, unit=" s")
+        _check_range("run.field_interval", self.field_interval, FIELD_INTERVAL_MIN, TIME_MAX,
                      unit=" s")
-        _check_range("run.field_interval", self.field_interval, 0, None, low_open=True,
-                     unit=" s")
-        if not isinstance(self.markers_per_side, int) or isinstance(self.markers_per_side, bool):
-            raise ConfigError(f"run.markers_per_side = {self.markers_per_side!r}: expected an "
-                              "integer in [0, 6]")
-        _check_range("run.markers_per_side", self.markers_per_side, 0, 6)
+        _check_int("run.markers_per_side", self.markers_per_side, 0, 6)
+        if isinstance(self.load_window, str):
+            if self.load_window != "auto":
+                raise ConfigError(f"run.load_window = {_show(self.load_window)}: expected a time "
+                                  f'in seconds in [{OUTPUT_INTERVAL_MIN:g}, {TIME_MAX:g}] or "auto"')
+        else:
+            _check_range("run.load_window", self.load_window, OUTPUT_INTERVAL_MIN, TIME_MAX,
+                         unit=" s")
+        if self.end_time != "empty" and self.end_time > self.max_time:
+            raise ConfigError(
+                f"run.end_time = {self.end_time:g} s is beyond run.max_time = "
+                f"{self.max_time:g} s, which would stop the run first; allowed range is "
+                f"[0, {self.max_time:g}] s (or raise run.max_time)")
+        if self.discharge_time == 0.0:             # fill only: nothing is sampled in time
+            return
+        what = ("run.end_time" if self.end_time != "empty"
+                else 'run.max_time (run.end_time = "empty")')
+        if self.output_interval > self.discharge_time:
+            raise ConfigError(
+                f"run.output_interval = {self.output_interval:g} s is longer than the discharge, "
+                f"{what} = {self.discharge_time:g} s: too few samples for a rate; allowed "
+                f"range is [{OUTPUT_INTERVAL_MIN:g}, {self.discharge_time:g}] s")
+        if self.load_window != "auto" and self.load_window > self.discharge_time:
+            raise ConfigError(
+                f"run.load_window = {self.load_window:g} s is longer than the discharge, "
+                f"{what} = {self.discharge_time:g} s; allowed range is "
+                f"[{OUTPUT_INTERVAL_MIN:g}, {self.discharge_time:g}] s")
+
+    @property
+    def load_window_s(self) -> float:
+        """The load window in seconds: ``load_window``, or for ``"auto"`` 0.1 s, but no more
+        than the discharge."""
+        if self.load_window != "auto":
+            return float(self.load_window)
+        return min(0.1, self.discharge_time) if self.discharge_time > 0 else 0.1
+
+    @property
+    def discharge_time(self) -> float:
+        """The longest the discharge can last (s): ``end_time``, or ``max_time`` for "empty"."""
+        return self.max_time if self.end_time == "empty" else float(self.end_time)
 
 
 _SECTIONS = {"hopper": HopperGeometry, "material": MaterialConfig, "wall": WallConfig,
@@ -280,7 +435,13 @@ _SECTIONS = {"hopper": HopperGeometry, "material": MaterialConfig, "wall": WallC
 
 @dataclass(frozen=True)
 class HopperConfig:
-    """A complete, validated run configuration (one dataclass per TOML section)."""
+    """A complete, validated run configuration (one dataclass per TOML section).
+
+    Beyond each section's own checks: at least 3 cells across the outlet radius; at most
+    :data:`MAX_CELLS` cells (the memory a run needs, :meth:`memory_estimate`); at most
+    :data:`MAX_STEPS` time steps (:meth:`step_estimate`); ``run.field_interval`` no longer than
+    both filling and discharge.  All are checked before anything is allocated.
+    """
 
     hopper: HopperGeometry = field(default_factory=HopperGeometry)
     material: MaterialConfig = field(default_factory=MaterialConfig)
@@ -289,6 +450,10 @@ class HopperConfig:
     run: RunConfig = field(default_factory=RunConfig)
 
     def __post_init__(self):
+        for name, kind in _SECTIONS.items():
+            if not isinstance(getattr(self, name), kind):
+                raise ConfigError(f"[{name}]: expected a {kind.__name__}, got "
+                                  f"{_show(getattr(self, name))}")
         cells_across_outlet = self.hopper.outlet_radius / self.numerics.cell_size
         if cells_across_outlet < 3:
             raise ConfigError(
@@ -296,10 +461,112 @@ class HopperConfig:
                 f"{cells_across_outlet:.2f} cells across the outlet radius "
                 f"({self.hopper.outlet_radius:g} m); at least 3 are needed "
                 f"(cell_size <= {self.hopper.outlet_radius / 3:.4g} m)")
+        self._check_grid_size()
+        self._check_step_count()
+        if self.ramp_time > self.numerics.max_fill_time:
+            raise ConfigError(
+                f"numerics.gravity_ramp_periods = {self.numerics.gravity_ramp_periods:g} periods "
+                f"of the filled column ({self.column_period:.4g} s each) ramp gravity over "
+                f"{self.ramp_time:.4g} s, longer than numerics.max_fill_time = "
+                f"{self.numerics.max_fill_time:g} s: filling would stop before gravity is "
+                f"complete; raise numerics.max_fill_time to at least {2 * self.ramp_time:.3g} s")
+        run, fill = self.run, self.numerics.max_fill_time
+        if run.field_interval > max(fill, run.discharge_time):
+            raise ConfigError(
+                f"run.field_interval = {run.field_interval:g} s is longer than both the filling "
+                f"(numerics.max_fill_time = {fill:g} s) and the discharge ({run.discharge_time:g}"
+                f" s): no snapshot in between; allowed range is [{FIELD_INTERVAL_MIN:g}, "
+                f"{max(fill, run.discharge_time):g}] s")
+        if run.end_time != "empty" and run.field_interval > run.end_time:
+            warnings.warn(f"run.field_interval = {run.field_interval:g} s is longer than "
+                          f"run.end_time = {run.end_time:g} s: the discharge gets only its "
+                          "first and last field snapshots", SamplingWarning, stacklevel=3)
         if cells_across_outlet < 6:
             warnings.warn(f"only {cells_across_outlet:.1f} cells across the outlet radius; "
                           "6 or more are recommended for a discharge rate", ResolutionWarning,
                           stacklevel=3)
+
+    # ------------------------------------------------------------ size of a run
+    def grid_shape(self, cell_size: float = None) -> tuple:
+        """``(nr, nz)`` of the grid :func:`fipy_hopper.mesh.build_grid` builds (same rules)."""
+        return _grid_shape(self.hopper, self.numerics,
+                           self.numerics.cell_size if cell_size is None else cell_size)
+
+    @property
+    def n_cells(self) -> int:
+        nr, nz = self.grid_shape()
+        return nr * nz
+
+    def memory_estimate(self) -> float:
+        """Peak resident memory of a run (bytes), from the measured cost a cell (MAX_CELLS)."""
+        return MEMORY_BASE + MEMORY_PER_CELL * self.n_cells
+
+    @property
+    def time_step(self) -> float:
+        """The explicit time step ``dt_safety * cell_size / c_p`` (s), as the model takes it."""
+        return self.numerics.dt_safety * self.numerics.cell_size / self.material.p_wave_speed
+
+    def step_estimate(self) -> float:
+        """Most time steps a run can take: filling up to ``max_fill_time`` plus the discharge."""
+        return (self.numerics.max_fill_time + self.run.discharge_time) / self.time_step
+
+    def _check_grid_size(self) -> None:
+        h = self.numerics.cell_size
+        n = self.n_cells
+        if n <= MAX_CELLS:
+            return
+        # the smallest cell size whose grid fits: the count never grows with the cell size,
+        # so bisect on the exact count, then round up to 3 digits
+        lo, hi = h, max(h, 2 * (self.hopper.top + self.hopper.bin_diameter))
+        for _ in range(100):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (mid, hi) if math.prod(self.grid_shape(mid)) > MAX_CELLS else (lo, mid)
+        smallest = _ceil_digits(hi)
+        while math.prod(self.grid_shape(smallest)) > MAX_CELLS:   # float noise of the rounding
+            smallest = _ceil_digits(smallest * 1.001)
+        limit = self.hopper.outlet_radius / 3
+        what = (f"cell_size >= {smallest:.3g} m" if smallest <= limit else
+                f"no cell size fits: {smallest:.3g} m or more would leave fewer than 3 cells "
+                f"across the outlet radius; a smaller hopper or a wider outlet")
+        raise ConfigError(
+            f"numerics.cell_size = {h:g} m makes a grid of {n:,} cells (about "
+            f"{(MEMORY_BASE + MEMORY_PER_CELL * n) / 1e9:.3g} GB); at most {MAX_CELLS:,} cells "
+            f"(about {(MEMORY_BASE + MEMORY_PER_CELL * MAX_CELLS) / 1e9:.2g} GB) are allowed: "
+            f"{what}")
+
+    def _check_step_count(self) -> None:
+        steps = self.step_estimate()
+        if steps <= MAX_STEPS:
+            return
+        num, run = self.numerics, self.run
+        end = "run.end_time" if run.end_time != "empty" else "run.max_time"
+        h = _ceil_digits(num.cell_size * steps / MAX_STEPS)
+        finer = (f"numerics.cell_size >= {h:.3g} m, " if h <= self.hopper.outlet_radius / 3
+                 else "")
+        raise ConfigError(
+            f"numerics.cell_size = {num.cell_size:g} m with numerics.dt_safety = "
+            f"{num.dt_safety:g} and c_p = {self.material.p_wave_speed:.4g} m/s gives a time "
+            f"step of {self.time_step:.3g} s and up to {steps:.3g} steps over "
+            f"numerics.max_fill_time + {end} = {num.max_fill_time:g} + {run.discharge_time:g}"
+            f" s; at most {MAX_STEPS:.0e} can finish: {finer}a smaller c_p "
+            f"(material.youngs_modulus, material.poisson_ratio) or shorter times")
+
+    @property
+    def column_period(self) -> float:
+        """Period of the lowest elastic mode of the filled column, ``4 L / c_p`` (s): a quarter
+        wave, fixed at the plate and free at the surface, ``L`` the fill level above the outlet
+        (at least a cell)."""
+        column = max(self.hopper.fill_level, self.numerics.cell_size)
+        return 4.0 * column / self.material.p_wave_speed
+
+    @property
+    def ramp_time(self) -> float:
+        """The time over which gravity rises during filling (s): ``gravity_ramp_periods``
+        column periods for ``gravity_ramp_time = "auto"``, else ``gravity_ramp_time``."""
+        num = self.numerics
+        if num.gravity_ramp_time == "auto":
+            return num.gravity_ramp_periods * self.column_period
+        return float(num.gravity_ramp_time)
 
     @classmethod
     def from_dict(cls, data: dict) -> "HopperConfig":
@@ -308,14 +575,19 @@ class HopperConfig:
             raise ConfigError("configuration: expected a table of sections")
         unknown = [k for k in data if k not in _SECTIONS]
         if unknown:
+            if not isinstance(unknown[0], str):
+                raise ConfigError(f"configuration: a section must be a name, got "
+                                  f"{_show(unknown[0])}")
             raise ConfigError(_unknown_message("section", unknown[0], list(_SECTIONS)))
         sections = {}
         for name, kind in _SECTIONS.items():
             values = data.get(name, {})
             if not isinstance(values, dict):
-                raise ConfigError(f"[{name}]: expected a table of keys, got {values!r}")
+                raise ConfigError(f"[{name}]: expected a table of keys, got {_show(values)}")
             allowed = [f.name for f in fields(kind)]
             for key in values:
+                if not isinstance(key, str):
+                    raise ConfigError(f"[{name}]: a key must be a name, got {_show(key)}")
                 if key not in allowed:
                     raise ConfigError(_unknown_message(f"key in [{name}]", key, allowed,
                                                        prefix=f"{name}."))
@@ -354,13 +626,34 @@ class HopperConfig:
     def replace(self, **sections) -> "HopperConfig":
         """A copy with some fields changed, e.g. ``cfg.replace(numerics={"cell_size": 0.01})``."""
         new = {}
-        for name in _SECTIONS:
+        for name, kind in _SECTIONS.items():
             current = getattr(self, name)
             change = sections.pop(name, None)
+            if change and not isinstance(change, dict):
+                raise ConfigError(f"[{name}]: expected a dict of keys, got {_show(change)}")
+            allowed = [f.name for f in fields(kind)]
+            for key in change or ():
+                if key not in allowed:
+                    raise ConfigError(_unknown_message(f"key in [{name}]", str(key), allowed,
+                                                       prefix=f"{name}."))
             new[name] = dataclasses.replace(current, **change) if change else current
         if sections:
             raise ConfigError(_unknown_message("section", next(iter(sections)), list(_SECTIONS)))
         return HopperConfig(**new)
+
+
+def _ceil_digits(x: float, digits: int = 3) -> float:
+    """``x`` rounded up to ``digits`` significant digits (a bound that stays admissible)."""
+    step = 10.0 ** (math.floor(math.log10(x)) - digits + 1)
+    return float(f"{math.ceil(x / step * (1 - 1e-12)) * step:.{digits}g}")
+
+
+def _grid_shape(geom: HopperGeometry, num: NumericsConfig, h: float) -> tuple:
+    """``(nr, nz)`` by the rules of :func:`fipy_hopper.mesh.build_grid` for cell size ``h``."""
+    nr = int(math.ceil(geom.bin_radius / h - 1e-9)) + 2
+    n_below = max(int(math.ceil(num.free_fall_depth * geom.outlet_diameter / h - 1e-9)), 3)
+    n_above = int(math.ceil(geom.top / h - 1e-9)) + 1
+    return nr, n_below + n_above
 
 
 def _toml_value(value) -> str:
@@ -374,7 +667,9 @@ def _toml_value(value) -> str:
 def _unknown_message(what: str, key: str, allowed: list, prefix: str = "") -> str:
     close = difflib.get_close_matches(key, allowed, n=1)
     hint = f"; did you mean '{prefix}{close[0]}'?" if close else ""
-    return f"unknown {what} '{prefix}{key}'{hint} (allowed: {', '.join(allowed)})"
+    name = repr(key)[1:-1] if key.isprintable() is False else key   # one line: escape
+    name = name if len(name) <= 40 else name[:37] + "..."
+    return f"unknown {what} '{prefix}{name}'{hint} (allowed: {', '.join(allowed)})"
 
 
 def reference_config(**sections) -> HopperConfig:

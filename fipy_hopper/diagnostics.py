@@ -149,8 +149,9 @@ class WallSampler:
         ok = np.isfinite(p_n)
         return s[ok], r[ok], z[ok], p_n[ok], tau[ok]
 
-    def profile_all(self, state):
-        """``(s, r, z, p_n, tau)`` for every bin; NaN where a bin holds no material."""
+    def mean_stress(self, state):
+        """The weighted mean stress ``(rr, zz, tt, rz)`` (Pa) of each bin's cells, (nb, 4);
+        NaN where a bin holds no material."""
         m = self.model
         w = (state.alpha * m.open_volume).ravel()[self.cells]
         w = np.where(state.alpha.ravel()[self.cells] > 0.5, w, 0.0)
@@ -160,6 +161,13 @@ class WallSampler:
         mean = np.stack([np.bincount(self.bins, w * sig[:, k], nb) for k in range(4)], axis=1)
         ok = wsum > 0
         mean[ok] /= wsum[ok, None]
+        mean[~ok] = np.nan
+        return mean
+
+    def profile_all(self, state):
+        """``(s, r, z, p_n, tau)`` for every bin; NaN where a bin holds no material."""
+        mean = self.mean_stress(state)
+        ok = np.isfinite(mean[:, 0])
         n_r, n_z = self.nr, self.nz
         t_r, t_z = -n_z, n_r          # tangent pointing up the wall
         trac_r = mean[:, 0] * n_r + mean[:, 3] * n_z
@@ -294,3 +302,123 @@ class WallLoads:
         out["relative_residual"] = (abs(out["residual"]) / out["weight"]
                                     if out["weight"] > 0 else math.nan)
         return out
+
+
+def wall_k(wall_loads: WallLoads, p_n, state, geom, margin_bins: int = 2) -> float:
+    """The lateral pressure ratio measured at the bin wall: the median over the bin wall's
+    bins of ``p_n / (-sigma_zz)``, ``p_n`` from the reaction and ``sigma_zz`` the mean
+    vertical stress of the cells next to the wall (:meth:`WallSampler.mean_stress`), leaving
+    out ``margin_bins`` bins next to the transition and next to the free surface."""
+    s = wall_loads.centres
+    s_t = float(geometry.transition_arc_length(geom))
+    s_top = float(geometry.arc_length(geom.fill_level, geom))
+    width = s[1] - s[0] if len(s) > 1 else 0.0
+    szz = wall_loads.sampler.mean_stress(state)[:, 1]
+    keep = ((s > s_t + margin_bins * width) & (s < s_top - margin_bins * width)
+            & np.isfinite(szz) & (szz < 0.0))
+    if not keep.any():
+        return math.nan
+    return float(np.median(p_n[keep] / -szz[keep]))
+
+
+def load_summary(sim) -> dict:
+    """The wall-load numbers of ``summary.json`` from a :class:`~fipy_hopper.simulation.
+    Simulation`'s record.
+
+    * ``fill_weight_N``, ``fill_wall_vertical_N``, ``fill_outlet_N``: the weight and the
+      vertical reactions of the wall and the outlet plate at rest (N, 3D);
+      ``fill_equilibrium_residual``: ``|wall + outlet - weight| / weight`` there;
+    * ``load_balance_residual_max``: the largest relative residual of the vertical momentum
+      balance over the rows of ``loads.csv`` (round-off when every force is accounted for);
+    * ``wall_k_bin``: the lateral pressure ratio at the bin wall at rest (:func:`wall_k`);
+    * ``overpressure_factor_bin_max``, ``overpressure_factor_cone_max``: the largest ratio of
+      the discharge envelope to the filled pressure in the bin (above the transition zone)
+      and in the cone, with EN 1991-4's discharge factor ``en1991_discharge_factor_bin``;
+    * ``switch_peak_Pa``, ``switch_peak_s_m``: the envelope's peak within a bin diameter of
+      the transition, and ``walker_switch_pressure_Pa``, Walker's passive pressure just below
+      the transition for the Janssen vertical stress there (with the measured ``K``).
+    """
+    from . import theory
+
+    rec, m = sim.record, sim.model
+    geom, mat = m.cfg.hopper, m.cfg.material
+    nan = math.nan
+    out = {"fill_weight_N": nan, "fill_wall_vertical_N": nan, "fill_outlet_N": nan,
+           "fill_equilibrium_residual": nan, "load_balance_residual_max": nan,
+           "wall_k_bin": getattr(rec, "wall_k", nan), "overpressure_factor_bin_max": nan,
+           "overpressure_factor_cone_max": nan,
+           "en1991_discharge_factor_bin": theory.en1991_discharge_factors()[0],
+           "switch_peak_Pa": nan, "switch_peak_s_m": nan, "walker_switch_pressure_Pa": nan}
+    rest = rec.rest_balance
+    if rest and rest.get("weight", 0) > 0:
+        out.update(fill_weight_N=rest["weight"], fill_wall_vertical_N=rest["wall"],
+                   fill_outlet_N=rest["outlet"],
+                   fill_equilibrium_residual=abs(rest["wall"] + rest["outlet"] - rest["weight"])
+                   / rest["weight"])
+    residuals = [r["relative_residual"] for r in rec.loads
+                 if math.isfinite(r.get("relative_residual", nan))]
+    if residuals:
+        out["load_balance_residual_max"] = float(max(residuals))
+    if "filling" in rec.wall and "discharge_envelope" in rec.wall:
+        s, p_fill = rec.wall["filling"][1], rec.wall["filling"][4]
+        envelope = rec.wall["discharge_envelope"][4]
+        s_t = float(geometry.transition_arc_length(geom))
+        s_top = float(geometry.arc_length(geom.fill_level, geom))
+        loaded = p_fill > 0.05 * np.nanmax(p_fill)
+        ratio = np.where(loaded, envelope / np.where(loaded, p_fill, 1.0), np.nan)
+        near = geom.bin_diameter
+        in_bin = (s > s_t + 0.5 * near) & (s < s_top - 0.25 * near)
+        in_cone = (s < s_t - 0.1 * near) & (s > 0.25 * near)
+        if np.isfinite(ratio[in_bin]).any():
+            out["overpressure_factor_bin_max"] = float(np.nanmax(ratio[in_bin]))
+        if np.isfinite(ratio[in_cone]).any():
+            out["overpressure_factor_cone_max"] = float(np.nanmax(ratio[in_cone]))
+        zone = np.abs(s - s_t) <= near
+        if zone.any():
+            k = np.flatnonzero(zone)[np.argmax(envelope[zone])]
+            out["switch_peak_Pa"], out["switch_peak_s_m"] = float(envelope[k]), float(s[k])
+        if geom.cone_height > 0:
+            K = out["wall_k_bin"] if math.isfinite(out["wall_k_bin"]) else float(
+                theory.k_jaky(mat.friction_angle_deg))
+            mu = m.mu_wall
+            if mu > 0:
+                sigma_vt = float(theory.janssen_vertical_stress(
+                    geom.fill_height, mat.density, geom.bin_diameter, K, mu))
+                out["walker_switch_pressure_Pa"] = float(theory.walker_switch_pressure(
+                    sigma_vt, K, mat.friction_angle_deg, m.cfg.wall.friction_angle_deg,
+                    geom.half_angle_deg).hopper)
+    return out
+
+
+# ---------------------------------------------------------------- stress pattern
+def stress_pattern(sigma, cohesion: float = 0.0, friction_angle_deg: float = 30.0):
+    """Principal stresses and mobilised friction of cell stresses ``sigma`` (..., 4) =
+    ``(rr, zz, tt, rz)`` (Pa, tension positive).
+
+    Returns a dict of arrays, compression positive (Pa): ``sigma1`` and ``sigma3``, the major
+    and minor principal stresses of the three (the hoop stress included); ``sigma1_angle_deg``,
+    the angle from the vertical of the major principal direction in the r-z plane (the
+    eigenvector of the larger in-plane compression; 0: vertical, the active state of a fill,
+    +-90: horizontal, across the flow, the passive state of an arch), in (-90, 90], positive
+    when the direction leans outward going up; and ``sin_phi_mob``,
+    ``(sigma1 - sigma3) / (sigma1 + sigma3 + 2 c cot(phi))``, the mobilised friction (1 on the
+    Mohr-Coulomb yield surface, NaN where the denominator is not positive).
+    """
+    s = np.asarray(sigma, dtype=float)
+    rr, zz, tt, rz = -s[..., 0], -s[..., 1], -s[..., 2], -s[..., 3]   # compression positive
+    mid, half = 0.5 * (rr + zz), 0.5 * (rr - zz)
+    radius = np.hypot(half, rz)
+    major, minor = mid + radius, mid - radius
+    sigma1 = np.maximum(major, tt)
+    sigma3 = np.minimum(minor, tt)
+    # eigenvector of the major in-plane compression: angle 2w from the r axis with
+    # tan 2w = 2 rz / (rr - zz); from the vertical: 90 deg - w
+    w = 0.5 * np.degrees(np.arctan2(2.0 * rz, rr - zz))
+    angle = 90.0 - w
+    angle = np.where(angle > 90.0, angle - 180.0, angle)
+    apex = 2.0 * cohesion / math.tan(math.radians(friction_angle_deg))
+    denominator = sigma1 + sigma3 + apex
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mobilised = np.where(denominator > 0, (sigma1 - sigma3) / denominator, np.nan)
+    return {"sigma1": sigma1, "sigma3": sigma3, "sigma1_angle_deg": angle,
+            "sin_phi_mob": mobilised}

@@ -12,6 +12,7 @@ A run directory describes itself::
     fields/markers_NNNN.vtu   the passive layer markers of snapshot NNNN (when the run has them)
     checkpoint.npz       while a run is unfinished (removed when it finishes)
     *.png, discharge.gif the pictures (:mod:`fipy_hopper.plotting`)
+    .lock                while a run is using the directory (see :class:`RunDirectory`)
 
 Every file is written atomically: to a temporary file in the same folder, then renamed over
 the target with :func:`os.replace`, so a run killed at any moment leaves each file either in
@@ -23,20 +24,33 @@ from __future__ import annotations
 import contextlib
 import csv
 import datetime
+import errno
 import io as _io
 import json
 import math
 import os
 import platform
+import re
 import sys
 import tempfile
+import warnings
+import zipfile
 from pathlib import Path
 from typing import Iterable, Optional, Union
 
 import numpy as np
 
+from .config import short_text as _short
+
+try:                      # POSIX; elsewhere runs are not locked
+    import fcntl
+except ImportError:       # pragma: no cover
+    fcntl = None
+
 __all__ = [
-    "RunDirectory", "RunDirectoryError", "Manifest", "FieldWriter", "atomic_path",
+    "RunDirectory", "RunDirectoryError", "CheckpointError", "read_checkpoint",
+    "validate_checkpoint", "checkpoint_template", "checkpoint_size_limit", "check_run_files",
+    "Manifest", "FieldWriter", "atomic_path",
     "atomic_write_text", "write_json", "write_timeseries", "write_wall_pressure", "read_csv",
     "environment_versions", "grid_points_and_quads", "cell_fields", "marker_file",
     "write_markers", "read_markers",
@@ -49,7 +63,13 @@ PathLike = Union[str, os.PathLike]
 TIMESERIES_COLUMNS = ("t_s", "mass_in_hopper_kg", "discharged_kg", "discharge_rate_kg_s",
                       "mass_flow_index", "stagnant_fraction")
 #: Columns of ``wall_pressure.csv`` (public contract).
-WALL_PRESSURE_COLUMNS = ("stage", "t_s", "s_m", "r_m", "z_m", "p_n_Pa", "tau_Pa")
+WALL_PRESSURE_COLUMNS = ("stage", "t_s", "s_m", "r_m", "z_m", "p_n_Pa", "tau_Pa",
+                         "p_n_stress_Pa", "tau_stress_Pa", "window_s")
+#: Columns of ``loads.csv`` (public contract): the vertical momentum balance of the grid over
+#: each interval, as mean forces (N, 3D, upward positive; ``weight`` positive).
+LOADS_COLUMNS = ("stage", "t_s", "weight_N", "wall_vertical_N", "outlet_N", "damping_N",
+                 "light_nodes_N", "momentum_outflow_N", "momentum_rate_N", "residual_N",
+                 "relative_residual")
 #: Columns of ``fields/snapshots.csv``.
 SNAPSHOT_COLUMNS = ("index", "file", "step", "t_s", "discharge_time_s", "stage")
 
@@ -68,6 +88,10 @@ _FILE_MODE = _file_mode()
 
 class RunDirectoryError(Exception):
     """The output directory cannot be used (exists and is not empty, nothing to resume, ...)."""
+
+
+class CheckpointError(RunDirectoryError):
+    """A checkpoint file cannot be restored (corrupt, too large, wrong arrays)."""
 
 
 # ---------------------------------------------------------------- atomic files
@@ -139,11 +163,24 @@ def _write_csv(path: PathLike, columns: Iterable[str], rows: Iterable[Iterable])
 
 
 def read_csv(path: PathLike) -> dict:
-    """Read a CSV written here: ``{column: array}``; numeric columns as float arrays."""
-    with open(path, newline="", encoding="utf-8") as fh:
-        reader = csv.reader(fh)
-        header = next(reader)
-        rows = list(reader)
+    """Read a CSV written here: ``{column: array}``; numeric columns as float arrays.
+
+    Raises ``ValueError`` naming the file for text that is not such a table (not UTF-8, no
+    header, rows of another length than the header).
+    """
+    try:
+        with open(path, newline="", encoding="utf-8") as fh:
+            reader = csv.reader(fh)
+            header = next(reader, None)
+            rows = list(reader)
+    except (UnicodeDecodeError, csv.Error) as exc:
+        raise ValueError(f"{_short(path)} is not a CSV table: {exc}") from None
+    if not header:
+        raise ValueError(f"{_short(path)} is empty (no header line)")
+    for n, row in enumerate(rows, start=2):
+        if len(row) != len(header):
+            raise ValueError(f"{_short(path)}, line {n}: {len(row)} values for "
+                             f"{len(header)} columns")
     out = {}
     for k, name in enumerate(header):
         values = [row[k] for row in rows]
@@ -169,18 +206,39 @@ def write_timeseries(path: PathLike, record) -> None:
 
 
 def write_wall_pressure(path: PathLike, record) -> None:
-    """``wall_pressure.csv`` from the record's wall samples, one row per arc-length bin.
+    """``wall_pressure.csv`` from the record's wall loads, one row per arc-length bin.
 
-    ``s_m`` is the arc length along the wall from the outlet lip, ``(r_m, z_m)`` the wall point,
-    ``p_n_Pa`` the normal pressure (compression positive), ``tau_Pa`` the shear stress (up the
-    wall positive); ``t_s`` is the time since the outlet opened (0 for the filled state).
+    ``stage`` is ``filling`` (at rest), ``early_discharge`` / ``mid_discharge`` (90 % / 50 %
+    of the mass left) or ``discharge_envelope`` (the largest windowed pressure per bin over
+    the discharge); ``s_m`` is the arc length along the wall from the outlet lip, ``(r_m,
+    z_m)`` the wall point, ``p_n_Pa`` the normal pressure (compression positive) and
+    ``tau_Pa`` the shear the wall exerts on the material (up the wall positive), both from
+    the wall's reaction averaged over the stage's window of ``window_s`` seconds;
+    ``p_n_stress_Pa``, ``tau_stress_Pa`` the estimate from the stresses of the cells next to
+    the wall (empty where a bin held no material); ``t_s`` the time since the outlet opened
+    at the end of the window (0 at rest).
     """
     rows = []
+    stress = getattr(record, "wall_stress", {})
+    window = getattr(record, "wall_window", {})
     for stage, (t, s, r, z, p, tau) in record.wall.items():
+        p_s, tau_s = stress.get(stage, (np.full(len(s), np.nan), np.full(len(s), np.nan)))
         for k in range(len(s)):
             rows.append([stage, _num(t), _num(s[k]), _num(r[k]), _num(z[k]), _num(p[k]),
-                         _num(tau[k])])
+                         _num(tau[k]), _num(p_s[k]), _num(tau_s[k]),
+                         _num(window.get(stage, math.nan))])
     _write_csv(path, WALL_PRESSURE_COLUMNS, rows)
+
+
+def write_loads(path: PathLike, record) -> None:
+    """``loads.csv``: the vertical momentum balance of the grid over each output interval
+    (:meth:`fipy_hopper.diagnostics.WallLoads.balance`), filling and discharge; ``t_s`` the
+    time since filling began at the end of the interval (s)."""
+    keys = ("weight", "wall", "outlet", "damping", "stopped", "outflow", "momentum_rate",
+            "residual", "relative_residual")
+    rows = [[row["stage"], _num(row["t_s"])] + [_num(row[k]) for k in keys]
+            for row in getattr(record, "loads", [])]
+    _write_csv(path, LOADS_COLUMNS, rows)
 
 
 # ---------------------------------------------------------------- run directory
@@ -190,7 +248,13 @@ class RunDirectory:
     A new run refuses an existing directory that is not empty unless ``force=True``; with
     ``force`` the files a previous run wrote there are removed first (other files are left
     alone).  ``resume=True`` requires the directory of an unfinished run (its configuration
-    and checkpoint).
+    and checkpoint).  An empty path (the current directory by accident) is refused.
+
+    The directory is locked for the run: an exclusive ``fcntl.flock`` on ``DIR/.lock`` is taken
+    before anything in it is removed or written, and held until :meth:`close` (or the end of a
+    ``with`` block, or the object's garbage collection).  A second run, ``--force`` or
+    ``--resume`` into a directory that a live process holds is refused; the kernel drops the
+    lock of a process that dies, so a ``.lock`` left by a killed run does not block.
     """
 
     CONFIG = "config.toml"
@@ -198,35 +262,148 @@ class RunDirectory:
     SUMMARY = "summary.json"
     TIMESERIES = "timeseries.csv"
     WALL_PRESSURE = "wall_pressure.csv"
+    LOADS = "loads.csv"
     CHECKPOINT = "checkpoint.npz"
     FIELDS = "fields"
     ERROR_LOG = "error.log"
-    FIGURES = ("flow_pattern.png", "discharge.png", "wall_pressure.png", "discharge.gif")
+    LOCK = ".lock"
+    FIGURES = ("flow_pattern.png", "discharge.png", "wall_pressure.png", "stress_pattern.png",
+               "discharge.gif")
 
     def __init__(self, path: PathLike, force: bool = False, resume: bool = False):
+        self._lock_fd = None
+        if not os.fspath(path).strip():
+            raise RunDirectoryError(f"the run directory {os.fspath(path)!r} is an empty path; "
+                                    "give a directory name")
         self.path = Path(path)
+        try:
+            self._open(force, resume)
+        except OSError as exc:       # a name too long, no permission, ...
+            self.close()
+            raise RunDirectoryError(f"cannot use {_short(self.path)} as a run directory: "
+                                    f"{exc.strerror or exc}") from None
+        except BaseException:
+            self.close()
+            raise
+
+    def _open(self, force: bool, resume: bool) -> None:
         if self.path.exists() and not self.path.is_dir():
-            raise RunDirectoryError(f"{self.path} exists and is not a directory")
+            raise RunDirectoryError(f"{_short(self.path)} exists and is not a directory")
         if resume:
             missing = [name for name in (self.CONFIG, self.CHECKPOINT)
                        if not (self.path / name).is_file()]
             if missing:
                 raise RunDirectoryError(
-                    f"cannot resume: {self.path} holds no {' and no '.join(missing)} "
+                    f"cannot resume: {_short(self.path)} holds no {' and no '.join(missing)} "
                     "(only an interrupted run can be resumed)")
+            self._lock()
             self._remove_temporaries()
         else:
-            if self.path.is_dir() and any(self.path.iterdir()):
-                if not force:
-                    raise RunDirectoryError(
-                        f"{self.path} exists and is not empty; choose another directory, "
-                        "add --force to overwrite it, or --resume to continue an interrupted run")
-                self._remove_outputs()
-        try:
+            if self._contents() and not force:
+                self._refuse_if_in_use()
+                self._refuse_not_empty()
             self.path.mkdir(parents=True, exist_ok=True)
-            self.fields.mkdir(exist_ok=True)
+            self._lock()
+            if self._contents():      # again under the lock: another run may have written
+                if not force:
+                    self._refuse_not_empty()
+                self._remove_outputs()
+        self.fields.mkdir(exist_ok=True)
+
+    def _contents(self) -> list:
+        """The directory's entries other than the lock file ([] if it does not exist)."""
+        if not self.path.is_dir():
+            return []
+        return [item for item in self.path.iterdir() if item.name != self.LOCK]
+
+    def _refuse_not_empty(self):
+        raise RunDirectoryError(
+            f"{_short(self.path)} exists and is not empty; choose another directory, add "
+            "--force to overwrite it, or --resume to continue an interrupted run")
+
+    # ------------------------------------------------------------ the lock
+    def _lock(self) -> None:
+        """Take the exclusive lock on ``DIR/.lock`` or raise :class:`RunDirectoryError`."""
+        if fcntl is None:          # pragma: no cover - not POSIX
+            return
+        lock = self.path / self.LOCK
+        while True:
+            fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o644)
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError as exc:
+                holder = _read_pid(fd)
+                os.close(fd)
+                if exc.errno in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES):
+                    raise self._in_use(holder) from None
+                warnings.warn(f"{_short(lock)} cannot be locked ({exc.strerror}); the run "
+                              "directory is not protected against a second run",
+                              RuntimeWarning, stacklevel=3)
+                return
+            # a holder that finished unlinks the file while holding it: make sure the lock
+            # taken is on the file that is there now, not on the unlinked one
+            try:
+                same = os.stat(lock).st_ino == os.fstat(fd).st_ino
+            except FileNotFoundError:
+                same = False
+            if same:
+                break
+            os.close(fd)
+        os.ftruncate(fd, 0)
+        os.write(fd, f"{os.getpid()}\n".encode())
+        self._lock_fd = fd
+
+    def _in_use(self, holder) -> RunDirectoryError:
+        who = f"process {holder}" if holder else "another process"
+        return RunDirectoryError(
+            f"{_short(self.path)} is in use by another run ({who} holds {self.LOCK}); wait "
+            "for it to finish or choose another directory")
+
+    def _refuse_if_in_use(self) -> None:
+        """Raise if a live process holds the directory's lock (never creates the lock file)."""
+        lock = self.path / self.LOCK
+        if fcntl is None or not lock.is_file():
+            return
+        try:
+            fd = os.open(lock, os.O_RDONLY)
+        except OSError:
+            return
+        try:
+            fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
         except OSError as exc:
-            raise RunDirectoryError(f"cannot create {self.path}: {exc.strerror}") from None
+            if exc.errno in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES):
+                raise self._in_use(_read_pid(fd)) from None
+        finally:
+            os.close(fd)
+
+    @property
+    def locked(self) -> bool:
+        """True while this object holds the directory's lock."""
+        return self._lock_fd is not None
+
+    def close(self) -> None:
+        """Release the lock (the lock file is removed while still held).  Idempotent."""
+        fd, self._lock_fd = getattr(self, "_lock_fd", None), None
+        if fd is None:
+            return
+        with contextlib.suppress(OSError):
+            if os.stat(self.path / self.LOCK).st_ino == os.fstat(fd).st_ino:
+                os.unlink(self.path / self.LOCK)
+        with contextlib.suppress(OSError):
+            os.close(fd)
+
+    def __enter__(self) -> "RunDirectory":
+        return self
+
+    def __exit__(self, *exc) -> bool:
+        self.close()
+        return False
+
+    def __del__(self):
+        try:
+            self.close()
+        except Exception:      # pragma: no cover - at interpreter shutdown
+            pass
 
     def __truediv__(self, name: str) -> Path:
         return self.path / name
@@ -241,7 +418,7 @@ class RunDirectory:
 
     def _remove_outputs(self) -> None:
         names = (self.CONFIG, self.MANIFEST, self.SUMMARY, self.TIMESERIES, self.WALL_PRESSURE,
-                 self.CHECKPOINT, self.ERROR_LOG) + self.FIGURES
+                 self.LOADS, self.CHECKPOINT, self.ERROR_LOG) + self.FIGURES
         for name in names:
             with contextlib.suppress(FileNotFoundError):
                 (self.path / name).unlink()
@@ -259,6 +436,15 @@ class RunDirectory:
                 for item in folder.glob(".*.tmp*"):
                     with contextlib.suppress(OSError):
                         item.unlink()
+
+
+def _read_pid(fd: int) -> str:
+    """The process id a lock file holds ('' if none can be read)."""
+    with contextlib.suppress(OSError, ValueError):
+        text = os.pread(fd, 32, 0).decode("ascii", "replace").strip()
+        if text.isdigit():
+            return text
+    return ""
 
 
 # ---------------------------------------------------------------- manifest
@@ -360,7 +546,7 @@ def grid_points_and_quads(grid):
     return points, quads
 
 
-def cell_fields(state, grid) -> dict:
+def cell_fields(state, grid, cohesion: float = 0.0, friction_angle_deg: float = 30.0) -> dict:
     """The cell data of a snapshot (SI units), each ``(n_cells,)`` or ``(n_cells, 3)``.
 
     ``alpha`` material fraction of the open cell volume, ``open_fraction`` the cut-cell open
@@ -369,8 +555,15 @@ def cell_fields(state, grid) -> dict:
     ``stress_rr/zz/tt/rz`` the material stress (Pa, tension positive), ``pressure``
     ``p = -(s_rr + s_zz + s_tt) / 3`` (Pa, compression positive), ``plastic_strain`` the
     accumulated equivalent plastic strain, ``loose_strain`` the loose volumetric strain of
-    the dense/loose rule (0 = dense, see :func:`fipy_hopper.material.close_loose_volume`).
+    the dense/loose rule (0 = dense, see :func:`fipy_hopper.material.close_loose_volume`);
+    the stress pattern (:func:`fipy_hopper.diagnostics.stress_pattern`, compression
+    positive): ``sigma1``, ``sigma3`` the major and minor principal stresses (Pa),
+    ``sigma1_angle_deg`` the angle of the major principal direction from the vertical
+    (degrees) and ``sin_phi_mob`` the mobilised friction (for the material's ``cohesion`` in Pa
+    and ``friction_angle_deg``).
     """
+    from .diagnostics import stress_pattern
+
     v = np.asarray(state.v, float)
     v_cell = 0.25 * (v[:, :-1, :-1] + v[:, :-1, 1:] + v[:, 1:, :-1] + v[:, 1:, 1:])
     velocity = np.column_stack([v_cell[0].ravel(), v_cell[1].ravel(),
@@ -390,6 +583,7 @@ def cell_fields(state, grid) -> dict:
         "plastic_strain": np.asarray(state.eps_p, float).ravel(),
         "loose_strain": (np.zeros(np.size(state.alpha)) if getattr(state, "loose", None) is None
                          else np.asarray(state.loose, float).ravel()),
+        **stress_pattern(sigma, cohesion, friction_angle_deg),
     }
 
 
@@ -444,10 +638,12 @@ class FieldWriter:
     PVD = "fields.pvd"
     INDEX = "snapshots.csv"
 
-    def __init__(self, folder: PathLike, grid):
+    def __init__(self, folder: PathLike, grid, cohesion: float = 0.0,
+                 friction_angle_deg: float = 30.0):
         self.folder = Path(folder)
         self.folder.mkdir(parents=True, exist_ok=True)
         self.grid = grid
+        self.strength = (cohesion, friction_angle_deg)    # for the mobilised friction
         self.points, self.quads = grid_points_and_quads(grid)
         self.entries: list = []
 
@@ -468,7 +664,8 @@ class FieldWriter:
                                np.asarray(state.v[0], float).ravel(),
                                np.asarray(state.v[1], float).ravel(),
                                np.zeros(state.v[0].size)])},
-                           cell_data={k: [v] for k, v in cell_fields(state, self.grid).items()})
+                           cell_data={k: [v] for k, v in cell_fields(state, self.grid,
+                                                                  *self.strength).items()})
         with atomic_path(self.folder / name) as tmp:
             meshio.write(tmp, mesh, file_format="vtu")
         markers = getattr(state, "markers", None)
@@ -523,3 +720,265 @@ def read_snapshot_index(folder: PathLike) -> list:
     return [{"index": int(r["index"]), "file": r["file"], "step": int(r["step"]),
              "t_s": float(r["t_s"]), "discharge_time_s": float(r["discharge_time_s"]),
              "stage": r["stage"]} for r in rows]
+
+
+# ---------------------------------------------------------------- reading a run back
+def check_run_files(path: PathLike) -> None:
+    """Check that ``path`` holds the readable files of a run before anything is drawn from it.
+
+    ``config.toml`` must be a valid configuration and ``timeseries.csv`` a table with the
+    columns of :data:`TIMESERIES_COLUMNS` (numbers); ``wall_pressure.csv``, ``summary.json``
+    and ``fields/snapshots.csv``, when present, must read back as written.  Raises
+    :class:`RunDirectoryError` with one line naming the file.
+    """
+    from .config import ConfigError, HopperConfig
+
+    folder = Path(path)
+    where = _short(folder)
+    try:
+        if not folder.is_dir():
+            raise RunDirectoryError(f"{where} is not a directory")
+        missing = [n for n in (RunDirectory.CONFIG, RunDirectory.TIMESERIES)
+                   if not (folder / n).is_file()]
+        if missing:
+            raise RunDirectoryError(f"{where} is not a run directory (no "
+                                    f"{' and no '.join(missing)})")
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                HopperConfig.from_toml(folder / RunDirectory.CONFIG)
+        except ConfigError as exc:
+            raise RunDirectoryError(f"{where} is not a run directory of fipy-hopper: {exc}") \
+                from None
+        _check_table(folder / RunDirectory.TIMESERIES, TIMESERIES_COLUMNS[:4], ())
+        if (folder / RunDirectory.WALL_PRESSURE).is_file():
+            _check_table(folder / RunDirectory.WALL_PRESSURE, WALL_PRESSURE_COLUMNS[:7],
+                         ("stage",))         # the public columns (older runs have no more)
+        if (folder / RunDirectory.SUMMARY).is_file():
+            try:
+                with open(folder / RunDirectory.SUMMARY, encoding="utf-8") as fh:
+                    summary = json.load(fh)
+            except (ValueError, UnicodeDecodeError) as exc:
+                raise RunDirectoryError(f"{_short(folder / RunDirectory.SUMMARY)} is not "
+                                        f"JSON: {exc}") from None
+            if not isinstance(summary, dict):
+                raise RunDirectoryError(f"{_short(folder / RunDirectory.SUMMARY)} is not a "
+                                        "JSON object")
+        fields = folder / RunDirectory.FIELDS
+        if (fields / FieldWriter.INDEX).is_file():
+            try:
+                entries = read_snapshot_index(fields)
+            except (ValueError, KeyError, TypeError, UnicodeDecodeError, csv.Error) as exc:
+                raise RunDirectoryError(f"{_short(fields / FieldWriter.INDEX)} is not an index "
+                                        f"of snapshots: {type(exc).__name__}: {exc}") from None
+            for e in entries:
+                if not re.fullmatch(r"fields_\d+\.vtu", e["file"]) or \
+                        not (fields / e["file"]).is_file():
+                    raise RunDirectoryError(f"{_short(fields / FieldWriter.INDEX)} lists "
+                                            f"{e['file']!r}, which is not a snapshot in {where}")
+    except OSError as exc:
+        raise RunDirectoryError(f"cannot read {where}: {exc.strerror or exc}") from None
+
+
+def _check_table(path: Path, columns, text_columns) -> None:
+    try:
+        table = read_csv(path)
+    except ValueError as exc:
+        raise RunDirectoryError(str(exc)) from None
+    missing = [c for c in columns if c not in table]
+    if missing:
+        raise RunDirectoryError(f"{_short(path)} has no column {missing[0]!r} (expected "
+                                f"{', '.join(columns)}): not written by fipy-hopper")
+    for c in columns:
+        if c not in text_columns and table[c].dtype.kind != "f":
+            raise RunDirectoryError(f"{_short(path)}: column {c!r} holds text, not numbers")
+
+
+# ---------------------------------------------------------------- checkpoints
+_WALL_ARRAY = re.compile(r"wall__(?P<stage>[A-Za-z_]\w*?)__(?P<k>[0-4])")
+#: The measurement arrays :meth:`Simulation.checkpoint` writes beside the state's (regular
+#: expressions of their names; keep in step with it): any float64 array of up to 3 axes,
+#: NaN allowed.  The wall samples ``wall__<stage>__<k>`` must also match the stages of the
+#: metadata.
+CHECKPOINT_AUXILIARY = (r"wall__\w+?__[0-4]", r"wallstress__\w+?__[01]",
+                        r"reading__\w+?__(wall|plate|budget)", r"stresssum__\w+?__[0-2]",
+                        r"envelope")
+_META_KEYS = ("state", "record", "wall_times", "t_open", "next_sample", "schedules")
+
+
+def checkpoint_template(state) -> tuple:
+    """``(expected_shapes, optional)`` for :func:`validate_checkpoint` from a state of the same
+    run (``model.State``, e.g. the fresh ``Simulation.state``): the shape of each of its arrays
+    (the number of markers free), and the arrays an older checkpoint may lack (the fields of
+    ``State`` that default to ``None``)."""
+    import dataclasses
+
+    shapes = {k: v.shape for k, v in vars(state).items() if isinstance(v, np.ndarray)}
+    if "markers" in shapes:
+        shapes["markers"] = (None,) + tuple(shapes["markers"][1:])
+    optional = tuple(f.name for f in dataclasses.fields(state) if f.default is None)
+    return shapes, optional
+
+
+def checkpoint_size_limit(state, cfg) -> int:
+    """Bytes a checkpoint of ``cfg`` may declare (uncompressed), generously: twice what the
+    arrays of ``state`` (a state of the same run) take with 6 x 6 markers a cell (the most
+    allowed), plus 4 kB for each time-series sample the run can take (the metadata holds the
+    record as JSON stored as UTF-32, 4 bytes a character) and 64 MB (wall samples, the rest
+    of the metadata)."""
+    arrays = sum(v.nbytes for k, v in vars(state).items()
+                 if isinstance(v, np.ndarray) and k != "markers")
+    arrays += 8 * 3 * 36 * np.size(state.alpha)
+    samples = cfg.run.discharge_time / cfg.run.output_interval + 10
+    return int(2 * arrays + 4096 * samples + 64 * 2 ** 20)
+
+
+def read_checkpoint(path: PathLike, state, cfg) -> tuple:
+    """:func:`validate_checkpoint` for a run whose fresh state is ``state`` (``model.State``)
+    and whose configuration is ``cfg``: ``(arrays, meta)``.
+
+    The expected arrays and the optional ones come from ``state``
+    (:func:`checkpoint_template`), the size bound from :func:`checkpoint_size_limit`, and the
+    scalars of ``meta["state"]`` must be fields of ``state``.
+    """
+    shapes, optional = checkpoint_template(state)
+    return validate_checkpoint(path, shapes, checkpoint_size_limit(state, cfg),
+                               optional=optional, state_keys=list(vars(state)))
+
+
+def validate_checkpoint(path: PathLike, expected_shapes: dict, max_bytes: int,
+                        optional: Iterable[str] = (), dtypes: Optional[dict] = None,
+                        state_keys: Optional[Iterable[str]] = None,
+                        auxiliary: Iterable[str] = CHECKPOINT_AUXILIARY) -> tuple:
+    """Open a checkpoint ``.npz`` of :meth:`Simulation.checkpoint` safely: ``(arrays, meta)``.
+
+    Nothing is read before the archive's members are known to be what a checkpoint holds:
+    the sum of their declared uncompressed sizes (``zipfile`` ``file_size``) is at most
+    ``max_bytes``; each is a ``.npy`` array whose header declares a plain numeric dtype
+    (``float64`` unless ``dtypes`` says otherwise; never objects, so never pickle) and, for
+    a name in ``expected_shapes``, its shape (``None`` matches any length); the header and the
+    declared size agree.  Then the arrays are read; those of ``expected_shapes`` (the state,
+    which the compiled kernels index) must be finite.  ``__meta__`` is the JSON metadata (a
+    dict with the keys the checkpoint writes).  Other arrays are measurements whose names
+    match a pattern of ``auxiliary`` (up to 3 axes, NaN allowed); the wall samples
+    ``wall__<stage>__<k>`` (``k`` 0-4, one length per stage) must be complete for each stage
+    in ``meta["wall_times"]``.  Every name of ``expected_shapes`` must be present unless listed
+    in ``optional``; any other name is refused.  ``meta["state"]`` holds a finite time ``t``, a
+    ``step`` >= 0, a ``stage`` and other plain JSON scalars (only names in ``state_keys``,
+    when given, none of them an array's name).
+
+    Raises :class:`CheckpointError` (one line naming the file) for anything else: a corrupt or
+    truncated file, a zip bomb, an unexpected, missing or misshapen array.
+    """
+    where = f"checkpoint {_short(path)}"
+    dtypes = dtypes or {}
+    auxiliary = [re.compile(pattern) for pattern in auxiliary]
+
+    def fail(message):
+        raise CheckpointError(f"{where}: {message}")
+
+    try:
+        archive = zipfile.ZipFile(path)
+    except FileNotFoundError:
+        fail("no such file")
+    except (zipfile.BadZipFile, zipfile.LargeZipFile, OSError, ValueError, EOFError) as exc:
+        fail(f"not a checkpoint (an .npz archive): {exc}")
+    with archive:
+        infos = archive.infolist()
+        names = [info.filename for info in infos]
+        if len(set(names)) != len(names):
+            fail("it holds a member twice")
+        declared = sum(info.file_size for info in infos)
+        if declared > max_bytes:
+            fail(f"it declares {declared:,} bytes uncompressed, more than the {max_bytes:,} "
+                 "a checkpoint of this run can hold")
+        arrays, meta = {}, None
+        for info in infos:
+            key = info.filename[:-4] if info.filename.endswith(".npy") else None
+            if key == "__meta__":
+                want_shape, want_kind = (), "U"
+            elif key in expected_shapes:
+                want_shape, want_kind = tuple(expected_shapes[key]), None
+            elif key and any(pattern.fullmatch(key) for pattern in auxiliary):
+                want_shape, want_kind = None, None
+            else:
+                fail(f"unexpected member {info.filename[:60]!r}")
+            want_dtype = np.dtype(dtypes.get(key, np.float64))
+            try:
+                with archive.open(info) as fh:
+                    version = np.lib.format.read_magic(fh)
+                    if version == (1, 0):
+                        shape, fortran, dtype = np.lib.format.read_array_header_1_0(fh)
+                    elif version == (2, 0):
+                        shape, fortran, dtype = np.lib.format.read_array_header_2_0(fh)
+                    else:
+                        fail(f"array {key!r}: unsupported .npy version {version}")
+                    if dtype.hasobject:
+                        fail(f"array {key!r} holds Python objects (pickled data is never "
+                             "loaded)")
+                    if want_kind == "U" and dtype.kind != "U" or \
+                            want_kind is None and dtype != want_dtype:
+                        fail(f"array {key!r} has dtype {dtype}, expected "
+                             f"{'text' if want_kind == 'U' else want_dtype}")
+                    if want_shape is None:
+                        if len(shape) > 3:
+                            fail(f"array {key!r} has {len(shape)} axes, at most 3 expected")
+                    elif len(shape) != len(want_shape) or any(
+                            w is not None and n != w for n, w in zip(shape, want_shape)):
+                        shown = tuple("any" if w is None else w for w in want_shape)
+                        fail(f"array {key!r} has shape {shape}, expected {shown}")
+                    nbytes = math.prod(shape) * dtype.itemsize
+                    if fh.tell() + nbytes != info.file_size:
+                        fail(f"array {key!r}: its header declares {nbytes:,} bytes of data, "
+                             f"the archive {info.file_size - fh.tell():,}")
+                    data = fh.read(nbytes)
+                    fh.read()          # to the end, where zipfile checks the CRC
+            except CheckpointError:
+                raise
+            except Exception as exc:   # zlib, zipfile, numpy header errors: a corrupt file
+                fail(f"corrupt (array {key!r}): {type(exc).__name__}: {_short(exc, 120)}")
+            if len(data) != nbytes:
+                fail(f"array {key!r} is truncated")
+            array = np.frombuffer(data, dtype=dtype).reshape(
+                shape, order="F" if fortran else "C").copy()
+            if key == "__meta__":
+                try:
+                    meta = json.loads(str(array[()]))
+                except ValueError as exc:
+                    fail(f"its metadata is not JSON: {exc}")
+                continue
+            if key in expected_shapes and not np.all(np.isfinite(array)):
+                fail(f"array {key!r} holds {int(np.size(array) - np.isfinite(array).sum())} "
+                     "non-finite values")
+            arrays[key] = array
+    if meta is None:
+        fail("it holds no metadata (__meta__)")
+    if not isinstance(meta, dict) or any(k not in meta for k in _META_KEYS):
+        fail(f"its metadata lacks {', '.join(k for k in _META_KEYS if k not in meta)}"
+             if isinstance(meta, dict) else "its metadata is not a JSON object")
+    if not all(isinstance(meta[k], dict) for k in ("state", "record", "wall_times")) or \
+            not isinstance(meta["schedules"], list):
+        fail("its metadata is malformed (state, record, wall_times, schedules)")
+    state = meta["state"]
+    if not (isinstance(state.get("t"), (int, float)) and math.isfinite(state["t"])
+            and isinstance(state.get("step"), int) and state["step"] >= 0
+            and state.get("stage") in ("filling", "discharge")):
+        fail("its metadata has no valid state time, step and stage")
+    allowed = None if state_keys is None else set(state_keys) - set(expected_shapes)
+    for key, value in state.items():
+        if allowed is not None and key not in allowed or \
+                not isinstance(value, (int, float, str, bool, type(None))):
+            fail(f"its metadata holds an unexpected state value {str(key)[:40]!r}")
+    missing = [k for k in expected_shapes if k not in arrays and k not in optional]
+    if missing:
+        fail(f"array {missing[0]!r} is missing")
+    stages = meta["wall_times"]
+    for stage in stages:
+        parts = [arrays.get(f"wall__{stage}__{k}") for k in range(5)]
+        if any(p is None or p.ndim != 1 for p in parts) or len({len(p) for p in parts}) != 1:
+            fail(f"the wall samples of stage {stage!r} are incomplete")
+    stray = [k for k in arrays if _WALL_ARRAY.fullmatch(k)
+             and _WALL_ARRAY.fullmatch(k)["stage"] not in stages]
+    if stray:
+        fail(f"array {stray[0]!r} belongs to no stage of the metadata")
+    return arrays, meta

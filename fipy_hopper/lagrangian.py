@@ -644,7 +644,7 @@ class LagrangianModel:
                                loose=np.zeros(m.n_elements))
 
     def gravity(self, state: LagrangianState) -> float:
-        ramp = self.cfg.numerics.gravity_ramp_time
+        ramp = self.cfg.ramp_time
         if state.stage == "filling" and ramp > 0:
             return GRAVITY * min(1.0, state.t / ramp)
         return GRAVITY
@@ -783,7 +783,7 @@ class LagrangianModel:
     # ------------------------------------------------------------------ run
     def fill(self, state: LagrangianState, record: Optional[LagrangianRecord] = None) -> bool:
         """Bring the fill to rest with the plate closed (same rule as ``Simulation.fill``):
-        gravity ramped over ``gravity_ramp_time``, mass-proportional damping, at rest when after
+        gravity ramped over ``HopperConfig.ramp_time``, mass-proportional damping, at rest when after
         the ramp the kinetic energy is below ``settle_kinetic_energy M g L``.  True when at rest;
         a distortion during filling stops it (recorded)."""
         num = self.cfg.numerics
@@ -801,7 +801,7 @@ class LagrangianModel:
                 break
             if state.t >= next_check:
                 next_check += 0.005
-                if state.t >= num.gravity_ramp_time and self.kinetic_energy(state) < threshold:
+                if state.t >= self.cfg.ramp_time and self.kinetic_energy(state) < threshold:
                     at_rest = True
                     break
                 if state.t >= num.max_fill_time:

@@ -184,14 +184,17 @@ class HopperModel:
         # mass-proportional damping during filling only: critical for the column's lowest mode
         column = max(cfg.hopper.fill_level, g.h)
         self.fill_damping = math.pi * self.c_p / (2.0 * column)
+        #: gravity rises linearly over this time during filling (s): ``HopperConfig.ramp_time``
+        self.ramp_time = cfg.ramp_time
         self._mass = None
         self._mass_of = None
         self._zface_aperture = g.zface_aperture()
         self._rface_aperture = g.rface_aperture()
         n = g.nz * g.nr
         # compiled steps (fipy_hopper.stepping): contacts grouped by node row, list order kept
-        self._contact_rows = _contact_rows(self.contact_list, g.nz + 1)
-        self._plate_rows = _contact_rows(self.plate_list, g.nz + 1)
+        # the walls and the plate of every node in contact, grouped by node and row
+        self.contact_groups = momentum.contact_groups(self.contact_list, self.plate_list,
+                                                      g.nz + 1)
         self._face_sign = np.ascontiguousarray(self.face_sign, dtype=float)
         self._work = (np.empty((n, 3), np.int64), np.empty((n, 3), np.int64),
                       np.empty(n + 1, np.int64), np.zeros((8, g.nz, g.nr)), np.zeros(g.nz + 1),
@@ -258,7 +261,7 @@ class HopperModel:
 
     def gravity(self, state: State) -> float:
         """Gravity (m/s^2, downward) at this time: ramped linearly during filling."""
-        ramp = self.cfg.numerics.gravity_ramp_time
+        ramp = self.ramp_time
         if state.stage == "filling" and ramp > 0:
             return GRAVITY * min(1.0, state.t / ramp)
         return GRAVITY
@@ -298,9 +301,10 @@ class HopperModel:
             displacement, with_markers = state.displacement, True
         else:
             displacement, with_markers = self._no_displacement, False
-        ramp = num.gravity_ramp_time if state.stage == "filling" else 0.0
+        ramp = self.ramp_time if state.stage == "filling" else 0.0
         damping = self.fill_damping if state.stage == "filling" else 0.0
         clock = np.array([state.t, float(state.step), state.flux_time])
+        row_nodes, _, node_i, node_ptr, normal, mu, kind, entry = self.contact_groups
         if numba.get_num_threads() != self.threads:
             numba.set_num_threads(self.threads)
         done, due = stepping.material_steps(
@@ -309,9 +313,9 @@ class HopperModel:
             self.open_volume, self.r_c, g.r_nodes, g.h, self.hourglass_base, g.kappa,
             self._zface_aperture, self._rface_aperture, self._face_sign, self._open_face,
             self._prm, self.dt, GRAVITY, ramp, damping, self.light_mass, num.alpha_min,
-            num.transport_cfl, num.max_transport_interval, *self._contact_rows,
-            *self._plate_rows, state.plate_closed, state.wall_impulse, state.plate_impulse,
-            state.momentum_budget, self._work)
+            num.transport_cfl, num.max_transport_interval, row_nodes, node_i, node_ptr,
+            normal, mu, kind, entry, state.plate_closed, state.wall_impulse,
+            state.plate_impulse, state.momentum_budget, self._work)
         state.t, state.flux_time = float(clock[0]), float(clock[2])
         state.step += int(done)
         if due:
@@ -368,30 +372,18 @@ class HopperModel:
         force += momentum.hourglass_force(state.v, self.hourglass_base * state.alpha)
         force[1] -= m * self.gravity(state)
         heavy = m > self.light_mass
-        free = np.where(heavy[None], state.v + dt * force / np.where(heavy, m, 1.0)[None], 0.0)
-        v = free * (1.0 / (1.0 + damping * dt))
+        v = np.where(heavy[None], state.v + dt * force / np.where(heavy, m, 1.0)[None], 0.0)
         budget = state.momentum_budget
         budget[0] -= np.sum(np.where(heavy, m * self.gravity(state) * dt, 0.0))
-        budget[1] += np.sum(np.where(heavy, m * (v[1] - free[1]), 0.0))
         budget[2] -= np.sum(np.where(heavy, 0.0, m * state.v[1]))
-        start = 0
-        for mask, normal, mu in self.contact_passes:
-            start = self._contact_with_impulse(v, m, mask, normal, mu, state.wall_impulse, start)
-        if state.plate_closed:
-            self._contact_with_impulse(v, m, self.plate_nodes, self.plate_normal, self.mu_wall,
-                                       state.plate_impulse, 0)
+        momentum.contact_nodes(v, m, self.contact_groups, state.plate_closed,
+                               state.wall_impulse, state.plate_impulse)
+        if damping > 0.0:              # after the contact: a wall, not the damping, holds
+            held = v[1].copy()         # what rests on it
+            v *= 1.0 / (1.0 + damping * dt)
+            budget[1] += np.sum(m * (v[1] - held))
         v[0, :, 0] = 0.0
         return v
-
-    @staticmethod
-    def _contact_with_impulse(v, m, mask, normal, mu, impulse, start):
-        """``momentum.apply_wall_contact`` of one pass, adding each node's ``m dv`` to
-        ``impulse[start:]`` in the order of the pass's nodes; returns the next start."""
-        j, i = np.nonzero(mask)
-        before = v[:, j, i].copy()
-        momentum.apply_wall_contact(v, normal, mask, mu)
-        impulse[start:start + len(j)] += (m[j, i] * (v[:, j, i] - before)).T
-        return start + len(j)
 
     def _transport_due(self, state: State, u_n: np.ndarray) -> bool:
         num = self.cfg.numerics
@@ -508,16 +500,6 @@ class HopperModel:
             bad = np.argwhere(~np.isfinite(state.sigma).all(axis=-1))
             raise InstabilityError(f"non-finite field at step {state.step}, t = {state.t:.6g} s,"
                                    f" cell(s) {bad[:3].tolist()}")
-
-
-def _contact_rows(contact_list, n_rows):
-    """A contact list ``(j, i, normals, mu)`` grouped by node row, in list order within a row:
-    ``(row pointer (n_rows + 1,), i, normals, mu, index in the list)``."""
-    j, i, normals, mu = contact_list
-    order = np.argsort(j, kind="stable")
-    ptr = np.searchsorted(j[order], np.arange(n_rows + 1)).astype(np.int64)
-    return (ptr, np.ascontiguousarray(i[order]), np.ascontiguousarray(normals[order]),
-            np.ascontiguousarray(mu[order]), order.astype(np.int64))
 
 
 def _contact_list(passes):

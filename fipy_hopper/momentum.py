@@ -421,3 +421,105 @@ def dual_momentum_kernel(v, mass_old, mass_new, flux_z, flux_r, rho, light_mass,
                     if c == 1:
                         stopped -= p
     return outflow, stopped
+
+
+def contact_groups(contact_list, plate_list, n_rows):
+    """The wall and plate contacts grouped by node for :func:`contact_nodes` and the compiled
+    step: ``(row_nodes (n_rows + 1,), node_j, node_i, node_ptr, normal (K, 2), mu, kind,
+    entry)``.  Nodes are in row-major order; a node's constraints keep the order of the lists
+    (wall entries, then plate entries); ``kind`` is 0 for a wall entry, 1 for a plate entry,
+    ``entry`` the index in its list."""
+    wj, wi, wn, wmu = contact_list
+    pj, pi, pn, pmu = plate_list
+    j = np.concatenate([wj, pj])
+    i = np.concatenate([wi, pi])
+    kind = np.concatenate([np.zeros(len(wj), np.int8), np.ones(len(pj), np.int8)])
+    entry = np.concatenate([np.arange(len(wj)), np.arange(len(pj))]).astype(np.int64)
+    order = np.lexsort((i, j))                      # stable: list order within a node
+    j, i, kind, entry = j[order], i[order], kind[order], entry[order]
+    normal = np.ascontiguousarray(np.concatenate([wn, pn])[order])
+    mu = np.ascontiguousarray(np.concatenate([wmu, pmu])[order])
+    first = np.concatenate([[True], (j[1:] != j[:-1]) | (i[1:] != i[:-1])])
+    starts = np.flatnonzero(first)
+    node_ptr = np.concatenate([starts, [len(j)]]).astype(np.int64)
+    node_j, node_i = j[starts].astype(np.int64), i[starts].astype(np.int64)
+    row_nodes = np.searchsorted(node_j, np.arange(n_rows + 1)).astype(np.int64)
+    return row_nodes, node_j, node_i, node_ptr, normal, mu, kind, entry
+
+
+def contact_nodes(v, mass, groups, plate_closed, wall_impulse, plate_impulse):
+    """Reference (numpy, vectorised over the nodes) of the compiled contact of every node with
+    all its walls (``stepping._contact_node``), in place: the velocity closest to the free one
+    that presses into no wall (one wall: :func:`apply_wall_contact`'s contact, with friction;
+    a corner pressed from both sides: rest), and each constraint's impulse ``m dv`` added to
+    ``wall_impulse`` / ``plate_impulse``."""
+    _, node_j, node_i, node_ptr, normal, mu, kind, entry = groups
+    n_nodes = len(node_j)
+    if n_nodes == 0:
+        return v
+    count = np.diff(node_ptr)
+    k_max = int(count.max())
+    slot = np.arange(k_max)
+    index = node_ptr[:-1, None] + slot[None, :]
+    present = slot[None, :] < count[:, None]
+    index = np.where(present, index, 0)
+    active = present & ((kind[index] == 0) | plate_closed)
+    n = normal[index]                                          # (Q, K, 2)
+    vel = v[:, node_j, node_i].T                               # (Q, 2)
+    vn = np.einsum("qkc,qc->qk", n, vel)
+    pressing = active & (vn > 0.0)
+    proj = vel[:, None, :] - vn[..., None] * n                 # (Q, K, 2)
+    tol = 1e-14 * np.abs(vel).sum(axis=1)
+    other = np.einsum("qkc,qlc->qkl", proj, n)                 # proj_k . n_l
+    off = active[:, None, :] & ~np.eye(k_max, dtype=bool)[None]
+    feasible = ~np.any(off & (other > tol[:, None, None]), axis=2)
+    gap = np.where(pressing & feasible, vn, np.inf)
+    best = np.argmin(gap, axis=1)
+    single = np.isfinite(gap[np.arange(n_nodes), best])
+    corner = pressing.any(axis=1) & ~single
+    m = mass[node_j, node_i]
+    new = vel.copy()
+    # one wall: the contact with friction (apply_wall_contact on the chosen normal)
+    bn = n[np.arange(n_nodes), best]                           # (Q, 2)
+    best_mu = mu[index[np.arange(n_nodes), best]]
+    one = apply_wall_contact(vel.T.copy()[:, :, None], bn.T[:, :, None], single[:, None],
+                             best_mu[:, None])
+    new[single] = one[:, single, 0].T
+    new[corner] = 0.0
+    impulse = m[:, None] * (new - vel)
+    chosen = index[np.arange(n_nodes), best]
+    _add_impulse(single, chosen, impulse, kind, entry, wall_impulse, plate_impulse)
+    if corner.any():
+        q = np.flatnonzero(corner)
+        d = -vel[q]                                            # (C, 2)
+        done = np.zeros(len(q), bool)
+        for a_k in range(k_max):
+            for b_k in range(a_k + 1, k_max):
+                na, nb = n[q, a_k], n[q, b_k]
+                det = na[:, 0] * nb[:, 1] - na[:, 1] * nb[:, 0]
+                ok = (active[q, a_k] & active[q, b_k] & (np.abs(det) >= 1e-12) & ~done)
+                safe = np.where(ok, det, 1.0)
+                a = (d[:, 0] * nb[:, 1] - d[:, 1] * nb[:, 0]) / safe
+                b = (na[:, 0] * d[:, 1] - na[:, 1] * d[:, 0]) / safe
+                small = -1e-12 * np.abs(d).sum(axis=1)
+                ok &= (a >= small) & (b >= small)
+                for k_slot, lam in ((a_k, a), (b_k, b)):
+                    part = (m[q] * lam)[:, None] * n[q, k_slot]
+                    _add_impulse(ok, index[q, k_slot], part, kind, entry, wall_impulse,
+                                 plate_impulse)
+                done |= ok
+        if not done.all():                       # round-off: to the wall pressed hardest
+            rest = ~done
+            hardest = np.argmax(np.where(active[q], vn[q], -np.inf), axis=1)
+            _add_impulse(rest, index[q, hardest], m[q, None] * d, kind, entry, wall_impulse,
+                         plate_impulse)
+    v[:, node_j, node_i] = new.T
+    return v
+
+
+def _add_impulse(mask, constraint, impulse, kind, entry, wall_impulse, plate_impulse):
+    """Add ``impulse[mask]`` to the entries of the constraints ``constraint[mask]``."""
+    c = constraint[mask]
+    wall = kind[c] == 0
+    np.add.at(wall_impulse, entry[c[wall]], impulse[mask][wall])
+    np.add.at(plate_impulse, entry[c[~wall]], impulse[mask][~wall])

@@ -6,9 +6,13 @@
   material fraction below 1/2 blank), the speed on the right, the hopper wall in grey;
 - :func:`discharge_curves`: the mass in the hopper ``M(t)`` and the discharge rate ``W(t)``,
   with the steady rate and Beverloo's rate times the Rose-Tanaka factor;
-- :func:`wall_pressure`: the normal wall pressure along the wall against Janssen in the bin
-  (``K = 1 - sin(phi)``, Jaky, used at the wall) and Walker's slice method in the cone
-  (filling and discharge ratios), all from :mod:`fipy_hopper.theory`;
+- :func:`wall_pressure`: the normal wall pressure along the wall (from the wall's reaction, with
+  the stress-sampled estimate beside it) at rest, in discharge and its envelope, against
+  Janssen in the bin (``K = 1 - sin(phi)``, Jaky, used at the wall), Walker's slice method in
+  the cone (filling and discharge ratios) and EN 1991-4's discharge factor, all from
+  :mod:`fipy_hopper.theory`; the overpressure factor per bin and the switch peak;
+- :func:`stress_pattern`: the major principal stress trajectories over the mobilised
+  friction, at rest and in discharge;
 - :func:`animate`: an animated GIF of the snapshots.
 
 Each returns a :class:`matplotlib.figure.Figure` built on the Agg canvas (no pyplot, no global
@@ -31,8 +35,8 @@ from .config import HopperConfig
 from .io import (FieldWriter, RunDirectory, atomic_path, marker_file, read_csv, read_markers,
                  read_snapshot_index)
 
-__all__ = ["plot_run", "flow_pattern", "discharge_curves", "wall_pressure", "animate",
-           "load_snapshot", "draw_layers", "theory_wall_pressure"]
+__all__ = ["plot_run", "flow_pattern", "discharge_curves", "wall_pressure", "stress_pattern",
+           "animate", "load_snapshot", "draw_layers", "theory_wall_pressure"]
 
 #: Diameter of a drawn marker over the markers' median nearest-neighbour spacing: above
 #: ``sqrt(2)``, the discs of a square lattice cover it (the material looks filled).
@@ -40,7 +44,7 @@ MARKER_DIAMETER = 1.5
 
 _STAGE_STYLE = {"filling": ("o", "C0", "filled, at rest"),
                 "early_discharge": ("s", "C1", "discharge, 90 % left"),
-                "mid_discharge": ("^", "C3", "discharge, 50 % left")}
+                "mid_discharge": ("^", "C2", "discharge, 50 % left")}
 
 
 def _figure(width, height):
@@ -337,33 +341,153 @@ def theory_wall_pressure(cfg: HopperConfig, n: int = 120) -> dict:
 
 
 def wall_pressure(run):
-    """Simulated normal wall pressure along the wall against Janssen (bin) and Walker (cone)."""
+    """The wall loads of a run against Janssen (bin), Walker (cone) and EN 1991-4.
+
+    Left: the normal pressure along the wall from the wall's reaction (markers joined by
+    lines) at rest and at the discharge stages, the discharge envelope (the largest windowed
+    pressure per bin), the stress-sampled estimate at rest (open markers), and the closed
+    forms.  Right: the overpressure factor (envelope / at rest) per bin with EN 1991-4's
+    discharge factor for the bin wall, and the switch peak against Walker's switch pressure.
+    """
     run = Path(run)
     cfg = _config(run)
+    summary = _summary(run)
     table = read_csv(run / RunDirectory.WALL_PRESSURE)
-    fig = _figure(6.4, 4.4)
-    ax = fig.add_subplot()
+    fig = _figure(11.0, 4.4)
+    ax, ax_f = fig.subplots(1, 2, width_ratios=(3, 2))
     stages = np.asarray(table.get("stage", np.array([])), dtype=str)
+    s_all = np.asarray(table.get("s_m", []), dtype=float)
+    p_all = np.asarray(table.get("p_n_Pa", []), dtype=float)
     for stage in dict.fromkeys(stages.tolist()):
-        marker, colour, label = _STAGE_STYLE.get(stage, ("x", "C4", stage))
         sel = stages == stage
-        ax.plot(table["s_m"][sel], table["p_n_Pa"][sel] / 1e3, marker, color=colour, ms=4,
+        if stage == "discharge_envelope":
+            ax.plot(s_all[sel], p_all[sel] / 1e3, "-", color="C3", lw=2.0, alpha=0.6,
+                    label="simulated, discharge envelope")
+            continue
+        marker, colour, label = _STAGE_STYLE.get(stage, ("x", "C4", stage))
+        ax.plot(s_all[sel], p_all[sel] / 1e3, marker + "-", color=colour, ms=4, lw=0.8,
                 label=f"simulated, {label}")
+        if stage == "filling" and "p_n_stress_Pa" in table:
+            ax.plot(s_all[sel], np.asarray(table["p_n_stress_Pa"], float)[sel] / 1e3, marker,
+                    mfc="none", color=colour, ms=5, lw=0,
+                    label="stress-sampled estimate, at rest")
     styles = {"Janssen": ("k", "-"), "Walker, cone, filling": ("C0", "-"),
               "Walker, cone, discharge": ("C3", "--")}
-    for name, (s, p) in theory_wall_pressure(cfg).items():
+    curves = theory_wall_pressure(cfg)
+    for name, (s, p) in curves.items():
         colour, ls = next((v for k, v in styles.items() if name.startswith(k)), ("0.4", "-"))
         ax.plot(s, p / 1e3, ls, color=colour, lw=1.2, label=name)
+    c_h = theory.en1991_discharge_factors()[0]
+    for name, (s, p) in curves.items():
+        if name.startswith("Janssen"):
+            ax.plot(s, c_h * p / 1e3, ":", color="k", lw=1.2,
+                    label=f"EN 1991-4 discharge, bin (C_h = {c_h:g} x Janssen)")
     s_t = float(geometry.transition_arc_length(cfg.hopper))
-    ax.axvline(s_t, color="0.5", lw=0.8, ls=":")
-    ax.text(s_t, ax.get_ylim()[1], " transition", va="top", fontsize=8, color="0.4")
+    for a in (ax, ax_f):
+        a.axvline(s_t, color="0.5", lw=0.8, ls=":")
+    ax.text(s_t, 0.0, " transition", va="bottom", fontsize=8, color="0.4")
     ax.set_xlabel("arc length along the wall from the outlet lip, s (m)")
     ax.set_ylabel("normal wall pressure p_n (kPa)")
     ax.set_xlim(left=0.0)
     ax.set_ylim(bottom=0.0)
-    ax.legend(loc="best", fontsize=7)
+    ax.legend(loc="best", fontsize=6.5)
     ax.set_title(f"Wall pressure (phi = {cfg.material.friction_angle_deg:g} deg, "
                  f"phi_w = {cfg.wall.friction_angle_deg:g} deg)", fontsize=10)
+    filled, envelope = stages == "filling", stages == "discharge_envelope"
+    if filled.any() and envelope.any() and filled.sum() == envelope.sum():
+        p_fill, p_env = p_all[filled], p_all[envelope]
+        loaded = p_fill > 0.05 * p_fill.max()
+        ratio = np.where(loaded, p_env / np.where(loaded, p_fill, 1.0), np.nan)
+        ax_f.plot(s_all[filled], ratio, "o-", color="C3", ms=4, lw=0.8,
+                  label="simulated: envelope / at rest")
+        ax_f.axhline(c_h, color="k", ls=":", lw=1.2, label=f"EN 1991-4 C_h = {c_h:g} (bin)")
+        ax_f.axhline(1.0, color="0.6", lw=0.8)
+        walker = summary.get("walker_switch_pressure_Pa")
+        peak, s_peak = summary.get("switch_peak_Pa"), summary.get("switch_peak_s_m")
+        if walker is not None and peak is not None and np.isfinite(walker or np.nan):
+            ax.plot([s_t], [walker / 1e3], "*", color="C3", ms=11,
+                    label="Walker switch pressure")
+            ax.plot([s_peak], [peak / 1e3], "P", color="k", ms=8, mfc="none",
+                    label="simulated switch peak")
+            ax.legend(loc="best", fontsize=6.5)
+        ax_f.set_xlabel("s (m)")
+        ax_f.set_ylabel("overpressure factor")
+        ax_f.set_ylim(bottom=0.0)
+        ax_f.legend(loc="best", fontsize=7)
+        ax_f.set_title("Discharge overpressure", fontsize=10)
+    else:
+        ax_f.set_axis_off()
+    return fig
+
+
+# ---------------------------------------------------------------- stress pattern
+def _stage_snapshots(entries):
+    """The snapshot at rest (the last of the fill) and the one of the discharge nearest to
+    half of its duration; either may be missing."""
+    filled = [e for e in entries if e["stage"] == "filling"]
+    discharge = [e for e in entries if e["stage"] == "discharge"]
+    chosen = []
+    if filled:
+        chosen.append(("at rest", filled[-1]))
+    if len(discharge) > 1:
+        times = np.array([float(e["discharge_time_s"]) for e in discharge])
+        k = int(np.argmin(np.abs(times - 0.5 * times.max())))
+        chosen.append((f"discharge, t = {times[k]:.2f} s", discharge[k]))
+    return chosen
+
+
+def stress_pattern(run):
+    """Trajectories of the major principal stress over the mobilised friction, at rest and in
+    discharge: the active state of the fill (sigma1 near vertical) and the passive, arched
+    state of the flow (sigma1 across it), from the stresses of the field snapshots."""
+    import meshio
+    from . import diagnostics
+
+    run = Path(run)
+    cfg = _config(run)
+    chosen = _stage_snapshots(snapshots(run))
+    fig = _figure(3.2 * max(len(chosen), 1) + 1.2, 6.0)
+    axes = np.atleast_1d(fig.subplots(1, max(len(chosen), 1)))
+    folder = run / RunDirectory.FIELDS
+    mesh_artist = None
+    for ax, (title, entry) in zip(axes, chosen):
+        mesh = meshio.read(folder / entry["file"])
+        r_nodes, z_nodes = np.unique(mesh.points[:, 0]), np.unique(mesh.points[:, 1])
+        shape = (len(z_nodes) - 1, len(r_nodes) - 1)
+        cell = {k: np.asarray(mesh.cell_data[k][0]).reshape(shape)
+                for k in ("alpha", "stress_rr", "stress_zz", "stress_tt", "stress_rz")}
+        sigma = np.stack([cell["stress_rr"], cell["stress_zz"], cell["stress_tt"],
+                          cell["stress_rz"]], axis=-1)
+        pattern = diagnostics.stress_pattern(sigma, cfg.material.cohesion,
+                                             cfg.material.friction_angle_deg)
+        present = cell["alpha"] > 0.5
+        mob = np.ma.masked_where(~present, pattern["sin_phi_mob"])
+        mesh_artist = ax.pcolormesh(r_nodes, z_nodes, mob, cmap="magma_r", vmin=0.0,
+                                    vmax=math.sin(math.radians(cfg.material.friction_angle_deg)),
+                                    shading="flat")
+        rc, zc = 0.5 * (r_nodes[1:] + r_nodes[:-1]), 0.5 * (z_nodes[1:] + z_nodes[:-1])
+        step = max(1, int(round(len(rc) / 14)))
+        R, Z = np.meshgrid(rc[::step], zc[::step])
+        angle = np.radians(pattern["sigma1_angle_deg"][::step, ::step])
+        keep = present[::step, ::step] & (pattern["sigma1"][::step, ::step] > 0)
+        u, w = np.sin(angle), np.cos(angle)
+        ax.quiver(R[keep], Z[keep], u[keep], w[keep], angles="xy", pivot="middle",
+                  headwidth=0, headlength=0, headaxislength=0,
+                  color="deepskyblue", width=0.012, edgecolor="k", linewidth=0.3,
+                  scale=1.0 / (0.9 * step * (rc[1] - rc[0])), scale_units="xy")
+        wall = geometry.wall_polyline(cfg.hopper, r_nodes[-1], z_nodes[-1])
+        ax.plot(wall[:, 0], wall[:, 1], color="k", lw=1.0)
+        ax.set_xlim(0.0, cfg.hopper.bin_radius * 1.05)
+        ax.set_ylim(z_nodes[0], min(z_nodes[-1], cfg.hopper.fill_level * 1.08))
+        ax.set_aspect("equal")
+        ax.set_title(title, fontsize=10)
+        ax.set_xlabel("r (m)")
+    axes[0].set_ylabel("z (m)")
+    if mesh_artist is not None:
+        fig.colorbar(mesh_artist, ax=list(axes), shrink=0.8,
+                     label="mobilised friction sin phi_mob = (s1 - s3)/(s1 + s3 + 2c cot phi)")
+    fig.suptitle("Major principal stress trajectories (lines) over the mobilised friction",
+                 fontsize=10)
     return fig
 
 
@@ -379,7 +503,10 @@ def plot_run(run) -> list:
         written.append(_save(discharge_curves(run), run / "discharge.png"))
     if (run / RunDirectory.WALL_PRESSURE).is_file():
         written.append(_save(wall_pressure(run), run / "wall_pressure.png"))
-    if snapshots(run):
+    entries = snapshots(run)
+    if entries:
+        written.append(_save(stress_pattern(run), run / "stress_pattern.png"))
+    if any(e["stage"] == "discharge" for e in entries):
         written.append(_save(flow_pattern(run), run / "flow_pattern.png"))
         written.append(animate(run))
     return written

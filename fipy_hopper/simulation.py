@@ -2,18 +2,37 @@
 
 The model steps; the simulation decides when to stop, measures on a schedule and calls the
 writers and diagnostics attached to it (callbacks that read the state and never change it).
+Every measurement reads the state between the run's own steps: nothing steps the model but
+the run.
 
 Stages:
 
-- **filling**: the outlet plate is closed, gravity is ramped up over ``gravity_ramp_time`` and a
-  mass-proportional damping (critical for the column's lowest elastic mode) removes the elastic
-  waves.  The fill is *at rest* when, after the ramp, the kinetic energy is below
-  ``settle_kinetic_energy * M g L`` (``M`` the mass, ``L`` the fill depth from outlet to
-  surface).  Filling gives up at ``max_fill_time`` and says so.
+- **filling**: the outlet plate is closed, gravity rises linearly over the model's ramp
+  (``HopperModel.ramp_time``: a number of periods of the column's lowest elastic mode, so
+  that the fill is quasi-static whatever the stiffness and the size) and a mass-proportional
+  damping removes the elastic waves.  The fill is *at rest* when, after the ramp, the kinetic
+  energy is below ``settle_kinetic_energy * M g L`` (``M`` the mass, ``L`` the fill depth from
+  outlet to surface) and the damping carries less than ``settle_damping_fraction`` of the
+  weight over the last check interval (the walls and the plate hold the rest).  Filling gives
+  up at ``max_fill_time`` and says so.  ``end_time = 0`` stops there (``"filled"``).
 - **discharge**: the plate is removed; the run stops at ``end_time`` or, for ``"empty"``, when
   less than ``empty_fraction`` of the initial mass is left in the hopper (``"empty"``), or when
   nothing has left for 0.25 s and the kinetic energy is tiny (``"at_rest"``: a heel on a
   shallow cone), or at ``max_time`` (``"max_time"``); any run stops at ``wall_time_limit``.
+
+What is measured, and when:
+
+- the time series (``timeseries.csv``) every ``output_interval`` of discharge, at the first
+  step at or after each sample time (evenly spaced to within one step), and once more when
+  the run stops;
+- the vertical momentum balance of the grid (``loads.csv``, :meth:`WallLoads.balance`) over
+  each ``output_interval``, filling and discharge;
+- the wall loads from the wall's reaction (:class:`~fipy_hopper.diagnostics.WallLoads`) over
+  windows: at rest (``filling``: the last check interval of the fill), from the moment 90 % and
+  50 % of the mass is left (``early_discharge``, ``mid_discharge``: ``load_window`` s), and over
+  consecutive windows of ``load_window`` s through the whole discharge, whose largest ``p_n``
+  per bin is the envelope (``discharge_envelope``); beside each, the stress-sampled profile
+  (:class:`~fipy_hopper.diagnostics.WallSampler`, averaged over the checks of the window).
 """
 
 from __future__ import annotations
@@ -32,13 +51,10 @@ import numpy as np
 from . import diagnostics
 from .model import GRAVITY, HopperModel, InstabilityError, State
 
-
-def _nanmean(samples) -> np.ndarray:
-    """Mean over axis 0 ignoring NaN; NaN where every sample is NaN."""
-    arr = np.asarray(samples, dtype=float)
-    count = np.isfinite(arr).sum(axis=0)
-    total = np.where(np.isfinite(arr), arr, 0.0).sum(axis=0)
-    return np.where(count > 0, total / np.maximum(count, 1), np.nan)
+#: Stages whose wall loads are measured from the moment this fraction of the mass is left.
+STAGE_MARKS = {"early_discharge": 0.9, "mid_discharge": 0.5}
+#: Wall-load stages in the order they are written.
+WALL_STAGES = ("filling", "early_discharge", "mid_discharge", "discharge_envelope")
 
 
 @dataclass
@@ -53,7 +69,7 @@ class Schedule:
 
 @dataclass
 class RunRecord:
-    """What a run measured (all SI; masses are 3D, kg)."""
+    """What a run measured (all SI; masses are 3D, kg; forces 3D, N)."""
 
     t: list = field(default_factory=list)               # s since the outlet opened
     mass_in_hopper: list = field(default_factory=list)
@@ -61,7 +77,15 @@ class RunRecord:
     rate: list = field(default_factory=list)             # kg/s over the last interval
     mass_flow_index: list = field(default_factory=list)
     stagnant_fraction: list = field(default_factory=list)
-    wall: dict = field(default_factory=dict)             # stage -> (t, s, r, z, p_n, tau)
+    # stage -> (t since the outlet opened, s, r, z, p_n, tau): the reaction estimate per bin
+    wall: dict = field(default_factory=dict)
+    # stage -> (p_n, tau) stress-sampled on the same bins (NaN where a bin held no material)
+    wall_stress: dict = field(default_factory=dict)
+    wall_window: dict = field(default_factory=dict)      # stage -> window duration (s)
+    loads: list = field(default_factory=list)            # rows of loads.csv (dicts)
+    rest_balance: dict = field(default_factory=dict)     # the balance over the rest window
+    envelope_windows: int = 0
+    wall_k: float = math.nan                             # p_n / (-sigma_zz) at the bin wall, at rest
     fill_time: float = math.nan
     fill_at_rest: bool = False
     initial_mass: float = math.nan
@@ -86,12 +110,18 @@ class Simulation:
         self.record = RunRecord()
         self.schedules: list[Schedule] = []
         self.wall_sampler = diagnostics.WallSampler(model)
-        self._wall_avg: dict = {}
+        self.wall_loads = diagnostics.WallLoads(model, self.wall_sampler)
+        self.load_window = run.load_window_s
         self._started = None
         self._last_progress = 0.0
         self._eta_mark = None            # (wall time, discharge time) when the ETA clock started
         self.t_open = math.nan
-        self.next_sample = math.nan
+        self.next_sample = math.nan      # next time-series sample (s, run time)
+        self.next_load_sample = math.nan  # next loads.csv row (s, run time)
+        self.next_envelope = math.nan    # end of the current envelope window (s, run time)
+        self._readings: dict = {}        # window name -> WallLoads.reading at its start
+        self._stress_sums: dict = {}     # stage -> [sum p_n, sum tau, count] of the window
+        self.envelope = None             # largest windowed p_n per bin in discharge
         self.wall_schedules: list = []   # [fn, wall-time interval, last call]
 
     def add_wall_time_callback(self, fn: Callable, interval: float):
@@ -125,59 +155,102 @@ class Simulation:
 
     # -------------------------------------------------------------- stages
     def _check_stable(self):
-        st = self.state
+        """Stop with :class:`InstabilityError` on a runaway or non-finite velocity, a
+        non-finite material fraction or stress, or mass that the books do not account for."""
+        st, m = self.state, self.model
         v = st.v
         speed = np.hypot(v[0], v[1])
-        limit = 50.0 * math.sqrt(GRAVITY * max(self.model.cfg.hopper.top, 0.1))
+        limit = 50.0 * math.sqrt(GRAVITY * max(m.cfg.hopper.top, 0.1))
         bad = ~np.isfinite(speed) | (speed > limit)
+        g = m.grid
         if bad.any():
             j, i = np.argwhere(bad)[0]
-            g = self.model.grid
             raise InstabilityError(
                 f"runaway velocity at step {st.step}, t = {st.t:.6g} s, node r = "
                 f"{g.r_nodes[i]:.4g} m, z = {g.z_nodes[j]:.4g} m (|v| = {speed[j, i]:.3g} m/s, "
                 f"limit {limit:.3g} m/s)")
+        broken = ~np.isfinite(st.alpha) | ~np.isfinite(st.sigma).all(axis=-1)
+        if broken.any():
+            j, i = np.argwhere(broken)[0]
+            raise InstabilityError(
+                f"non-finite material fraction or stress at step {st.step}, t = {st.t:.6g} s, "
+                f"cell r = {g.r_cells[i]:.4g} m, z = {g.z_cells[j]:.4g} m")
+        total = m.total_mass(st) + st.lost
+        if not hasattr(self, "_mass_books"):
+            self._mass_books = total
+        if not abs(total - self._mass_books) <= 1e-6 * self._mass_books:
+            raise InstabilityError(
+                f"mass not accounted for at step {st.step}, t = {st.t:.6g} s: "
+                f"{total:.9g} kg in the grid and lost, {self._mass_books:.9g} kg at the start")
 
     def _out_of_wall_time(self) -> bool:
         return self.wall_time_limit > 0 and time.perf_counter() - self._started > \
             self.wall_time_limit
 
+    def _steps_until(self, t_target: float) -> int:
+        """Steps until the state's time first reaches ``t_target`` (at least 1)."""
+        ahead = (t_target - self.state.t) / self.model.dt
+        return max(1, int(math.ceil(ahead - 1e-9)))
+
     def fill(self) -> bool:
         """Bring the filled hopper to rest with the outlet closed; True when at rest."""
         m, st = self.model, self.state
-        num = m.cfg.numerics
+        num, run = m.cfg.numerics, m.cfg.run
         if self._started is None:
             self._started = time.perf_counter()
         mass = m.total_mass(st)
         depth = m.cfg.hopper.fill_level
         threshold = num.settle_kinetic_energy * mass * GRAVITY * depth
+        settle = num.settle_damping_fraction
         check_every = max(1, int(0.005 / m.dt))
+        loads = self.wall_loads
+        if "check" not in self._readings:
+            self._readings["check"] = self._readings["sample"] = loads.reading(m, st)
+            self.next_load_sample = st.t + run.output_interval
+        window = None
         while st.stage == "filling":
-            m.advance(st, check_every - st.step % check_every)
-            if st.step % check_every == 0:
-                self._check_stable()
-                self._call_schedules()
-                if st.t >= num.gravity_ramp_time and m.kinetic_energy(st) < threshold:
-                    self.record.fill_at_rest = True
-                    break
-                if st.t >= num.max_fill_time:
-                    break
-                if self._out_of_wall_time():
-                    self.record.stop_reason = "wall_time_limit"
-                    self._call_wall_schedules(force=True)
-                    return False
-                # last: a checkpoint here resumes exactly (see add_wall_time_callback)
-                self._call_wall_schedules()
-                self._progress(f"filling t={st.t:.3f} s  KE/MgL={m.kinetic_energy(st) / (mass * GRAVITY * depth):.2e}")
+            m.advance(st, min(check_every - st.step % check_every,
+                              self._steps_until(self.next_load_sample)))
+            if st.t >= self.next_load_sample - 1e-12:
+                self._load_sample("filling")
+                self.next_load_sample += run.output_interval
+            if st.step % check_every:
+                continue
+            self._check_stable()
+            self._call_schedules()
+            previous, current = self._readings["check"], loads.reading(m, st)
+            self._readings["check"] = current
+            balance = loads.balance(previous, current)
+            ke = m.kinetic_energy(st)
+            if (st.t >= m.ramp_time and ke < threshold
+                    and abs(balance["damping"]) <= settle * balance["weight"]):
+                self.record.fill_at_rest = True
+                window = (previous, current)
+                break
+            if st.t >= num.max_fill_time:
+                window = (previous, current)
+                break
+            if self._out_of_wall_time():
+                self.record.stop_reason = "wall_time_limit"
+                self._call_wall_schedules(force=True)
+                return False
+            # last: a checkpoint here resumes exactly (see add_wall_time_callback)
+            self._call_wall_schedules()
+            self._progress(f"filling t={st.t:.3f} s  KE/MgL={ke / (mass * GRAVITY * depth):.2e}"
+                           f"  damping/weight={balance['damping'] / balance['weight']:.1e}")
         m.transport_step(st)
         self.record.fill_time = st.t
-        self._sample_wall("filling", average_over=0.0)
+        self.record.rest_balance = loads.balance(*window)
+        self._wall_stage("filling", *window)
+        self.record.wall_k = diagnostics.wall_k(loads, self.record.wall["filling"][4], st,
+                                                m.cfg.hopper)
         return self.record.fill_at_rest
 
     def discharge(self) -> str:
         """Open the outlet and run until a stop rule fires; returns the stop reason."""
         m, st, rec = self.model, self.state, self.record
         run = m.cfg.run
+        loads = self.wall_loads
         if self._started is None:
             self._started = time.perf_counter()
         if st.stage == "filling":
@@ -186,25 +259,27 @@ class Simulation:
             rec.initial_mass = m.mass_in_hopper(st)
             self._log_sample(force=True)
             self.next_sample = st.t + run.output_interval
+            self.next_load_sample = st.t + run.output_interval
+            self._readings["sample"] = self._readings["envelope"] = loads.reading(m, st)
+            self.next_envelope = st.t + self.load_window
         m0 = rec.initial_mass
         check_every = max(1, int(0.002 / m.dt))
-        stage_marks = {"early_discharge": 0.9, "mid_discharge": 0.5}
         reason = ""
         while not reason:
-            m.advance(st, check_every - st.step % check_every)
+            m.advance(st, min(check_every - st.step % check_every,
+                              self._steps_until(self.next_sample)))
+            if st.t >= self.next_sample - 1e-12:
+                self._log_sample()
+                self.next_sample += run.output_interval
+                self._load_sample("discharge")
             if st.step % check_every:
                 continue
             self._check_stable()
             self._call_schedules()
-            if st.t >= self.next_sample - 1e-12:
-                self._log_sample()
-                self.next_sample += run.output_interval
             t_dis = st.t - self.t_open
             mass = m.mass_in_hopper(st)
-            for name, frac in stage_marks.items():
-                if name not in rec.wall and mass <= frac * m0:
-                    self._sample_wall(name, average_over=0.1)
-            if self.end_time != "empty" and t_dis >= float(self.end_time):
+            self._discharge_windows(mass, m0)
+            if self.end_time != "empty" and t_dis >= float(self.end_time) - 1e-12:
                 reason = "end_time"
             elif self.end_time == "empty" and mass < run.empty_fraction * m0:
                 reason = "empty"
@@ -224,17 +299,22 @@ class Simulation:
                                f"left {mass:.3g} kg  W={rec.rate[-1] if rec.rate else 0:.3g} kg/s"
                                + self._eta(t_dis, mass))
         self._log_sample(force=True)
+        self._finish_discharge_stages()
         rec.stop_reason = reason
         return reason
 
     def run(self) -> RunRecord:
-        """Fill, then discharge; returns the :class:`RunRecord`."""
+        """Fill, then discharge (unless ``end_time`` is 0); returns the :class:`RunRecord`."""
         self._started = time.perf_counter()
         self.record.stop_reason = ""
         try:
             if self.state.stage == "filling":
                 self.fill()
-            if self.record.stop_reason != "wall_time_limit":
+            if self.record.stop_reason == "wall_time_limit":
+                pass
+            elif self.end_time != "empty" and float(self.end_time) == 0.0:
+                self.record.stop_reason = "filled"
+            else:
                 self.discharge()
         finally:
             self.record.wall_time = time.perf_counter() - self._started
@@ -251,6 +331,29 @@ class Simulation:
             return False
         recent = np.asarray(rec.rate[-n:])
         return bool(np.all(np.abs(recent) < 1e-3 * max(rec.initial_mass, 1e-9)))
+
+    def _eta(self, t_dis: float, mass: float) -> str:
+        """`` ETA ...`` of the progress line: the wall time to the end, from the discharge's
+        progress since the ETA clock started (its first call)."""
+        now = time.perf_counter()
+        if self._eta_mark is None:
+            self._eta_mark = (now, t_dis, mass)
+            return ""
+        wall0, t0, mass0 = self._eta_mark
+        elapsed, simulated = now - wall0, t_dis - t0
+        if elapsed < 2.0 or simulated <= 0:
+            return ""
+        if self.end_time == "empty":
+            rate = (mass0 - mass) / simulated
+            target = self.model.cfg.run.empty_fraction * self.record.initial_mass
+            remaining = (mass - target) / rate if rate > 0 else math.inf
+            remaining = min(remaining, self.model.cfg.run.max_time - t_dis)
+        else:
+            remaining = float(self.end_time) - t_dis
+        seconds = elapsed / simulated * max(remaining, 0.0)
+        if not math.isfinite(seconds):
+            return ""
+        return f"  ETA {seconds:.0f} s"
 
     def _log_sample(self, force=False):
         m, st, rec = self.model, self.state, self.record
@@ -271,25 +374,87 @@ class Simulation:
         rec.mass_flow_index.append(index)
         rec.stagnant_fraction.append(stagnant)
 
-    def _sample_wall(self, stage: str, average_over: float = 0.0):
-        """Wall pressure profile; in discharge the mean over ``average_over`` s of steps.
+    def _load_sample(self, stage: str):
+        """A row of ``loads.csv``: the vertical balance since the previous row."""
+        current = self.wall_loads.reading(self.model, self.state)
+        previous = self._readings.get("sample")
+        self._readings["sample"] = current
+        if previous is None or not current["t"] > previous["t"]:
+            return
+        row = {"stage": stage, "t_s": current["t"]}
+        row.update(self.wall_loads.balance(previous, current))
+        self.record.loads.append(row)
 
-        Samples are taken every 20 steps; a bin's mean is over the samples in which it held
-        material (the free surface moves down during the average).
-        """
-        st = self.state
-        s, r, z, p, tau = self.wall_sampler.profile_all(st)
-        samples_p, samples_t = [p], [tau]
-        for _ in range(int(average_over / self.model.dt / 20)):
-            for _ in range(20):
-                self.model.step(st)
-            _, _, _, p2, t2 = self.wall_sampler.profile_all(st)
-            samples_p.append(p2)
-            samples_t.append(t2)
-        p, tau = _nanmean(samples_p), _nanmean(samples_t)
+    def _stress_profile(self):
+        return self.wall_sampler.profile_all(self.state)[3:]
+
+    def _discharge_windows(self, mass: float, m0: float):
+        """At a check of the discharge: start and finish the stage windows, close envelope
+        windows, and add the stress-sampled profile to the open stage windows."""
+        m, st, loads = self.model, self.state, self.wall_loads
+        for stage, fraction in STAGE_MARKS.items():
+            if stage not in self._readings and stage not in self.record.wall \
+                    and mass <= fraction * m0:
+                self._readings[stage] = loads.reading(m, st)
+                self._stress_sums[stage] = None
+        for stage in list(STAGE_MARKS):
+            if stage in self._readings:
+                self._add_stress(stage)
+                if st.t - self._readings[stage]["t"] >= self.load_window - 1e-12:
+                    self._wall_stage(stage, self._readings.pop(stage),
+                                     loads.reading(m, st))
+        if st.t >= self.next_envelope - 1e-12:
+            current = loads.reading(m, st)
+            p_n = loads.profile(self._readings["envelope"], current)[3]
+            self.envelope = p_n if self.envelope is None else np.maximum(self.envelope, p_n)
+            self.record.envelope_windows += 1
+            self._readings["envelope"] = current
+            self.next_envelope = st.t + self.load_window
+
+    def _add_stress(self, stage: str):
+        p, tau = self._stress_profile()
+        sums = self._stress_sums.get(stage)
         ok = np.isfinite(p)
-        t_stage = st.t - (self.t_open if np.isfinite(self.t_open) else st.t)
-        self.record.wall[stage] = (t_stage, s[ok], r[ok], z[ok], p[ok], tau[ok])
+        if sums is None:
+            sums = [np.zeros_like(p), np.zeros_like(p), np.zeros_like(p)]
+        sums[0] += np.where(ok, p, 0.0)
+        sums[1] += np.where(ok, tau, 0.0)
+        sums[2] += ok
+        self._stress_sums[stage] = sums
+
+    def _wall_stage(self, stage: str, start: dict, end: dict):
+        """Record the wall loads of ``stage`` over the window ``start``-``end``: the reaction
+        profile, and the stress-sampled one (averaged over the window's checks, or at its end
+        when it had none)."""
+        s, r, z, p_n, tau = self.wall_loads.profile(start, end)
+        sums = self._stress_sums.pop(stage, None)
+        if sums is None or not np.any(sums[2]):
+            p_s, tau_s = self._stress_profile()
+        else:
+            count = np.maximum(sums[2], 1)
+            p_s = np.where(sums[2] > 0, sums[0] / count, np.nan)
+            tau_s = np.where(sums[2] > 0, sums[1] / count, np.nan)
+        t_open = self.t_open if np.isfinite(self.t_open) else end["t"]
+        self.record.wall[stage] = (end["t"] - t_open, s, r, z, p_n, tau)
+        self.record.wall_stress[stage] = (p_s, tau_s)
+        self.record.wall_window[stage] = end["t"] - start["t"]
+
+    def _finish_discharge_stages(self):
+        """At the end of the discharge: the envelope as a stage (its ``tau`` is not an
+        envelope: NaN) and stage windows that the end cut short, over what they had."""
+        m, st = self.model, self.state
+        for stage in list(STAGE_MARKS):
+            if stage in self._readings:
+                start = self._readings.pop(stage)
+                if st.t > start["t"]:
+                    self._wall_stage(stage, start, self.wall_loads.reading(m, st))
+        if self.envelope is not None:
+            sampler = self.wall_sampler
+            nan = np.full_like(self.envelope, np.nan)
+            self.record.wall["discharge_envelope"] = (
+                st.t - self.t_open, sampler.centres, sampler.r, sampler.z, self.envelope, nan)
+            self.record.wall_stress["discharge_envelope"] = (nan, nan)
+            self.record.wall_window["discharge_envelope"] = self.load_window
 
     def _progress(self, text: str):
         if not self.progress:
@@ -312,13 +477,31 @@ class Simulation:
         arrays = {k: v for k, v in st.__dict__.items() if isinstance(v, np.ndarray)}
         scalars = {k: v for k, v in st.__dict__.items() if not isinstance(v, np.ndarray)}
         rec = dict(self.record.__dict__)
-        wall = rec.pop("wall")
+        wall, wall_stress = rec.pop("wall"), rec.pop("wall_stress")
         for stage, values in wall.items():
             for k, arr in enumerate(values[1:]):
                 arrays[f"wall__{stage}__{k}"] = np.asarray(arr)
+            for k, arr in enumerate(wall_stress.get(stage, ())):
+                arrays[f"wallstress__{stage}__{k}"] = np.asarray(arr)
+        readings = {}
+        for name, reading in self._readings.items():
+            readings[name] = {k: v for k, v in reading.items() if not isinstance(v, np.ndarray)}
+            for k, v in reading.items():
+                if isinstance(v, np.ndarray):
+                    arrays[f"reading__{name}__{k}"] = v
+        for stage, sums in self._stress_sums.items():
+            if sums is not None:
+                for k, v in enumerate(sums):
+                    arrays[f"stresssum__{stage}__{k}"] = v
+        if self.envelope is not None:
+            arrays["envelope"] = self.envelope
         meta = {"state": scalars, "record": rec,
                 "wall_times": {stage: values[0] for stage, values in wall.items()},
                 "t_open": self.t_open, "next_sample": self.next_sample,
+                "next_load_sample": self.next_load_sample,
+                "next_envelope": self.next_envelope, "readings": readings,
+                "stress_sums": {k: v is not None for k, v in self._stress_sums.items()},
+                "mass_books": getattr(self, "_mass_books", None),
                 "schedules": [s.next_time for s in self.schedules]}
         path = os.fspath(path)
         folder = os.path.dirname(os.path.abspath(path))
@@ -335,18 +518,39 @@ class Simulation:
             raise
 
     def restore(self, path) -> None:
-        """Continue from a checkpoint written by :meth:`checkpoint` (same configuration)."""
-        with np.load(path, allow_pickle=False) as data:
-            meta = json.loads(str(data["__meta__"]))
-            arrays = {k: data[k].copy() for k in data.files if k != "__meta__"}
-        wall = {}
+        """Continue from a checkpoint written by :meth:`checkpoint` (same configuration).
+
+        The file is checked before use (:func:`fipy_hopper.io.read_checkpoint`: its size, the
+        names, types and shapes of its arrays against this run's state, no pickle): a damaged
+        or foreign checkpoint raises :class:`~fipy_hopper.io.CheckpointError`."""
+        from . import io as fio
+
+        arrays, meta = fio.read_checkpoint(path, self.state, self.model.cfg)
+        wall, wall_stress = {}, {}
         for stage, t_stage in meta["wall_times"].items():
             wall[stage] = (t_stage,) + tuple(arrays.pop(f"wall__{stage}__{k}") for k in range(5))
-        self.state = State(**meta["state"], **{k: v for k, v in arrays.items()
-                                                if not k.startswith("wall__")})
-        self.record = RunRecord(**meta["record"], wall=wall)
+            if f"wallstress__{stage}__0" in arrays:
+                wall_stress[stage] = tuple(arrays.pop(f"wallstress__{stage}__{k}")
+                                           for k in range(2))
+        self._readings = {}
+        for name, scalars in meta.get("readings", {}).items():
+            reading = dict(scalars)
+            for key in ("wall", "plate", "budget"):
+                reading[key] = arrays.pop(f"reading__{name}__{key}")
+            self._readings[name] = reading
+        self._stress_sums = {}
+        for stage, present in meta.get("stress_sums", {}).items():
+            self._stress_sums[stage] = ([arrays.pop(f"stresssum__{stage}__{k}")
+                                         for k in range(3)] if present else None)
+        self.envelope = arrays.pop("envelope", None)
+        self.state = State(**meta["state"], **arrays)
+        self.record = RunRecord(**meta["record"], wall=wall, wall_stress=wall_stress)
         self.t_open = meta["t_open"]
         self.next_sample = meta["next_sample"]
+        self.next_load_sample = meta.get("next_load_sample", math.nan)
+        self.next_envelope = meta.get("next_envelope", math.nan)
+        if meta.get("mass_books") is not None:
+            self._mass_books = meta["mass_books"]
         for s, t_next in zip(self.schedules, meta["schedules"]):
             s.next_time = t_next
         self.model._mass = None
@@ -367,20 +571,25 @@ class Simulation:
         index = float(np.nanmedian(idx)) if np.isfinite(idx).any() else math.nan
         stagnant = float(np.nanmedian(stag)) if np.isfinite(stag).any() else math.nan
         remaining = m.mass_in_hopper(st)
-        balance = abs(remaining + st.discharged - m0) / m0 if m0 > 0 else math.nan
-        return {
+        if np.isfinite(m0) and m0 > 0:
+            balance = abs(remaining + st.discharged - m0) / m0
+        else:
+            balance = math.nan
+        out = {
             "steady_discharge_rate_kg_s": rate,
             "steady_rate_spread": spread,
-            "flow_mode": diagnostics.classify_flow_mode(index, stagnant, self.flow_rule),
+            "flow_mode": diagnostics.classify_flow_mode(index, stagnant, self.flow_rule)
+            if len(t) else "none",
             "mass_flow_index": index,
             "stagnant_fraction": stagnant,
-            "initial_mass_kg": m0,
+            "initial_mass_kg": m0 if np.isfinite(m0) else m.mass_in_hopper(st),
             "remaining_mass_kg": remaining,
             "discharged_kg": st.discharged,
             "mass_balance_error": balance,
             "discharge_time_s": float(t[-1]) if len(t) else 0.0,
             "fill_time_s": rec.fill_time,
             "fill_at_rest": rec.fill_at_rest,
+            "gravity_ramp_time_s": m.ramp_time,
             "stop_reason": rec.stop_reason,
             "cells": m.grid.n_cells,
             "steps": st.step,
@@ -390,3 +599,5 @@ class Simulation:
             "cell_size_m": m.grid.h,
             "hourglass_coefficient": m.cfg.numerics.hourglass_coefficient,
         }
+        out.update(diagnostics.load_summary(self))
+        return out

@@ -146,11 +146,11 @@ def _cell_forces(carry_runs, n_carry, alpha, sigma, v, open_volume, r_c, h, hg_b
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
-def _contact(v, j, i, n_r, n_z, mu):
-    """Impulse Coulomb contact of node (j, i) against a wall of normal (n_r, n_z), in place
-    (``momentum.contact_kernel`` for one node)."""
-    vr = v[0, j, i]
-    vz = v[1, j, i]
+def _project(vr, vz, n_r, n_z, mu):
+    """The velocity after an impulse Coulomb contact against one wall of normal (n_r, n_z)
+    (into the wall): the normal part removed if pressing, the tangential speed reduced by
+    ``mu`` times the removed normal speed (not below zero); ``momentum.contact_kernel`` for
+    one node and one wall."""
     vn = vr * n_r + vz * n_z
     if vn > 0.0:
         vr -= vn * n_r
@@ -162,24 +162,116 @@ def _contact(v, j, i, n_r, n_z, mu):
         scale = 0.0
         if speed > 0.0:
             scale = max(0.0, 1.0 - mu * vn / speed)
-        v[0, j, i] = (vr - t_r) + scale * t_r
-        v[1, j, i] = (vz - t_z) + scale * t_z
+        return (vr - t_r) + scale * t_r, (vz - t_z) + scale * t_z
+    return vr, vz
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _contact_node(v, j, i, mass, k0, k1, normal, mu, kind, entry, plate_closed,
+                  contact_impulse, plate_impulse):
+    """Contact of node (j, i) with all its walls (constraints ``k0 <= k < k1``; a plate
+    constraint, ``kind == 1``, only while ``plate_closed``), in place, and the impulse ``m dv``
+    of each constraint added to its entry.
+
+    The velocity is the closest to the free one that presses into no wall: unchanged if it
+    presses into none; else the one-wall contact (:func:`_project`, with friction) against the
+    wall whose frictionless projection is closest among those that then press into no other
+    wall; else (a corner that the velocity presses into from both sides) rest, with the
+    impulse split between the two walls whose normals span it.  One wall: the one-wall
+    contact, as before corners were treated.  (Projecting onto the walls one after the other
+    is not this: at the outlet lip, with the plate closed, it turned the weight pressing on
+    the cone and the plate into a steady inward slide of the lip's node, which squeezed the
+    material out of the lip's cells during the fill.)"""
+    vr, vz = v[0, j, i], v[1, j, i]
+    best = -1
+    best_gap = np.inf
+    pressing = 0
+    for k in range(k0, k1):
+        if kind[k] == 1 and not plate_closed:
+            continue
+        vn = vr * normal[k, 0] + vz * normal[k, 1]
+        if vn <= 0.0:
+            continue
+        pressing += 1
+        fr, fz = vr - vn * normal[k, 0], vz - vn * normal[k, 1]
+        tol = 1e-14 * (abs(vr) + abs(vz))
+        feasible = True
+        for q in range(k0, k1):
+            if q == k or (kind[q] == 1 and not plate_closed):
+                continue
+            if fr * normal[q, 0] + fz * normal[q, 1] > tol:
+                feasible = False
+                break
+        if feasible and vn < best_gap:
+            best, best_gap = k, vn
+    if pressing == 0:
+        return
+    m = mass[j, i]
+    if best >= 0:
+        wr, wz = _project(vr, vz, normal[best, 0], normal[best, 1], mu[best])
+        v[0, j, i], v[1, j, i] = wr, wz
+        if kind[best] == 1:
+            plate_impulse[entry[best], 0] += m * (wr - vr)
+            plate_impulse[entry[best], 1] += m * (wz - vz)
+        else:
+            contact_impulse[entry[best], 0] += m * (wr - vr)
+            contact_impulse[entry[best], 1] += m * (wz - vz)
+        return
+    # a corner: the node stops; -v = a n_a + b n_b with a, b >= 0 for a pair of walls
+    v[0, j, i], v[1, j, i] = 0.0, 0.0
+    dr, dz = -vr, -vz
+    for a_k in range(k0, k1):
+        if kind[a_k] == 1 and not plate_closed:
+            continue
+        for b_k in range(a_k + 1, k1):
+            if kind[b_k] == 1 and not plate_closed:
+                continue
+            det = normal[a_k, 0] * normal[b_k, 1] - normal[a_k, 1] * normal[b_k, 0]
+            if abs(det) < 1e-12:
+                continue
+            a = (dr * normal[b_k, 1] - dz * normal[b_k, 0]) / det
+            b = (normal[a_k, 0] * dz - normal[a_k, 1] * dr) / det
+            if a >= -1e-12 * (abs(dr) + abs(dz)) and b >= -1e-12 * (abs(dr) + abs(dz)):
+                for k, lam in ((a_k, a), (b_k, b)):
+                    if kind[k] == 1:
+                        plate_impulse[entry[k], 0] += m * lam * normal[k, 0]
+                        plate_impulse[entry[k], 1] += m * lam * normal[k, 1]
+                    else:
+                        contact_impulse[entry[k], 0] += m * lam * normal[k, 0]
+                        contact_impulse[entry[k], 1] += m * lam * normal[k, 1]
+                return
+    # no pair spans the stop (round-off): all of it to the wall pressed hardest
+    k = k0
+    most = -np.inf
+    for q in range(k0, k1):
+        if kind[q] == 1 and not plate_closed:
+            continue
+        vn = vr * normal[q, 0] + vz * normal[q, 1]
+        if vn > most:
+            k, most = q, vn
+    if kind[k] == 1:
+        plate_impulse[entry[k], 0] += m * dr
+        plate_impulse[entry[k], 1] += m * dz
+    else:
+        contact_impulse[entry[k], 0] += m * dr
+        contact_impulse[entry[k], 1] += m * dz
 
 
 @_jit_parallel
-def _node_update(j0, j1, v, mass, contrib, gravity, dt, damping, light_mass, contact_ptr,
-                 contact_i, contact_normal, contact_mu, contact_entry, plate_ptr, plate_i,
-                 plate_normal, plate_mu, plate_entry, plate_closed, contact_impulse,
+def _node_update(j0, j1, v, mass, contrib, gravity, dt, damping, light_mass, row_nodes,
+                 node_i, node_ptr, normal, mu, kind, entry, plate_closed, contact_impulse,
                  plate_impulse, row_budget):
     """Velocities of the nodes of rows ``j0 <= j < j1`` from the corner forces (summed in the
-    scatter's order: NE of the cell below left, NW below, SE left, SW own); contact, plate and
-    axis row by row (each node meets its contacts in the contact list's order).
+    scatter's order: NE of the cell below left, NW below, SE left, SW own); then, node by
+    node, the contact with the walls and the plate (:func:`_contact_node`; the nodes of row
+    ``j`` are ``row_nodes[j]:row_nodes[j + 1]``, node ``q`` at column ``node_i[q]`` with the
+    constraints ``node_ptr[q]:node_ptr[q + 1]``), the mass-proportional damping (after the
+    contact, so that a wall, not the damping, holds what rests on it) and the axis.
 
     Measured on the way, without changing a velocity: the impulse ``m dv`` (kg m/s per radian)
-    of every contact and plate entry is added to ``contact_impulse`` / ``plate_impulse`` at
-    the entry's place in the model's lists (``contact_entry``, ``plate_entry``), and each
-    row's vertical impulses of gravity (``-m g dt``), of the damping and of stopping light
-    nodes go to ``row_budget[j, 0:3]``."""
+    of every wall and plate constraint (:func:`_contact_node`), and each row's vertical
+    impulses of gravity (``-m g dt``), of the damping and of stopping light nodes in
+    ``row_budget[j, 0:3]``."""
     nz1, nr1 = mass.shape
     nz, nr = nz1 - 1, nr1 - 1
     scale = 1.0 / (1.0 + damping * dt)
@@ -204,30 +296,22 @@ def _node_update(j0, j1, v, mass, contrib, gravity, dt, damping, light_mass, con
                 fz += contrib[1, j, i]
             m = mass[j, i]
             if m > light_mass:
-                v[0, j, i] = (v[0, j, i] + dt * fr / m) * scale
-                free_z = v[1, j, i] + dt * (fz / m - gravity)
-                v[1, j, i] = free_z * scale
+                v[0, j, i] = v[0, j, i] + dt * fr / m
+                v[1, j, i] = v[1, j, i] + dt * (fz / m - gravity)
                 weight -= m * gravity * dt
-                damped += m * (v[1, j, i] - free_z)
             else:
                 stopped -= m * v[1, j, i]
                 v[0, j, i] = 0.0
                 v[1, j, i] = 0.0
-        for e in range(contact_ptr[j], contact_ptr[j + 1]):
-            i = contact_i[e]
-            vr, vz = v[0, j, i], v[1, j, i]
-            _contact(v, j, i, contact_normal[e, 0], contact_normal[e, 1], contact_mu[e])
-            k = contact_entry[e]
-            contact_impulse[k, 0] += mass[j, i] * (v[0, j, i] - vr)
-            contact_impulse[k, 1] += mass[j, i] * (v[1, j, i] - vz)
-        if plate_closed:
-            for e in range(plate_ptr[j], plate_ptr[j + 1]):
-                i = plate_i[e]
-                vr, vz = v[0, j, i], v[1, j, i]
-                _contact(v, j, i, plate_normal[e, 0], plate_normal[e, 1], plate_mu[e])
-                k = plate_entry[e]
-                plate_impulse[k, 0] += mass[j, i] * (v[0, j, i] - vr)
-                plate_impulse[k, 1] += mass[j, i] * (v[1, j, i] - vz)
+        for q in range(row_nodes[j], row_nodes[j + 1]):
+            _contact_node(v, j, node_i[q], mass, node_ptr[q], node_ptr[q + 1], normal, mu,
+                          kind, entry, plate_closed, contact_impulse, plate_impulse)
+        if damping > 0.0:
+            for i in range(nr1):
+                vz = v[1, j, i]
+                v[0, j, i] *= scale
+                v[1, j, i] = vz * scale
+                damped += mass[j, i] * (v[1, j, i] - vz)
         v[0, j, 0] = 0.0
         row_budget[j, 0] = weight
         row_budget[j, 1] = damped
@@ -425,9 +509,8 @@ def material_steps(max_steps, clock, v, mass, alpha, sigma, loose, eps_p, face_f
                    displacement, with_markers, open_volume, r_c, r_nodes, h, hg_base, kappa,
                    zface_aperture, rface_aperture, face_sign, open_face, prm, dt, g_full,
                    ramp_time, damping, light_mass, alpha_min, transport_cfl,
-                   max_transport_interval, contact_ptr, contact_i, contact_normal, contact_mu,
-                   contact_entry, plate_ptr, plate_i, plate_normal, plate_mu, plate_entry,
-                   plate_closed, contact_impulse, plate_impulse, budget, work):
+                   max_transport_interval, row_nodes, node_i, node_ptr, normal, mu, kind,
+                   entry, plate_closed, contact_impulse, plate_impulse, budget, work):
     """Up to ``max_steps`` material steps, in place.
 
     ``clock = [t, step, flux_time]`` (s, -, s) is advanced; gravity is ``g_full`` ramped over
@@ -449,9 +532,8 @@ def material_steps(max_steps, clock, v, mass, alpha, sigma, loose, eps_p, face_f
         gravity = g_full * min(1.0, t / ramp_time) if ramp_time > 0.0 else g_full
         _cell_forces(carry_runs, n_carry, alpha, sigma, v, open_volume, r_c, h, hg_base,
                      contrib)
-        _node_update(j0, j1, v, mass, contrib, gravity, dt, damping, light_mass, contact_ptr,
-                     contact_i, contact_normal, contact_mu, contact_entry, plate_ptr, plate_i,
-                     plate_normal, plate_mu, plate_entry, plate_closed, contact_impulse,
+        _node_update(j0, j1, v, mass, contrib, gravity, dt, damping, light_mass, row_nodes,
+                     node_i, node_ptr, normal, mu, kind, entry, plate_closed, contact_impulse,
                      plate_impulse, row_budget)
         for j in range(j0, j1):           # in row order: the sums do not depend on threads
             budget[0] += row_budget[j, 0]

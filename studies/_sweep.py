@@ -104,7 +104,7 @@ def estimated_cost(config: dict) -> float:
         t_end = min(cfg.run.max_time, 1.3 * mat.density * geom.fill_volume() / rate)
     else:
         t_end = float(cfg.run.end_time)
-    return cells * (t_end + max(num.gravity_ramp_time, 0.1)) / dt
+    return cells * (t_end + max(cfg.ramp_time, 0.1)) / dt
 
 
 # ---------------------------------------------------------------- state of a case

@@ -69,7 +69,7 @@ def case_for(opts, cell, modulus):
               "material": {"friction_angle_deg": opts["friction_angle"],
                            "youngs_modulus": float(modulus)},
               "wall": {"friction_angle_deg": opts["wall_friction"]},
-              "numerics": {"cell_size": float(cell), "gravity_ramp_time": 0.1},
+              "numerics": {"cell_size": float(cell)},
               "run": {"end_time": opts["end_time"], "output_interval": 0.02,
                       "field_interval": 0.25}}
     return _sweep.make_case(

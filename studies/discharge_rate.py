@@ -87,7 +87,7 @@ def setup(quick: bool = False, **options) -> dict:
                          "density": opts["density"],
                          "youngs_modulus": opts["youngs_modulus"]},
             "wall": {"friction_angle_deg": opts["wall_friction"]},
-            "numerics": {"cell_size": opts["cell_size"], "gravity_ramp_time": 0.1},
+            "numerics": {"cell_size": opts["cell_size"]},
             "run": {"end_time": opts["end_time"], "output_interval": 0.02,
                     "field_interval": 0.25}}
     wanted = {}

@@ -80,7 +80,7 @@ def setup(quick: bool = False, **options) -> dict:
                        "bin_height": opts["fill_height"] + 0.02},
             "material": {"friction_angle_deg": opts["friction_angle"],
                          "youngs_modulus": opts["youngs_modulus"]},
-            "numerics": {"cell_size": opts["cell_size"], "gravity_ramp_time": 0.1},
+            "numerics": {"cell_size": opts["cell_size"]},
             "run": {"end_time": opts["end_time"], "output_interval": 0.02,
                     "field_interval": 0.2}}
     cases = []

@@ -200,8 +200,13 @@ def comparison_window(cfg):
 
 
 def wall_pressure_agreement(cfg, lag_rec, sim):
-    """Relative differences of the binned filled-state wall pressures (same bins)."""
-    _, s_e, _, _, p_e, _ = sim.record.wall["filling"]
+    """Relative differences of the binned filled-state wall pressures (same bins): both from
+    the stresses of the cells next to the wall (the Eulerian run's stress-sampled estimate,
+    beside its reaction-based one)."""
+    s_e = sim.record.wall["filling"][1]
+    p_e = np.asarray(sim.record.wall_stress["filling"][0])
+    ok = np.isfinite(p_e)
+    s_e, p_e = s_e[ok], p_e[ok]
     s_l, _, _, p_l, _ = lag_rec.wall_fill
     common, i_e, i_l = np.intersect1d(np.round(s_e, 9), np.round(s_l, 9), return_indices=True)
     lip, near_t, near_top, s_t, s_top = comparison_window(cfg)

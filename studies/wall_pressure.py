@@ -1,11 +1,16 @@
-"""Normal wall pressure along the wall: filled at rest and during discharge, against the theories.
+"""Wall loads along the wall: at rest and in discharge, against the theories; their
+convergence with the cell size and their independence of the stiffness.
 
-Each case fills a hopper, lets it come to rest and discharges it past the half-way mark (by
-default the reference hopper, D = 0.3 m, 20 deg, D0 = 0.06 m, 0.3 m fill, phi = 30 deg,
-phi_w = 15 deg, and the same hopper with a 30 deg cone, 5 mm cells).  The package samples the
-normal wall pressure ``p_n`` along the wall (``wall_pressure.csv``) when the fill is at rest
-(``filling``), and averaged over 0.05 s when 90 % and 50 % of the mass is left
-(``early_discharge``, ``mid_discharge``).
+Each case fills a hopper, brings it to rest quasi-statically (gravity ramped over ten periods
+of the column's lowest elastic mode) and discharges it past the half-way mark.  The package
+measures the wall loads from the wall's reaction (the contact impulses, ``wall_pressure.csv``,
+see :class:`fipy_hopper.diagnostics.WallLoads`): at rest (``filling``), over 0.1 s windows from
+the moment 90 % and 50 % of the mass is left (``early_discharge``, ``mid_discharge``), and the
+envelope of consecutive 0.1 s windows over the discharge (``discharge_envelope``); beside them
+the estimate from the stresses of the cells next to the wall.  The default cases are the
+reference hopper (D = 0.3 m, 20 deg, D0 = 0.06 m, 0.3 m fill, phi = 30 deg, phi_w = 15 deg)
+at 7.5, 5, 3.75 and 2.5 mm cells (E = 5 MPa), at 5 mm with E = 2 and 20 MPa, and the same
+hopper with a 30 deg cone at 5 mm.
 
 Theory, from :mod:`fipy_hopper.theory` (all with the material's phi and the wall's phi_w):
 
@@ -28,14 +33,21 @@ are means over two regions that avoid the outlet, the transition and the free su
 bin from 5 % to 85 % of the (equivalent) fill depth below the surface, and the cone from 20 %
 to 80 % of its slant length; ``diff`` is ``100 (mean simulated - mean theory) / mean theory``.
 
+Convergence and stiffness: each profile (filled; discharge envelope) is put on common bins of
+45 mm of wall (an exact merge of every grid's 3-cell bins: 45 mm is 6, 9, 12 and 18 of them)
+as the force on each common bin over its area; the relative L2 difference of two profiles is
+``|p_a - p_b| / |p_b|`` over every bin of the wall, the outlet lip included.
+
 Written to ``--out`` (default ``studies/output/wall_pressure``): ``profiles.csv`` (simulated and
 theoretical p_n at every sampled wall point), ``comparison.csv`` (the region means),
-``switch.csv``, ``study.json``, ``wall_pressure_<case>.png`` and ``cases/<name>/``.
+``switch.csv``, ``convergence.csv``, ``study.json``, ``wall_pressure_<case>.png``,
+``convergence.png``, ``stress_pattern_<case>.png`` and ``cases/<name>/``.
 
 Usage::
 
     python studies/wall_pressure.py [--out DIR] [--quick] [--serial | --scheduler ADDRESS]
-                                    [--cell-size 0.005] [--half-angles 20 30]
+                                    [--cell-sizes 0.0075 0.005 0.00375 0.0025]
+                                    [--half-angles 20 30]
 """
 
 from __future__ import annotations
@@ -59,33 +71,53 @@ from fipy_hopper.config import HopperConfig  # noqa: E402
 NAME = "wall_pressure"
 TITLE = "Wall pressure at rest and in discharge against Janssen, Walker and EN 1991-4"
 DEFAULTS = {
-    "half_angles": (20.0, 30.0),     # deg
+    "half_angles": (20.0, 30.0),     # deg; the first is the reference of the series below
     "wall_friction": 15.0,           # deg
     "friction_angle": 30.0,          # deg
     "bin_diameter": 0.3,             # m
     "outlet_diameter": 0.06,         # m
     "fill_height": 0.3,              # m above the transition
     "bin_height": 0.35,              # m
-    "cell_size": 0.005,              # m
+    "cell_size": 0.005,              # m (the other half-angles and the stiffness series)
+    "cell_sizes": (0.0075, 0.005, 0.00375, 0.0025),    # m, the grid series (reference angle)
     "youngs_modulus": 5.0e6,         # Pa
+    "youngs_moduli": (2.0e6, 5.0e6, 20.0e6),           # Pa, the stiffness series
     "end_time": None,                # s; None: emptying_fraction of the Beverloo emptying time
     "emptying_fraction": 0.65,
     "case_plots": True,
 }
 QUICK = {"half_angles": (30.0,), "bin_diameter": 0.2, "fill_height": 0.1, "bin_height": 0.12,
-         "cell_size": 0.01, "end_time": 0.5, "case_plots": False}
+         "cell_size": 0.01, "cell_sizes": (0.01, 0.0075), "youngs_moduli": (2.0e6, 20.0e6),
+         "end_time": 0.5, "case_plots": False}
 STAGES = ("filling", "early_discharge", "mid_discharge")
+COMMON_BIN = 0.045                   # m of wall: 6, 9, 12, 18 bins of 3 cells at 7.5-2.5 mm
 
 
-def base_config(opts, theta) -> dict:
+def base_config(opts, theta, cell_size=None, youngs_modulus=None) -> dict:
     return {"hopper": {"bin_diameter": opts["bin_diameter"], "half_angle_deg": float(theta),
                        "outlet_diameter": opts["outlet_diameter"],
                        "fill_height": opts["fill_height"], "bin_height": opts["bin_height"]},
             "material": {"friction_angle_deg": opts["friction_angle"],
-                         "youngs_modulus": opts["youngs_modulus"]},
+                         "youngs_modulus": float(youngs_modulus or opts["youngs_modulus"])},
             "wall": {"friction_angle_deg": opts["wall_friction"]},
-            "numerics": {"cell_size": opts["cell_size"]},
+            "numerics": {"cell_size": float(cell_size or opts["cell_size"])},
             "run": {"output_interval": 0.05}}
+
+
+def case_variants(opts) -> list:
+    """``(theta, cell_size, E, series)`` of every case, without repeats: the grid series and
+    the stiffness series at the first half-angle, and the other half-angles."""
+    ref = float(opts["half_angles"][0])
+    variants = {}
+    for h in opts["cell_sizes"]:
+        variants[(ref, float(h), float(opts["youngs_modulus"]))] = "grid"
+    for E in opts["youngs_moduli"]:
+        key = (ref, float(opts["cell_size"]), float(E))
+        variants.setdefault(key, "stiffness")
+    for theta in opts["half_angles"][1:]:
+        variants.setdefault((float(theta), float(opts["cell_size"]),
+                             float(opts["youngs_modulus"])), "angle")
+    return [(t, h, E, series) for (t, h, E), series in variants.items()]
 
 
 def setup(quick: bool = False, **options) -> dict:
@@ -95,8 +127,8 @@ def setup(quick: bool = False, **options) -> dict:
         raise TypeError(f"unknown options {sorted(unknown)}; known: {sorted(DEFAULTS)}")
     opts = {**DEFAULTS, **(QUICK if quick else {}), **options}
     cases = []
-    for theta in opts["half_angles"]:
-        config = base_config(opts, theta)
+    for theta, cell, E, series in case_variants(opts):
+        config = base_config(opts, theta, cell, E)
         end = opts["end_time"]
         if end is None:
             cfg = _sweep._config(config)
@@ -106,10 +138,12 @@ def setup(quick: bool = False, **options) -> dict:
             end = round(opts["emptying_fraction"] * mass / rate, 2)
         config["run"]["end_time"] = float(end)
         cases.append(_sweep.make_case(
-            _sweep.case_name(("theta", float(theta)), ("wall", float(opts["wall_friction"]))),
+            _sweep.case_name(("theta", float(theta)), ("wall", float(opts["wall_friction"])),
+                             ("h", 1000 * cell), ("E", E / 1e6)),
             {"half_angle_deg": float(theta), "wall_friction_deg": float(opts["wall_friction"]),
+             "cell_size_m": cell, "youngs_modulus_Pa": E, "series": series,
              "end_time_s": float(end)},
-            config, plots=opts["case_plots"]))
+            config, plots=True))
     return {"options": opts, "cases": cases, "setting": _sweep.setting_label(quick, options)}
 
 
@@ -291,6 +325,134 @@ def analyse(rows: list, options: dict) -> tuple:
     return profiles, comparison, switch, numbers
 
 
+# ---------------------------------------------------------------- convergence, stiffness
+def common_profile(res, stage: str, width: float = COMMON_BIN):
+    """``(centres, p_n)`` of a stage on common bins of ``width`` m of wall up to the fill
+    surface: each common bin's force (the sum of its 3-cell bins' ``p_n`` times their wall
+    area ``3 h r``) over its area.  ``None`` when the stage is missing."""
+    sel = res.wall_stage(stage)
+    if not len(sel["s_m"]):
+        return None
+    h = res.config.numerics.cell_size
+    s, r, p = sel["s_m"], sel["r_m"], sel["p_n_Pa"]
+    area = 3.0 * h * r
+    s_top = float(geometry.arc_length(res.config.hopper.fill_level, res.config.hopper))
+    n = int(math.floor(s_top / width + 1e-9))
+    index = np.floor(s / width + 1e-9).astype(int)
+    keep = index < n
+    force = np.bincount(index[keep], (p * area)[keep], n)
+    total = np.bincount(index[keep], area[keep], n)
+    centres = (np.arange(n) + 0.5) * width
+    return centres, np.where(total > 0, force / np.where(total > 0, total, 1.0), np.nan)
+
+
+def relative_l2(a, b) -> float:
+    """``|a - b| / |b|`` over the bins where both are finite."""
+    ok = np.isfinite(a) & np.isfinite(b)
+    return float(np.linalg.norm(a[ok] - b[ok]) / np.linalg.norm(b[ok]))
+
+
+def series_analysis(rows: list) -> tuple:
+    """Convergence with the cell size and the spread with E: ``(table rows, numbers,
+    profiles {case: {stage: (centres, p)}})``."""
+    loaded = {}
+    for row in rows:
+        try:
+            loaded[row["case"]] = (row, load_case(row))
+        except FileNotFoundError:
+            continue
+    profiles = {case: {stage: common_profile(res, stage)
+                       for stage in ("filling", "discharge_envelope")}
+                for case, (row, res) in loaded.items()}
+    table, numbers = [], {}
+    grid = sorted((r for r, _ in loaded.values() if r.get("series") == "grid"
+                   or _in_series(r, rows, "grid")), key=lambda r: -r["cell_size_m"])
+    for stage in ("filling", "discharge_envelope"):
+        curves = [(r, profiles[r["case"]][stage]) for r in grid
+                  if profiles[r["case"]][stage] is not None]
+        if len(curves) >= 2:
+            finest = curves[-1][1][1]
+            for (ra, (_, pa)), (rb, (_, pb)) in zip(curves[:-1], curves[1:]):
+                change = relative_l2(pa, pb)
+                key = f"{1000 * ra['cell_size_m']:g}->{1000 * rb['cell_size_m']:g} mm"
+                numbers[f"l2_change_pct[{stage}|{key}]"] = 100 * change
+                table.append({"series": "grid", "stage": stage, "pair": key,
+                              "l2_change_pct": 100 * change,
+                              "l2_from_finest_pct": 100 * relative_l2(pa, finest)})
+            changes = [numbers[k] for k in numbers if k.startswith(f"l2_change_pct[{stage}|")]
+            numbers[f"l2_changes_decrease[{stage}]"] = bool(np.all(np.diff(changes) < 0))
+            numbers[f"l2_last_change_pct[{stage}]"] = changes[-1]
+    stiff = [r for r, _ in loaded.values() if _in_series(r, rows, "stiffness")]
+    for stage in ("filling", "discharge_envelope"):
+        curves = [(r, profiles[r["case"]][stage]) for r in stiff
+                  if profiles[r["case"]][stage] is not None]
+        spread = 0.0
+        for i, (ra, (_, pa)) in enumerate(curves):
+            for rb, (_, pb) in curves[i + 1:]:
+                diff = relative_l2(pa, pb)
+                spread = max(spread, diff)
+                table.append({"series": "stiffness", "stage": stage,
+                              "pair": f"E {ra['youngs_modulus_Pa'] / 1e6:g} / "
+                                      f"{rb['youngs_modulus_Pa'] / 1e6:g} MPa",
+                              "l2_change_pct": 100 * diff, "l2_from_finest_pct": math.nan})
+        if len(curves) >= 2:
+            numbers[f"E_spread_pct[{stage}]"] = 100 * spread
+    residuals = [float(res.summary.get("fill_equilibrium_residual", math.nan))
+                 for _, res in loaded.values()]
+    numbers["fill_equilibrium_residual_max_pct"] = 100 * float(np.nanmax(residuals)) \
+        if residuals else math.nan
+    return table, numbers, profiles
+
+
+def _in_series(row, rows, series) -> bool:
+    """A case belongs to the grid series at the reference angle and E, to the stiffness
+    series at the reference angle and cell size (one case can be in both)."""
+    ref = [r for r in rows if r.get("series") == series]
+    if not ref:
+        return False
+    theta = ref[0]["half_angle_deg"]
+    if row["half_angle_deg"] != theta:
+        return False
+    if series == "grid":
+        E = [r["youngs_modulus_Pa"] for r in ref][0]
+        return row["youngs_modulus_Pa"] == E
+    h = [r["cell_size_m"] for r in ref][0]
+    return row["cell_size_m"] == h
+
+
+def plot_series(rows, profiles):
+    """The filled and envelope profiles on the common bins: the grid series (left two) and
+    the stiffness series (right)."""
+    fig = _sweep.figure(13.0, 4.2)
+    axes = fig.subplots(1, 3)
+    grid = sorted((r for r in rows if _in_series(r, rows, "grid")
+                   and r["case"] in profiles), key=lambda r: -r["cell_size_m"])
+    stiff = sorted((r for r in rows if _in_series(r, rows, "stiffness")
+                    and r["case"] in profiles), key=lambda r: r["youngs_modulus_Pa"])
+    for ax, stage, title in ((axes[0], "filling", "at rest"),
+                             (axes[1], "discharge_envelope", "discharge envelope")):
+        for k, r in enumerate(grid):
+            prof = profiles[r["case"]][stage]
+            if prof is not None:
+                ax.plot(prof[0], prof[1] / 1e3, "o-", ms=3, lw=1.0, color=f"C{k}",
+                        label=f"h = {1000 * r['cell_size_m']:g} mm")
+        ax.set_title(f"{title}: cell size", fontsize=9)
+    for k, r in enumerate(stiff):
+        for stage, ls in (("filling", "-"), ("discharge_envelope", "--")):
+            prof = profiles[r["case"]][stage]
+            if prof is not None:
+                axes[2].plot(prof[0], prof[1] / 1e3, ls, marker="o", ms=3, lw=1.0,
+                             color=f"C{k}", label=f"E = {r['youngs_modulus_Pa'] / 1e6:g} MPa"
+                             + (" (envelope)" if stage != "filling" else ""))
+    axes[2].set_title("stiffness (solid: at rest, dashed: envelope)", fontsize=9)
+    for ax in axes:
+        ax.set_xlabel("s (m), 45 mm bins")
+        ax.set_ylim(bottom=0.0)
+        ax.legend(fontsize=7)
+    axes[0].set_ylabel("p_n (kPa)")
+    return fig
+
+
 # ---------------------------------------------------------------- figures
 STAGE_STYLE = {"filling": ("o", "C0", "simulated, filled at rest"),
                "early_discharge": ("s", "C1", "simulated, discharge, 90 % left"),
@@ -356,15 +518,37 @@ def plot_case(row, profiles, switch):
 
 # ---------------------------------------------------------------- outputs
 def write_outputs(out, rows, profiles, comparison, switch, numbers, options, setting,
-                  argv=None):
+                  argv=None, series=None):
     out = Path(out)
     _sweep.write_rows_csv(out / "profiles.csv", profiles)
     _sweep.write_rows_csv(out / "comparison.csv", comparison)
     _sweep.write_rows_csv(out / "switch.csv", switch)
     _sweep.write_rows_csv(out / "results.csv", rows, first=(
-        "case", "half_angle_deg", "wall_friction_deg", "end_time_s", "flow_mode",
-        "steady_discharge_rate_kg_s", "fill_at_rest", "wall_time_s", "error"))
+        "case", "half_angle_deg", "wall_friction_deg", "cell_size_m", "youngs_modulus_Pa",
+        "series", "end_time_s", "flow_mode", "steady_discharge_rate_kg_s", "fill_at_rest",
+        "fill_equilibrium_residual", "wall_k_bin", "switch_peak_Pa",
+        "walker_switch_pressure_Pa", "overpressure_factor_bin_max",
+        "overpressure_factor_cone_max", "wall_time_s", "error"))
     figures = []
+    series_table, series_numbers, common = series if series is not None else ([], {}, {})
+    numbers = {**numbers, **series_numbers}
+    if series_table:
+        _sweep.write_rows_csv(out / "convergence.csv", series_table)
+        _sweep.save(plot_series(rows, common), out / "convergence.png")
+        figures.append({"file": "convergence.png", "caption": (
+            "Wall pressure on common 45 mm bins: at rest and the discharge envelope at 7.5, 5, "
+            "3.75 and 2.5 mm cells, and at rest and enveloped for E = 2, 5 and 20 MPa.")})
+    import shutil
+    for row in rows:
+        picture = Path(row.get("run_dir", "")) / "stress_pattern.png"
+        if picture.is_file() and (row.get("series") == "grid"
+                                  and row["cell_size_m"] == options["cell_size"]):
+            name = f"stress_pattern_{row['case']}.png"
+            shutil.copyfile(picture, out / name)
+            figures.append({"file": name, "caption": (
+                f"{row['case']}: major principal stress trajectories over the mobilised "
+                "friction, at rest (sigma1 near vertical: active) and in discharge (sigma1 "
+                "across the flow: passive, arched).")})
     for row in rows:
         if row.get("error") and not Path(row.get("run_dir", "")).is_dir():
             continue
@@ -388,6 +572,22 @@ def write_outputs(out, rows, profiles, comparison, switch, numbers, options, set
             f"{sw['sim_ratio_discharge_to_filling']:.2f} x the filled peak there; Walker's "
             f"F_e sigma_vt = {sw['walker_hopper_Pa']:.0f} Pa ({sw['diff_peak_vs_walker_pct']:+.0f}"
             f" %), F_e/K = {sw['walker_ratio_Fe_over_K']:.2f}.")
+    for stage in ("filling", "discharge_envelope"):
+        pairs = [t for t in series_table if t["series"] == "grid" and t["stage"] == stage]
+        if pairs:
+            findings.append(
+                f"Cell-size convergence, {stage.replace('_', ' ')}: successive relative L2 "
+                "changes " + ", ".join(f"{t['pair']} {t['l2_change_pct']:.1f} %" for t in pairs)
+                + (" (decreasing)." if numbers.get(f"l2_changes_decrease[{stage}]")
+                   else " (not decreasing)."))
+        if f"E_spread_pct[{stage}]" in numbers:
+            findings.append(f"Stiffness, {stage.replace('_', ' ')}: largest relative L2 "
+                            f"difference between E = 2, 5 and 20 MPa "
+                            f"{numbers[f'E_spread_pct[{stage}]']:.2f} %.")
+    if math.isfinite(numbers.get("fill_equilibrium_residual_max_pct", math.nan)):
+        findings.append("At rest, the wall's and the plate's vertical reactions equal the "
+                        "weight to within "
+                        f"{numbers['fill_equilibrium_residual_max_pct']:.3f} % in every case.")
     if numbers["missing_stages"]:
         findings.append("Stages not reached: " + ", ".join(numbers["missing_stages"]) + ".")
     if numbers["failed"]:
@@ -406,6 +606,15 @@ def write_outputs(out, rows, profiles, comparison, switch, numbers, options, set
                    round(sw["peak_filling_sim_Pa"]), round(sw["sim_ratio_discharge_to_filling"], 2),
                    round(sw["walker_hopper_Pa"]), round(sw["diff_peak_vs_walker_pct"], 1),
                    round(sw["walker_ratio_Fe_over_K"], 2)] for sw in switch]}]
+    if series_table:
+        tables.append({"title": "Convergence and stiffness (relative L2 over the whole wall, "
+                                "45 mm bins)",
+                       "columns": ["series", "stage", "pair", "L2 change %", "L2 from finest %"],
+                       "rows": [[t["series"], t["stage"], t["pair"],
+                                 round(t["l2_change_pct"], 2),
+                                 round(t["l2_from_finest_pct"], 2)
+                                 if math.isfinite(t["l2_from_finest_pct"]) else ""]
+                                for t in series_table]})
     settings = {k: (list(v) if isinstance(v, tuple) else v) for k, v in options.items()}
     settings["regions"] = ("bin: 5-85 % of the equivalent fill depth; cone: 20-80 % of the "
                            "slant length; switch window: the quarter of the slant length below "
@@ -416,25 +625,35 @@ def write_outputs(out, rows, profiles, comparison, switch, numbers, options, set
     fill = [f"{c['case']} filled, {c['region']}: {c['diff_pct']:+.0f} % from {c['theory']}"
             for c in comparison if c["stage"] == "filling"
             and c["theory"].startswith(("Janssen", "Walker"))]
+    conv = [f"filled L2 change 3.75->2.5 mm {numbers[k]:.1f} %"
+            for k in numbers if k == "l2_change_pct[filling|3.75->2.5 mm]"]
     _sweep.write_study_json(out, NAME, TITLE, setting, settings,
                             {k: v for k, v in numbers.items()}, findings, figures, tables,
-                            rows, argv, headline="; ".join(fill + head) + ".")
+                            rows, argv, headline="; ".join(fill + head + conv) + ".")
 
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     _sweep.add_arguments(parser, NAME)
     parser.add_argument("--cell-size", type=float, help="m (default 0.005)")
+    parser.add_argument("--cell-sizes", type=float, nargs="+",
+                        help="m, the grid series (default 0.0075 0.005 0.00375 0.0025)")
     parser.add_argument("--half-angles", type=float, nargs="+", help="deg (default 20 30)")
     parser.add_argument("--end-time", type=float, help="s of discharge (default: 0.65 of the "
                         "Beverloo x Rose-Tanaka emptying time)")
     args = parser.parse_args(argv)
-    options = _sweep.study_options(args, ('cell_size', 'half_angles', 'end_time'))
+    options = _sweep.study_options(args, ('cell_size', 'cell_sizes', 'half_angles',
+                                          'end_time'))
+    if "cell_sizes" in options:
+        options["cell_sizes"] = tuple(options["cell_sizes"])
     study = setup(quick=args.quick, **options)
     rows = _sweep.run_study(NAME, study, args)
     profiles, comparison, switch, numbers = analyse(rows, study["options"])
+    series = series_analysis(rows)
     write_outputs(args.out, rows, profiles, comparison, switch, numbers, study["options"],
-                  study["setting"], argv)
+                  study["setting"], argv, series=series)
+    for key, value in series[1].items():
+        print(f"{key}: {value}")
     for sw in switch:
         print(f"{sw['case']} {sw['stage']}: switch peak {sw['peak_sim_Pa']:.0f} Pa, Walker "
               f"{sw['walker_hopper_Pa']:.0f} Pa ({sw['diff_peak_vs_walker_pct']:+.0f} %)")

@@ -52,7 +52,8 @@ SUMMARY_KEYS = ("steady_discharge_rate_kg_s", "flow_mode", "mass_flow_index", "i
                 "remaining_mass_kg", "mass_balance_error", "discharge_time_s", "stop_reason",
                 "cells", "steps", "wall_time_s", "youngs_modulus_used")
 TIMESERIES = ["t_s", "mass_in_hopper_kg", "discharged_kg", "discharge_rate_kg_s"]
-WALL = ["stage", "t_s", "s_m", "r_m", "z_m", "p_n_Pa", "tau_Pa"]
+WALL = ["stage", "t_s", "s_m", "r_m", "z_m", "p_n_Pa", "tau_Pa", "p_n_stress_Pa", "tau_stress_Pa",
+        "window_s"]
 CELL_FIELDS = ("alpha", "layer", "velocity", "stress_rr", "stress_zz", "stress_tt", "stress_rz",
                "pressure", "plastic_strain")
 REPO = Path(__file__).resolve().parents[1]
@@ -124,6 +125,9 @@ def test_timeseries_and_wall_pressure_csv(run_dir):
     np.testing.assert_allclose(ts["mass_in_hopper_kg"] + ts["discharged_kg"], m0, rtol=1e-9)
     assert ts["mass_in_hopper_kg"][-1] == pytest.approx(summary["remaining_mass_kg"], rel=1e-12)
     assert (run_dir / "wall_pressure.csv").read_text().splitlines()[0].split(",") == WALL
+    loads = read_csv(run_dir / "loads.csv")
+    assert set(loads["stage"]) == {"filling", "discharge"}
+    assert np.all(loads["relative_residual"] < 1e-9)
     wall = read_csv(run_dir / "wall_pressure.csv")
     assert "filling" in set(wall["stage"])
     filled = wall["stage"] == "filling"
@@ -134,7 +138,8 @@ def test_timeseries_and_wall_pressure_csv(run_dir):
 def test_pictures_are_non_empty_images(run_dir):
     from PIL import Image
 
-    for name in ("flow_pattern.png", "discharge.png", "wall_pressure.png"):
+    for name in ("flow_pattern.png", "discharge.png", "wall_pressure.png",
+                 "stress_pattern.png"):
         data = (run_dir / name).read_bytes()
         assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 10_000, name
         with Image.open(run_dir / name) as im:

@@ -160,9 +160,19 @@ def test_wall_pressure_profiles_theories_and_switch(wall):
     switch = rows_of(wall / "switch.csv")
     assert switch and float(switch[0]["peak_sim_Pa"]) > 0
     assert float(switch[0]["walker_ratio_Fe_over_K"]) > 1
-    assert_png(wall / "wall_pressure_theta30_wall15.png")
+    pictures = sorted(wall.glob("wall_pressure_theta30_wall15_*.png"))
+    assert len(pictures) == 4                       # two cell sizes, two more moduli
+    for picture in pictures:
+        assert_png(picture)
     profiles = rows_of(wall / "profiles.csv")
     assert {r["stage"] for r in profiles} >= {"filling", "early_discharge"}
+    series = rows_of(wall / "convergence.csv")
+    assert {r["series"] for r in series} == {"grid", "stiffness"}
+    assert all(math.isfinite(float(r["l2_change_pct"])) for r in series)
+    numbers = study_json(wall)["numbers"]
+    assert "E_spread_pct[filling]" in numbers and "l2_change_pct[filling|10->7.5 mm]" in numbers
+    assert numbers["fill_equilibrium_residual_max_pct"] < 0.5
+    assert_png(wall / "convergence.png")
 
 
 # ---------------------------------------------------------------- convergence

@@ -62,6 +62,7 @@ def material_call(model, state, prm=None, part="all"):
     g, num = model.grid, model.cfg.numerics
     carry_runs, load_runs, block_ptr, contrib, row_speed, row_budget = model._work
     wall, plate = state.wall_impulse.copy(), state.plate_impulse.copy()
+    groups = model.contact_groups
     n_carry, n_load, n_blocks, j0, j1 = stepping._runs(
         state.alpha, num.alpha_min, state.sigma, state.loose, state.v, contrib, carry_runs,
         load_runs, block_ptr)
@@ -75,9 +76,8 @@ def material_call(model, state, prm=None, part="all"):
                                                 model.open_volume, model.r_c, g.h,
                                                 model.hourglass_base, contrib),
         "nodes": lambda: stepping._node_update(j0, j1, v, mass, contrib, GRAVITY, model.dt,
-                                               0.0, model.light_mass, *model._contact_rows,
-                                               *model._plate_rows, False, wall, plate,
-                                               row_budget),
+                                               0.0, model.light_mass, groups[0], *groups[2:],
+                                               False, wall, plate, row_budget),
         "stress": lambda: stepping._stress_update(block_ptr, n_blocks, load_runs, v, sigma,
                                                   loose, eps_p, model.r_c, g.r_nodes, g.h,
                                                   model.dt, g.kappa, model._zface_aperture,

@@ -1,0 +1,599 @@
+"""Reliability gaps of issue 16 in configuration, I/O and the command line.
+
+Bad paths and values give one line and exit code 2, never a traceback; the grid's size and the
+number of time steps are checked before anything is allocated (against the measured memory a
+cell); a run directory is locked for its run; a checkpoint is checked before it is restored;
+after Ctrl-C the advice matches what can be done; the package imports where numba has no
+cache folder of its own.  Seconds in all: no run here goes beyond a second of simulation.
+"""
+
+import io
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+import warnings
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import fipy_hopper as fh
+from fipy_hopper import cli
+from fipy_hopper import config as fconfig
+from fipy_hopper.cli import main
+from fipy_hopper.config import ConfigError, HopperConfig
+from fipy_hopper.io import (CheckpointError, RunDirectory, RunDirectoryError,
+                            checkpoint_size_limit, checkpoint_template, validate_checkpoint)
+
+REPO = Path(__file__).resolve().parents[1]
+
+COARSE = """\
+[hopper]
+bin_diameter = 0.2
+outlet_diameter = 0.06
+bin_height = 0.25
+fill_height = 0.15
+
+[numerics]
+cell_size = 0.01
+gravity_ramp_time = 0.05
+
+[run]
+end_time = 0.05
+output_interval = 0.01
+field_interval = 0.05
+"""
+
+
+def coarse(folder: Path) -> Path:
+    path = folder / "coarse.toml"
+    path.write_text(COARSE)
+    return path
+
+
+def one_error_line(err: str) -> str:
+    lines = [line for line in err.splitlines() if "warning:" not in line]
+    assert len(lines) == 1, err
+    assert lines[0].startswith("fipy-hopper: error: ") and "Traceback" not in err
+    return lines[0]
+
+
+# ---------------------------------------------------------------- paths and CLI values
+def test_a_path_component_over_255_characters_is_one_line(tmp_path, capsys):
+    long = tmp_path / ("x" * 300 + ".toml")
+    assert main(["validate", str(long)]) == 2
+    assert "File name too long" in one_error_line(capsys.readouterr().err)
+    out = tmp_path / ("o" * 300)
+    assert main(["run", str(coarse(tmp_path)), "--out", str(out), "--quiet"]) == 2
+    line = one_error_line(capsys.readouterr().err)
+    assert "cannot use" in line and "File name too long" in line and len(line) < 300
+    assert main(["plot", str(out)]) == 2
+    one_error_line(capsys.readouterr().err)
+
+
+@pytest.mark.parametrize("value", ["nan", "inf", "-inf", "-1"])
+def test_checkpoint_interval_must_be_finite_and_not_negative(tmp_path, capsys, value):
+    out = tmp_path / "run"
+    argv = ["run", str(coarse(tmp_path)), "--out", str(out), f"--checkpoint-interval={value}"]
+    assert main(argv) == 2
+    line = one_error_line(capsys.readouterr().err)
+    assert "--checkpoint-interval" in line and "finite number of seconds >= 0" in line
+    assert not out.exists()
+
+
+def test_empty_out_is_refused_and_the_current_directory_untouched(tmp_path, capsys,
+                                                                   monkeypatch):
+    config = coarse(tmp_path)
+    work = tmp_path / "cwd"
+    work.mkdir()
+    (work / "config.toml").write_text("mine")
+    (work / "summary.json").write_text("{}")
+    monkeypatch.chdir(work)
+    for out in ("", "  "):
+        assert main(["run", str(config), "--out", out, "--force", "--quiet"]) == 2
+        assert "--out" in one_error_line(capsys.readouterr().err)
+    assert sorted(p.name for p in work.iterdir()) == ["config.toml", "summary.json"]
+    assert (work / "config.toml").read_text() == "mine"
+    with pytest.raises(RunDirectoryError, match="empty path"):
+        RunDirectory("", force=True)
+
+
+@pytest.mark.parametrize("name, files", [
+    ("foreign timeseries", {"timeseries.csv": "date,price\n2024-01-01,3\n"}),
+    ("ragged timeseries", {"timeseries.csv": "t_s,mass_in_hopper_kg,discharged_kg,"
+                           "discharge_rate_kg_s\n0,1\n"}),
+    ("text in a number column", {"timeseries.csv": "t_s,mass_in_hopper_kg,discharged_kg,"
+                                 "discharge_rate_kg_s\n0,a,b,c\n"}),
+    ("binary timeseries", {"timeseries.csv": b"\xff\xfe\x00\x01"}),
+    ("empty timeseries", {"timeseries.csv": ""}),
+    ("foreign config", {"config.toml": "[server]\nport = 80\n"}),
+    ("broken summary", {"summary.json": "{not json"}),
+    ("foreign wall pressure", {"wall_pressure.csv": "a,b\n1,2\n"}),
+    ("snapshot index naming another file", {"fields/snapshots.csv":
+                                            "index,file,step,t_s,discharge_time_s,stage\n"
+                                            "0,../../etc/passwd,0,0.0,nan,filling\n"}),
+])
+def test_plot_on_a_foreign_directory_is_one_line(tmp_path, capsys, name, files):
+    run = tmp_path / "run"
+    (run / "fields").mkdir(parents=True)
+    (run / "config.toml").write_text(HopperConfig().to_toml())
+    (run / "timeseries.csv").write_text("t_s,mass_in_hopper_kg,discharged_kg,"
+                                        "discharge_rate_kg_s\n0.0,1.0,0.0,0.0\n")
+    for file, content in files.items():
+        (run / file).write_bytes(content if isinstance(content, bytes) else content.encode())
+    assert main(["plot", str(run)]) == 2
+    line = one_error_line(capsys.readouterr().err)
+    assert str(run) in line
+    assert not (run / "discharge.png").exists()
+
+
+# ---------------------------------------------------------------- size of a run
+@pytest.mark.parametrize("changes", [
+    {},
+    {"numerics": {"cell_size": 0.0025}},
+    {"numerics": {"cell_size": 0.0037, "free_fall_depth": 2.5}},
+    {"hopper": {"half_angle_deg": 90.0, "bin_diameter": 0.23}, "numerics": {"cell_size": 0.007}},
+    {"hopper": {"half_angle_deg": 10.0, "bin_diameter": 0.2}},
+])
+def test_grid_shape_is_the_grid_the_model_builds(changes):
+    from fipy_hopper.mesh import build_grid
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        cfg = HopperConfig().replace(**changes)
+    grid = build_grid(cfg, n_sub=2)
+    assert cfg.grid_shape() == (grid.nr, grid.nz)
+    assert cfg.n_cells == grid.n_cells
+
+
+def test_the_reference_grid_at_2_5_mm_is_allowed():
+    cfg = HopperConfig().replace(numerics={"cell_size": 0.0025})
+    assert 18_000 < cfg.n_cells < 20_000 and cfg.memory_estimate() < 0.5e9
+
+
+def test_grid_limit_names_the_smallest_cell_size_that_fits():
+    with pytest.raises(ConfigError) as err:
+        HopperConfig().replace(numerics={"cell_size": 1.2e-4})
+    message = str(err.value)
+    smallest = float(message.split("cell_size >= ")[1].split(" m")[0])
+    assert "at most 2,000,000 cells" in message and "GB" in message
+    fits = HopperConfig().replace(numerics={"cell_size": smallest})
+    assert fits.n_cells <= fconfig.MAX_CELLS
+    with pytest.raises(ConfigError, match="cells"):          # the bound is tight
+        HopperConfig().replace(numerics={"cell_size": smallest * 0.995})
+
+
+def test_validate_does_not_build_the_grid(tmp_path, capsys, monkeypatch):
+    """A large admissible grid is checked and described from the configuration alone."""
+    import fipy_hopper.mesh
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("validate built the grid")
+
+    monkeypatch.setattr(fipy_hopper.mesh, "build_grid", refuse)
+    path = tmp_path / "fine.toml"
+    path.write_text("[numerics]\ncell_size = 0.0003\n")
+    started = time.perf_counter()
+    assert main(["validate", str(path)]) == 0
+    out = capsys.readouterr().out
+    n = HopperConfig.from_toml(path).n_cells
+    assert f"= {n} cells" in out and n > 1_000_000 and "GB" in out
+    assert time.perf_counter() - started < 5
+
+
+MEASURE = """
+import resource, sys, warnings
+warnings.simplefilter("ignore")
+from fipy_hopper.config import HopperConfig
+from fipy_hopper.model import HopperModel
+cfg = HopperConfig().replace(numerics={"cell_size": float(sys.argv[1])})
+model = HopperModel(cfg)
+print(cfg.n_cells, cfg.memory_estimate(), resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024)
+"""
+
+
+def test_memory_estimate_bounds_the_measured_peak():
+    """Peak resident memory of building the model of 72,346 cells (the allocation the cell
+    limit guards): below the estimate, and not far below (the figure is a measurement)."""
+    done = subprocess.run([sys.executable, "-c", MEASURE, "0.00125"], capture_output=True,
+                          text=True, timeout=120, env={**os.environ, "NUMBA_NUM_THREADS": "1"})
+    assert done.returncode == 0, done.stderr
+    cells, estimate, peak = (float(x) for x in done.stdout.split())
+    assert cells == 72_346
+    assert 0.6 * estimate < peak < estimate, (peak, estimate)
+
+
+def test_a_run_refused_for_its_size_leaves_no_directory(tmp_path, capsys):
+    path = tmp_path / "huge.toml"
+    path.write_text("[numerics]\ncell_size = 1e-4\n")
+    out = tmp_path / "run"
+    assert main(["run", str(path), "--out", str(out)]) == 2
+    assert "cells" in one_error_line(capsys.readouterr().err)
+    assert not out.exists()
+
+
+def test_a_time_step_that_cannot_finish_is_refused():
+    with pytest.raises(ConfigError, match=r"at most 1e\+09 can finish"):
+        HopperConfig().replace(material={"youngs_modulus": 1e12, "poisson_ratio": 0.49},
+                               numerics={"cell_size": 0.002})
+    cfg = HopperConfig()
+    assert cfg.step_estimate() == pytest.approx(62.0 / cfg.time_step)
+    assert 1e6 < cfg.step_estimate() < 1e7
+
+
+@pytest.mark.parametrize("study", ["flow_mode_map", "discharge_rate", "convergence",
+                                   "robustness", "wall_pressure"])
+def test_the_studies_configurations_stay_valid(study):
+    """Every case of every study, default and quick, passes the new checks (``setup``
+    validates each case's configuration)."""
+    import importlib
+
+    sys.path.insert(0, str(REPO / "studies"))
+    try:
+        module = importlib.import_module(study)
+        for quick in (False, True):
+            assert module.setup(quick=quick)["cases"]
+    finally:
+        sys.path.remove(str(REPO / "studies"))
+
+
+# ---------------------------------------------------------------- the lock
+HOLD = """
+import fcntl, os, sys, time
+fd = os.open(sys.argv[1], os.O_RDWR | os.O_CREAT, 0o644)
+fcntl.flock(fd, fcntl.LOCK_EX)
+os.ftruncate(fd, 0); os.write(fd, f"{os.getpid()}\\n".encode())
+print("locked", flush=True)
+time.sleep(60)
+"""
+
+
+@pytest.fixture
+def held(tmp_path):
+    """A directory of a finished run whose lock a live process holds."""
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / "config.toml").write_text(HopperConfig().to_toml())
+    (out / "checkpoint.npz").write_bytes(b"PK")
+    proc = subprocess.Popen([sys.executable, "-c", HOLD, str(out / ".lock")],
+                            stdout=subprocess.PIPE, text=True)
+    assert proc.stdout.readline().strip() == "locked"
+    yield out, proc
+    proc.kill()
+    proc.wait()
+
+
+@pytest.mark.parametrize("mode", [{"force": True}, {}, {"resume": True}])
+def test_a_directory_in_use_is_refused(held, mode):
+    out, proc = held
+    with pytest.raises(RunDirectoryError, match=rf"in use by another run \(process {proc.pid}"):
+        RunDirectory(out, **mode)
+    assert (out / "config.toml").is_file() and (out / "checkpoint.npz").is_file()
+
+
+def test_a_second_run_with_force_is_refused_in_one_line(held, tmp_path, capsys):
+    out, proc = held
+    before = (out / "config.toml").read_text()
+    argv = ["run", str(coarse(tmp_path)), "--out", str(out), "--force", "--quiet"]
+    assert main(argv) == 2
+    assert "in use by another run" in one_error_line(capsys.readouterr().err)
+    assert (out / "config.toml").read_text() == before
+    assert sorted(p.name for p in out.iterdir()) == [".lock", "checkpoint.npz", "config.toml"]
+
+
+def test_the_lock_of_a_killed_process_does_not_block(held):
+    out, proc = held
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    assert (out / ".lock").read_text().strip() == str(proc.pid)     # stale file left behind
+    with RunDirectory(out, force=True) as rundir:
+        assert rundir.locked and not (out / "config.toml").exists()
+    assert not (out / ".lock").exists()
+
+
+def test_only_a_stale_lock_file_counts_as_empty(tmp_path):
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / ".lock").write_text("999999999\n")
+    rundir = RunDirectory(out)                # no --force needed: nothing but a dead lock
+    with pytest.raises(RunDirectoryError, match="in use"):
+        RunDirectory(out, force=True)         # a second object, same process: refused
+    rundir.close()
+    RunDirectory(out, force=True).close()
+
+
+def test_the_lock_is_held_for_the_run_and_released_after(tmp_path):
+    out = tmp_path / "run"
+    seen = {}
+
+    def setup(sim):
+        def try_second(sim_, state):
+            if "error" not in seen:
+                try:
+                    RunDirectory(out, force=True)
+                except RunDirectoryError as exc:
+                    seen["error"] = str(exc)
+                else:
+                    seen["error"] = None
+        sim.add_callback(try_second, 0.01, stages=("filling",))
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        fh.run(coarse(tmp_path), out, plots=False, checkpoint_interval=0, setup=setup)
+    assert seen["error"] and "in use by another run" in seen["error"]
+    assert not (out / ".lock").exists()
+    RunDirectory(out, force=True).close()     # free again
+
+
+# ---------------------------------------------------------------- Ctrl-C advice
+def test_ctrl_c_before_any_checkpoint_does_not_suggest_resume(tmp_path, capsys, monkeypatch):
+    from fipy_hopper import api
+
+    checkpoints = []
+
+    def interrupted(config, out, **kwargs):       # Ctrl-C after writing what api.run writes
+        rundir = RunDirectory(out, force=kwargs["force"])
+        (rundir / "config.toml").write_text(config.to_toml())
+        if checkpoints:
+            (rundir / "checkpoint.npz").write_bytes(b"")
+        rundir.close()
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(api, "run", interrupted)
+    out = tmp_path / "run"
+    assert main(["run", str(coarse(tmp_path)), "--out", str(out), "--quiet"]) == 130
+    line = one_error_line(capsys.readouterr().err)
+    assert "--resume" not in line and "cannot be resumed" in line and "--force" in line
+    checkpoints.append(True)
+    assert main(["run", str(coarse(tmp_path)), "--out", str(out), "--force", "--quiet"]) == 130
+    assert "--resume" in one_error_line(capsys.readouterr().err)
+
+
+def test_ctrl_c_before_the_directory_exists(tmp_path):
+    message = cli._interrupted_message(str(tmp_path / "none"), "fipy-hopper demo --out x",
+                                       "fipy-hopper demo --out x --resume")
+    assert "before the run started" in message and "--resume" not in message
+
+
+# ---------------------------------------------------------------- checkpoints
+@pytest.fixture(scope="module")
+def checkpoint(tmp_path_factory):
+    """A real checkpoint after filling (with markers and the filled wall samples)."""
+    from fipy_hopper.model import HopperModel
+    from fipy_hopper.simulation import Simulation
+
+    folder = tmp_path_factory.mktemp("checkpoint")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        cfg = HopperConfig.from_toml(coarse(folder))
+    model = HopperModel(cfg)
+    sim = Simulation(model, progress=False)
+    sim.run()
+    path = folder / "checkpoint.npz"
+    sim.checkpoint(path)
+    fresh = model.initial_state()          # what Simulation.restore has before it restores
+    shapes, optional = checkpoint_template(fresh)
+    return path, shapes, optional, checkpoint_size_limit(fresh, cfg)
+
+
+def rewrite(source: Path, target: Path, change) -> Path:
+    """A copy of a checkpoint with ``change(arrays)`` applied (arrays includes __meta__)."""
+    with np.load(source) as data:
+        arrays = {k: data[k] for k in data.files}
+    change(arrays)
+    with open(target, "wb") as fh_:
+        np.savez(fh_, **arrays)
+    return target
+
+
+def test_a_real_checkpoint_passes_with_its_arrays_and_metadata(checkpoint):
+    path, shapes, optional, limit = checkpoint
+    arrays, meta = validate_checkpoint(path, shapes, limit, optional)
+    with np.load(path) as data:
+        assert set(arrays) == set(data.files) - {"__meta__"}
+        for k in arrays:
+            assert np.array_equal(arrays[k], data[k], equal_nan=True) and arrays[k].flags.writeable
+        assert meta == json.loads(str(data["__meta__"]))
+    assert meta["state"]["stage"] == "discharge" and "filling" in meta["wall_times"]
+    assert arrays["markers"].shape[1] == 3 and len(arrays["markers"]) > 100
+    assert shapes["alpha"] == arrays["alpha"].shape and shapes["markers"] == (None, 3)
+    assert "loose" in optional and "alpha" not in optional
+
+
+def test_read_checkpoint_checks_against_the_runs_own_state(checkpoint, tmp_path):
+    """The call Simulation.restore makes: the template and the bound from its fresh state."""
+    from fipy_hopper.io import read_checkpoint
+    from fipy_hopper.model import HopperModel
+
+    path = checkpoint[0]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        cfg = HopperConfig.from_toml(coarse(tmp_path))
+        model = HopperModel(cfg)
+    arrays, meta = read_checkpoint(path, model.initial_state(), cfg)
+    assert arrays["alpha"].shape == (model.grid.nz, model.grid.nr)
+
+    def extra_scalar(a):
+        meta_ = json.loads(str(a["__meta__"]))
+        meta_["state"]["surprise"] = 1
+        a["__meta__"] = np.array(json.dumps(meta_))
+
+    bad = rewrite(path, tmp_path / "scalar.npz", extra_scalar)
+    with pytest.raises(CheckpointError, match="unexpected state value 'surprise'"):
+        read_checkpoint(bad, model.initial_state(), cfg)
+    finer = cfg.replace(numerics={"cell_size": 0.005})
+    with pytest.raises(CheckpointError, match="shape"):          # another grid's checkpoint
+        read_checkpoint(path, HopperModel(finer).initial_state(), finer)
+
+
+def test_measurements_beside_the_state_may_hold_nan(checkpoint, tmp_path):
+    """Stress-sampled wall profiles are NaN where a bin held no material: not refused."""
+    path, shapes, optional, limit = checkpoint
+    nan = rewrite(path, tmp_path / "nan.npz",
+                  lambda a: a.update(envelope=np.array([1.0, np.nan, 2.0])))
+    arrays, _ = validate_checkpoint(nan, shapes, limit, optional)
+    assert np.isnan(arrays["envelope"][1])
+
+
+def test_an_older_checkpoint_without_optional_arrays_passes(checkpoint, tmp_path):
+    path, shapes, optional, limit = checkpoint
+    old = rewrite(path, tmp_path / "old.npz", lambda a: a.pop("loose"))
+    arrays, _ = validate_checkpoint(old, shapes, limit, optional)
+    assert "loose" not in arrays and "alpha" in arrays
+    with pytest.raises(CheckpointError, match="'loose' is missing"):
+        validate_checkpoint(old, shapes, limit)          # unless the name is optional
+
+
+@pytest.mark.parametrize("name, change, words", [
+    ("transposed alpha", lambda a: a.update(alpha=a["alpha"].T.copy()),
+     ["'alpha'", "shape"]),
+    ("another grid", lambda a: a.update(v=np.zeros((2, 10, 10))), ["'v'", "shape"]),
+    ("markers of 2 columns", lambda a: a.update(markers=a["markers"][:, :2].copy()),
+     ["'markers'", "shape"]),
+    ("a NaN stress", lambda a: a["sigma"].__setitem__((3, 3, 0), np.nan),
+     ["'sigma'", "1 non-finite"]),
+    ("float32", lambda a: a.update(eps_p=a["eps_p"].astype(np.float32)), ["'eps_p'", "float32"]),
+    ("a missing array", lambda a: a.pop("sigma"), ["'sigma'", "missing"]),
+    ("an unexpected array", lambda a: a.update(extra=np.zeros(3)), ["unexpected", "extra"]),
+    ("a measurement of 4 axes", lambda a: a.update(envelope=np.zeros((1, 2, 1, 2))),
+     ["'envelope'", "4 axes"]),
+    ("incomplete wall samples", lambda a: a.pop("wall__filling__4"), ["filling", "incomplete"]),
+    ("no metadata", lambda a: a.pop("__meta__"), ["no metadata"]),
+    ("metadata not JSON", lambda a: a.update(__meta__=np.array("{oops")), ["not JSON"]),
+    ("metadata without state", lambda a: a.update(__meta__=np.array('{"record": {}}')),
+     ["metadata lacks", "state"]),
+])
+def test_a_wrong_checkpoint_is_refused_in_one_line(checkpoint, tmp_path, name, change, words):
+    path, shapes, optional, limit = checkpoint
+    bad = rewrite(path, tmp_path / "bad.npz", change)
+    with pytest.raises(CheckpointError) as err:
+        validate_checkpoint(bad, shapes, limit, optional)
+    message = str(err.value)
+    assert "\n" not in message and message.startswith(f"checkpoint {bad}")
+    for word in words:
+        assert word in message, (word, message)
+
+
+def test_an_object_array_is_never_unpickled(checkpoint, tmp_path):
+    path, shapes, optional, limit = checkpoint
+    bad = rewrite(path, tmp_path / "pickle.npz",
+                  lambda a: a.update(alpha=np.array([{"x": 1}, None], dtype=object)))
+    with pytest.raises(CheckpointError, match="Python objects"):
+        validate_checkpoint(bad, shapes, limit, optional)
+
+
+@pytest.mark.parametrize("damage", ["truncated", "flipped", "random", "empty", "pickle"])
+def test_a_corrupt_checkpoint_is_one_line_without_the_pickle_hint(checkpoint, tmp_path,
+                                                                   damage):
+    path, shapes, optional, limit = checkpoint
+    data = path.read_bytes()
+    bad = tmp_path / "corrupt.npz"
+    if damage == "truncated":
+        bad.write_bytes(data[:len(data) // 2])
+    elif damage == "flipped":                  # damage inside a member: the CRC catches it
+        middle = bytearray(data)
+        for k in range(len(data) // 3, len(data) // 3 + 64):
+            middle[k] ^= 0xFF
+        bad.write_bytes(bytes(middle))
+    elif damage == "random":
+        bad.write_bytes(np.random.default_rng(1).bytes(5000))
+    elif damage == "empty":
+        bad.write_bytes(b"")
+    else:
+        import pickle
+        bad.write_bytes(pickle.dumps({"alpha": [1, 2]}))
+    with pytest.raises(CheckpointError) as err:
+        validate_checkpoint(bad, shapes, limit, optional)
+    message = str(err.value)
+    assert "\n" not in message and "allow_pickle" not in message and str(bad) in message
+
+
+def test_a_zip_bomb_is_refused_before_it_is_read(checkpoint, tmp_path, monkeypatch):
+    """5 MB on disk, 1.2 GB declared: refused from the zip directory, nothing decompressed."""
+    path, shapes, optional, limit = checkpoint
+    bomb = tmp_path / "bomb.npz"
+    n = 150_000_000
+    with zipfile.ZipFile(bomb, "w", zipfile.ZIP_DEFLATED, compresslevel=1) as zf:
+        with zf.open("alpha.npy", "w", force_zip64=True) as member:
+            header = io.BytesIO()
+            np.lib.format.write_array_header_1_0(
+                header, {"descr": "<f8", "fortran_order": False, "shape": (n,)})
+            member.write(header.getvalue())
+            zeros = bytes(16 << 20)
+            left = 8 * n
+            while left:
+                member.write(zeros[:min(left, len(zeros))])
+                left -= min(left, len(zeros))
+    assert bomb.stat().st_size < 20e6
+
+    def no_reading(*args, **kwargs):
+        raise AssertionError("a member was opened")
+
+    monkeypatch.setattr(zipfile.ZipFile, "open", no_reading)
+    with pytest.raises(CheckpointError, match="1,200,000,128 bytes uncompressed"):
+        validate_checkpoint(bomb, shapes, limit, optional)
+
+
+def test_a_checkpoint_limit_fits_real_runs(checkpoint):
+    path, shapes, optional, limit = checkpoint
+    with zipfile.ZipFile(path) as zf:
+        assert sum(i.file_size for i in zf.infolist()) < limit < 200e6
+
+
+# ---------------------------------------------------------------- numba cache
+def test_numba_cache_decision(tmp_path):
+    decide = fh._numba_cache_dir
+    writable = {"/pkg/__pycache__": True, "/home/u/.cache/numba": True}
+    can = writable.get
+    assert decide("/pkg", {"HOME": "/home/u"}, can) is None            # next to the module
+    writable["/pkg/__pycache__"] = False
+    assert decide("/pkg", {"HOME": "/home/u"}, can) is None            # ~/.cache/numba
+    assert decide("/pkg", {"XDG_CACHE_HOME": "/home/u/.cache"}, can) is None
+    writable["/home/u/.cache/numba"] = False
+    assert decide("/pkg", {"NUMBA_CACHE_DIR": "/mine"}, can) is None      # the user's choice
+    fallback = decide("/pkg", {"HOME": "/home/u"}, can, temp_dir=str(tmp_path))
+    assert fallback == str(tmp_path / f"fipy_hopper-numba-{os.getuid()}")
+
+
+def test_numba_cache_falls_back_to_a_private_temp_dir(tmp_path):
+    path = fh._numba_cache_dir("/nowhere", {"XDG_CACHE_HOME": "/nowhere/cache"},
+                               lambda p: False, temp_dir=str(tmp_path))
+    assert path == str(tmp_path / f"fipy_hopper-numba-{os.getuid()}")
+    assert os.path.isdir(path) and (os.stat(path).st_mode & 0o777) == 0o700
+    other = tmp_path / "taken"
+    other.mkdir()
+    (other / f"fipy_hopper-numba-{os.getuid()}").write_text("not a directory")
+    fresh = fh._numba_cache_dir("/nowhere", {}, lambda p: False, temp_dir=str(other))
+    assert os.path.isdir(fresh) and fresh.startswith(str(other / "fipy_hopper-numba-"))
+
+
+def test_import_where_neither_the_package_nor_home_is_writable(tmp_path):
+    """A copy of the package whose ``__pycache__`` cannot be a folder (a file of that name;
+    this holds for root too) and a home whose cache cannot be made: the kernels with
+    ``cache=True`` import, with the cache in a private temporary folder."""
+    package = tmp_path / "site" / "fipy_hopper"
+    shutil.copytree(REPO / "fipy_hopper", package,
+                    ignore=shutil.ignore_patterns("__pycache__"))
+    (package / "__pycache__").write_text("")
+    blocker = tmp_path / "blocker"
+    blocker.write_text("")
+    temp = tmp_path / "tmp"
+    temp.mkdir()
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+    env.update(HOME=str(blocker / "home"), XDG_CACHE_HOME=str(blocker / "cache"),
+               TMPDIR=str(temp), PYTHONPATH=str(tmp_path / "site"), PYTHONDONTWRITEBYTECODE="1")
+    script = textwrap.dedent("""
+        import os, fipy_hopper, fipy_hopper.material, fipy_hopper.stepping
+        assert fipy_hopper.__file__.startswith(os.environ["PYTHONPATH"]), fipy_hopper.__file__
+        print(os.environ["NUMBA_CACHE_DIR"])
+    """)
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                          env=env, cwd=tmp_path, timeout=120)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert done.stdout.strip() == str(temp / f"fipy_hopper-numba-{os.getuid()}")
