@@ -88,7 +88,7 @@ def expected_quantities(cfg: HopperConfig) -> dict:
 def run(config_or_path, out, force: bool = False, resume: bool = False, quiet: bool = True,
         checkpoint_interval: float = 60.0, plots: bool = True,
         setup: Optional[Callable] = None, command: Optional[str] = None,
-        config_source: Optional[str] = None) -> dict:
+        config_source: Optional[str] = None, threads: Optional[int] = None) -> dict:
     """Run a hopper into the directory ``out`` and return its summary (``summary.json``).
 
     Parameters
@@ -105,6 +105,8 @@ def run(config_or_path, out, force: bool = False, resume: bool = False, quiet: b
         before it runs, to attach more callbacks (``sim.add_callback``).
     command, config_source : recorded in the manifest (the command line and the configuration
         file, when called from the command line).
+    threads : numba threads of the compiled steps (default: one per core); the results do not
+        depend on it.
 
     Raises :class:`ConfigError` or :class:`~fipy_hopper.io.RunDirectoryError` before anything
     runs; :class:`~fipy_hopper.model.InstabilityError` (and any other error) after writing
@@ -136,7 +138,7 @@ def run(config_or_path, out, force: bool = False, resume: bool = False, quiet: b
     from .model import HopperModel, InstabilityError
     from .simulation import Simulation
 
-    model = HopperModel(cfg)
+    model = HopperModel(cfg, threads=threads)
     progress = (not quiet) and sys.stderr.isatty()
     sim = Simulation(model, progress=progress)
     fields = fio.FieldWriter(rundir.fields, model.grid, cfg.material.cohesion,

@@ -63,6 +63,9 @@ def _parser() -> argparse.ArgumentParser:
                        help="no progress line and no summary (errors are still reported)")
         q.add_argument("--checkpoint-interval", metavar="SECONDS", type=float, default=60.0,
                        help="wall-clock seconds between checkpoints (default 60; 0: none)")
+        q.add_argument("--threads", metavar="N", type=int, default=None,
+                       help="threads of the compiled steps (default: one per core; the "
+                       "results do not depend on it; use 1 when other runs share the cores)")
 
     q = sub.add_parser("run", help="run a hopper described by a TOML configuration",
                        description="Run the hopper of CONFIG.toml: fill, discharge, and write "
@@ -77,8 +80,8 @@ def _parser() -> argparse.ArgumentParser:
     run_options(q, out_required=False)
 
     q = sub.add_parser("plot", help="draw the pictures of a run directory",
-                       description="Draw flow_pattern.png, discharge.png, wall_pressure.png "
-                       "and discharge.gif from the files in DIR.")
+                       description="Draw flow_pattern.png, discharge.png, wall_pressure.png, "
+                       "stress_pattern.png and discharge.gif from the files in DIR.")
     q.add_argument("dir", metavar="DIR", help="run directory")
 
     q = sub.add_parser("validate", help="check a configuration and print derived quantities",
@@ -177,6 +180,9 @@ def _run(args, config, source=None) -> int:
                       "a finite number of seconds >= 0 (0: no checkpoints)", EXIT_BAD_INPUT)
     if not args.out.strip():
         return _error(f"--out = {args.out!r}: expected a directory name", EXIT_BAD_INPUT)
+    if args.threads is not None and not 1 <= args.threads <= 1024:
+        return _error(f"--threads = {args.threads}: expected a number of threads in [1, 1024]",
+                      EXIT_BAD_INPUT)
     command = " ".join(shlex.quote(a) for a in [PROG] + list(args.argv))
     start = ("fipy-hopper demo" if args.command == "demo" else
              f"fipy-hopper run {shlex.quote(args.config)}") + f" --out {shlex.quote(args.out)}"
@@ -185,7 +191,7 @@ def _run(args, config, source=None) -> int:
         with _sigterm_as_interrupt():
             summary = api.run(config, args.out, force=args.force, resume=args.resume,
                               quiet=args.quiet, checkpoint_interval=args.checkpoint_interval,
-                              command=command, config_source=source)
+                              command=command, config_source=source, threads=args.threads)
     except (ConfigError, RunDirectoryError) as exc:
         return _error(exc, EXIT_BAD_INPUT)
     except KeyboardInterrupt:

@@ -184,10 +184,12 @@ class _AlphaBounds:
         return {"alpha_min": self.low, "alpha_max": self.high}
 
 
-def run_case(case: dict, root, force: bool = False) -> dict:
+def run_case(case: dict, root, force: bool = False, threads: int | None = 1) -> dict:
     """Run (or read) one case into ``root/cases/<name>``; returns its row.
 
     Never raises for a failed run: the row carries ``error`` and whatever the run measured.
+    ``threads``: numba threads of the run (1 on a cluster's workers, one per core, so that
+    two runs never compete for a core; ``None``: all cores, for a serial sweep).
     """
     from fipy_hopper.api import run
     from fipy_hopper.config import ResolutionWarning
@@ -209,7 +211,7 @@ def run_case(case: dict, root, force: bool = False) -> dict:
         try:
             run(case["config"], path, force=not resume, resume=resume, quiet=True,
                 plots=case.get("plots", True), setup=tracker.attach if tracker else None,
-                command="studies: " + " ".join(sys.argv))
+                command="studies: " + " ".join(sys.argv), threads=threads)
         except Exception as exc:  # the run wrote what it measured; keep the sweep going
             error = f"{type(exc).__name__}: {exc}"
     if tracker is not None:
@@ -314,7 +316,7 @@ def run_cases(cases: list, root, serial: bool = False, scheduler: str | None = N
 
     if todo and serial:
         for k, c in enumerate(todo, 1):
-            row = run_case(c, root, force=force)
+            row = run_case(c, root, force=force, threads=None)    # one run: every core
             rows[c["name"]] = row
             report(k, row)
     elif todo:
