@@ -200,9 +200,15 @@ print(cfg.n_cells, cfg.memory_estimate(), resource.getrusage(resource.RUSAGE_SEL
 
 def test_memory_estimate_bounds_the_measured_peak():
     """Peak resident memory of building the model of 72,346 cells (the allocation the cell
-    limit guards): below the estimate, and not far below (the figure is a measurement)."""
+    limit guards): below the estimate, and not far below (the figure is a measurement).  A
+    first, small run compiles and caches the kernels: on a fresh install the compiler's own
+    memory (about 0.3 GB more) would otherwise be measured instead of the model's."""
+    env = {**os.environ, "NUMBA_NUM_THREADS": "1"}
+    warm = subprocess.run([sys.executable, "-c", MEASURE, "0.01"], capture_output=True,
+                          text=True, timeout=300, env=env)
+    assert warm.returncode == 0, warm.stderr
     done = subprocess.run([sys.executable, "-c", MEASURE, "0.00125"], capture_output=True,
-                          text=True, timeout=120, env={**os.environ, "NUMBA_NUM_THREADS": "1"})
+                          text=True, timeout=120, env=env)
     assert done.returncode == 0, done.stderr
     cells, estimate, peak = (float(x) for x in done.stdout.split())
     assert cells == 72_346
