@@ -183,6 +183,18 @@ def _contact_node(v, j, i, mass, k0, k1, normal, mu, kind, entry, plate_closed,
     the cone and the plate into a steady inward slide of the lip's node, which squeezed the
     material out of the lip's cells during the fill.)"""
     vr, vz = v[0, j, i], v[1, j, i]
+    if k1 - k0 == 1 and (kind[k0] == 0 or plate_closed):     # one wall: the usual contact
+        if vr * normal[k0, 0] + vz * normal[k0, 1] > 0.0:
+            wr, wz = _project(vr, vz, normal[k0, 0], normal[k0, 1], mu[k0])
+            v[0, j, i], v[1, j, i] = wr, wz
+            m = mass[j, i]
+            if kind[k0] == 1:
+                plate_impulse[entry[k0], 0] += m * (wr - vr)
+                plate_impulse[entry[k0], 1] += m * (wz - vz)
+            else:
+                contact_impulse[entry[k0], 0] += m * (wr - vr)
+                contact_impulse[entry[k0], 1] += m * (wz - vz)
+        return
     best = -1
     best_gap = np.inf
     pressing = 0
