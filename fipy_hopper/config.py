@@ -272,7 +272,8 @@ class NumericsConfig:
     - ``cell_size`` (m): square cells of the fixed grid.
     - ``dt_safety``: explicit step ``dt = dt_safety * cell_size / c_p``.
     - ``transport_cfl``: sub-cycled transport runs when the material has moved this fraction of a
-      cell (mass-weighted speed), and at most every ``max_transport_interval`` steps.
+      cell at the largest face speed of the open faces, and at least every
+      ``max_transport_interval`` steps.
     - ``hourglass_coefficient``: viscous hourglass force per unit area
       ``kappa_hg * rho * sqrt(g h)`` times the cell's checkerboard velocity.  The velocity scale
       is the grid's free-fall speed ``sqrt(g h)``, not the elastic wave speed: a damping that

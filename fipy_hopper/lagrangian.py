@@ -1,4 +1,4 @@
-"""Updated-Lagrangian mode of the same physics (issue 8): the mesh moves with the material.
+"""Updated-Lagrangian mode of the same physics: the mesh moves with the material.
 
 :class:`LagrangianModel` solves the hopper problem of :class:`fipy_hopper.model.HopperModel` --
 the same explicit Galerkin momentum step, Mohr-Coulomb update with Jaumann rotation, wall contact,

@@ -1,4 +1,4 @@
-"""HopperModel: the state of the Eulerian hopper and one explicit time step (method.md, sec. 3).
+"""HopperModel: the state of the Eulerian hopper and one explicit time step (docs/method.md, sections 3-5).
 
 A step is an operator split:
 
@@ -11,7 +11,7 @@ A step is an operator split:
    conservatively (van Leer); nodal momentum is carried on the dual grid with the same mass
    fluxes.  Transport runs when the material has moved ``transport_cfl`` of a cell.
 
-Dense and loose material (method.md sec. 7.2; the "disconnected" phase of Dunatunga & Kamrin
+Dense and loose material (docs/method.md, section 6; the "disconnected" phase of Dunatunga & Kamrin
 2015).  ``alpha = 1`` is the dense (filled) state.  Each cell carries the loose volumetric
 strain ``e_l >= 0`` of its material, transported with it like ``eps_p``:
 
@@ -116,20 +116,30 @@ class State:
 
 
 class HopperModel:
-    """The hopper on its grid, with material, wall and numerics from a :class:`HopperConfig`."""
+    """The hopper on its grid, with material, wall and numerics from a :class:`HopperConfig`.
+
+    ``backend``: ``"numba"`` (the compiled steps of :mod:`fipy_hopper.stepping`, the compiled
+    return, transport, redistribution and markers) or ``"numpy"``, the plain-numpy reference
+    of every part of a step (:func:`fipy_hopper.material.update_reference`, the numpy
+    transport and redistribution, :func:`fipy_hopper.markers.advance_reference`), which a
+    test holds the compiled path to over a short run.  ``threads``: numba threads of the
+    compiled steps (default: one per core).
+    """
 
     def __init__(self, cfg: HopperConfig, grid: HopperGrid | None = None,
-                 kernels: str = "numba", threads: int | None = None):
-        from .material import update as material_update
+                 backend: str = "numba", threads: int | None = None):
+        from .material import update, update_reference
         from .transport import Transport
 
-        if kernels not in ("numba", "numpy"):
-            raise ValueError(f"kernels must be 'numba' or 'numpy', not {kernels!r}")
-        self.kernels = kernels
+        if backend not in ("numba", "numpy"):
+            raise ValueError(f"backend must be 'numba' or 'numpy', not {backend!r}")
+        self.backend = backend
         self.cfg = cfg
         self.grid = grid if grid is not None else build_grid(cfg)
         self.material = cfg.material.mohr_coulomb()
-        self._material_update = material_update
+        self._material_update = update if backend == "numba" else update_reference
+        self._advance_markers = (markers.advance if backend == "numba"
+                                 else markers.advance_reference)
         g = self.grid
         self.rho = cfg.material.density
         self.c_p = cfg.material.p_wave_speed
@@ -141,11 +151,13 @@ class HopperModel:
         # cylindrical cells corrected; FiPy's own geometry over/undershoots on cylindrical
         # grids (see fipy_hopper.transport), this one stays within [0, 1]
         self.transport_open = Transport(g.mesh, g.kappa.ravel(), g.face_aperture,
-                                        g.outflow_faces, TRANSPORTED, scheme="axisymmetric")
+                                        g.outflow_faces, TRANSPORTED, backend=backend,
+                                        scheme="axisymmetric")
         # with the outlet plate closed, no transfer (flux or redistribution) crosses the outlet
         plate_aperture = np.where(g.outlet_faces, 0.0, g.face_aperture)
         self.transport_closed = Transport(g.mesh, g.kappa.ravel(), plate_aperture,
-                                          g.outflow_faces, TRANSPORTED, scheme="axisymmetric")
+                                          g.outflow_faces, TRANSPORTED, backend=backend,
+                                          scheme="axisymmetric")
         normals = np.asarray(g.mesh.faceNormals)
         nzf = g.n_zfaces
         self.face_sign = np.concatenate([normals[1, :nzf], normals[0, nzf:]])
@@ -290,7 +302,7 @@ class HopperModel:
         if state.wall_impulse is None:     # a state from before the load measurements
             for key, value in self._measurements().items():
                 setattr(state, key, value)
-        if self.kernels == "numpy":
+        if self.backend == "numpy":
             for n in range(max_steps):
                 if self._step_numpy(state):
                     self.transport_step(state)
@@ -401,7 +413,7 @@ class HopperModel:
         dt_T = state.flux_time
         u_mean = state.face_flux_sum / dt_T
         transport = self.transport_closed if state.plate_closed else self.transport_open
-        compiled = self.kernels != "numpy"
+        compiled = self.backend != "numpy"
         if compiled:
             stacked = self._stacked
             stepping.pack_fields(state.alpha, state.sigma, state.eps_p, state.layer,
@@ -491,7 +503,7 @@ class HopperModel:
         state.loose = loose
         self._mass, self._mass_of = mass_new, new_alpha
         if state.markers is not None:
-            state.markers = markers.advance(state.markers, state.displacement, g,
+            state.markers = self._advance_markers(state.markers, state.displacement, g,
                                             self.cfg.hopper)
             state.displacement[:] = 0.0
         state.face_flux_sum[:] = 0.0

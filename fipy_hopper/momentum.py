@@ -62,8 +62,9 @@ def internal_force(stress: np.ndarray, open_volume: np.ndarray, r_c: np.ndarray,
 def hourglass_force(v: np.ndarray, coefficient: np.ndarray) -> np.ndarray:
     """Viscous hourglass force: ``f_a = -C_c Gamma_a (Gamma . v_c)``, ``Gamma = (1,-1,1,-1)``.
 
-    ``coefficient`` (nz, nr) in kg/(s rad), typically ``kappa_hg rho c_p alpha w_c / h``.  It
-    acts only on the checkerboard mode of each cell (zero for rigid motion and linear fields).
+    ``coefficient`` (nz, nr) in kg/(s rad); the model uses ``kappa_hg rho sqrt(g h) alpha w_c /
+    h`` (:mod:`fipy_hopper.config`, ``hourglass_coefficient``).  It acts only on the
+    checkerboard mode of each cell (zero for rigid motion and linear fields).
     """
     nz, nr = coefficient.shape
     mode = sum(gam * v[:, dj:dj + nz, di:di + nr] for (dj, di), gam in zip(CORNERS, HOURGLASS))

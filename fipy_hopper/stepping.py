@@ -3,7 +3,7 @@
 :meth:`fipy_hopper.model.HopperModel.advance` runs the material part of the operator split
 (stage 1 of :mod:`fipy_hopper.model`) for up to ``max_steps`` steps in one compiled call of
 :func:`material_steps`, stopping after the step at which a transport is due.  A step is the
-numpy reference's (``HopperModel(..., kernels="numpy")``), with the same arithmetic in the
+numpy reference's (``HopperModel(..., backend="numpy")``), with the same arithmetic in the
 same order, so that each number is the same to the last bit as that of the sequence of
 compiled kernels it replaces:
 
@@ -166,7 +166,7 @@ def _project(vr, vz, n_r, n_z, mu):
     return vr, vz
 
 
-@numba.njit(cache=True, error_model="numpy")
+@numba.njit(cache=True, error_model="numpy", inline="always")
 def _contact_node(v, j, i, mass, k0, k1, normal, mu, kind, entry, plate_closed,
                   contact_impulse, plate_impulse):
     """Contact of node (j, i) with all its walls (constraints ``k0 <= k < k1``; a plate

@@ -1,6 +1,6 @@
 """Conservative, bounded transport of cell fields on the fixed cylindrical grid.
 
-The Eulerian step of method.md section 3 carries every cell field ``phi`` (a density per
+The Eulerian step (docs/method.md, section 5) carries every cell field ``phi`` (a density per
 *open* volume: the material fraction ``alpha`` and alpha-weighted quantities such as
 ``alpha*sigma_rr`` or ``alpha*tracer``) with the face normal velocity of the material step:
 
@@ -65,13 +65,15 @@ On a cylindrical grid two geometric factors of this reconstruction include r:
 
 So FiPy's scheme is *not* bounded on a cylindrical grid even for a discretely divergence-free
 velocity (a blob in a Stokes-stream-function rotation reaches alpha 1.14 and -0.002 at CFL 0.5;
-smaller CFL is worse), although it is on a Cartesian grid.  ``scheme="axisymmetric"`` (an option
-of ``Transport``) keeps FiPy's limiter, upwinding, CFL correction and conservative update but
+smaller CFL is worse), although it is on a Cartesian grid.  ``scheme="axisymmetric"`` (what the
+model runs, and the default of ``Transport`` and ``FiPyTransport``, whose equations then use
+``AxisymmetricVanLeerConvectionTerm``, a FiPy term) keeps FiPy's limiter, upwinding, CFL
+correction and conservative update but
 reconstructs with planar geometry: gradient ``sum n L phi_f / (dr dz)`` (``L`` the face length)
 and reach ``2 d_Pf (1 - |F| dt / V)`` (``d_Pf`` the centre-to-face distance).  Then face values
 of an outflow face lie in ``[0, 2 phi_P]`` for non-negative fields, the update is positive for
 any velocity at ``cfl <= 0.5``, and the divergence-free blob stays in ``[0, 1]`` to round-off.
-The default stays ``"fipy"`` (the definition); ``redistribute_overshoot`` makes either bounded.
+``scheme="fipy"`` is FiPy's own term, unchanged; ``redistribute_overshoot`` makes either bounded.
 
 Cut cells enter only through ``F`` (the aperture) and ``kappa`` in the time derivative; the
 CFL correction ``V - |F| dt`` uses the full cell volume, as in FiPy.
@@ -247,20 +249,82 @@ def _planar_cell_areas(mesh):
 # 1. The definition: FiPy equations
 # --------------------------------------------------------------------------------------------
 
+def _axisymmetric_term_class():
+    """:class:`AxisymmetricVanLeerConvectionTerm`, built on first use (FiPy is imported late)."""
+    global AxisymmetricVanLeerConvectionTerm
+    if AxisymmetricVanLeerConvectionTerm is not None:
+        return AxisymmetricVanLeerConvectionTerm
+    import fipy
+    from fipy.terms.explicitUpwindConvectionTerm import ExplicitUpwindConvectionTerm
+    from fipy.tools import numerix
+
+    class _Term(fipy.VanLeerConvectionTerm):
+        """FiPy's ``VanLeerConvectionTerm`` with the bounded axisymmetric reconstruction.
+
+        Everything is FiPy's (the explicit upwind assembly, the MC limiter ``_getGradient``, the
+        CFL correction, the conservative update solved by FiPy) except the two geometric
+        factors of the donor's extrapolation (module docstring): the cell gradient is the
+        planar Gauss gradient ``sum n L phi_f / (dr dz)`` (:func:`cell_gradient` of the
+        ``"axisymmetric"`` geometry) instead of ``phi.grad``, and the reach is ``V / (2 d_Pf)``
+        instead of the face area ``A``.  ``geometry`` is a :class:`TransportGeometry` of
+        ``scheme="axisymmetric"`` for the term's mesh.
+        """
+
+        def __init__(self, coeff=1.0, var=None, geometry=None):
+            super().__init__(coeff=coeff, var=var)
+            if geometry is None or geometry.scheme != "axisymmetric":
+                raise ValueError("the term needs the mesh's axisymmetric TransportGeometry")
+            self._planar = geometry
+
+        def _getOldAdjacentValues(self, oldArray, id1, id2, dt):
+            oldArray1, oldArray2 = ExplicitUpwindConvectionTerm._getOldAdjacentValues(
+                self, oldArray, id1, id2, dt)
+            mesh, geom = oldArray.mesh, self._planar
+            interiorIDs = numerix.nonzero(mesh.interiorFaces)[0]
+            normals = numerix.take(mesh._orientedFaceNormals, interiorIDs, axis=-1)
+            interiorCFL = abs(numerix.take(self._getGeomCoeff(oldArray), interiorIDs)) * dt
+            gradUpwind = (oldArray2 - oldArray1) / numerix.take(mesh._cellDistances,
+                                                                interiorIDs)
+            grad = cell_gradient(geom, np.asarray(oldArray.value, float)[None])[:, 0]
+            vol1 = numerix.take(mesh.cellVolumes, id1)
+            oldArray1 += 0.5 * self._getGradient(
+                numerix.dot(numerix.take(grad, id1, axis=-1), normals), gradUpwind) \
+                * (vol1 - interiorCFL) / geom.reach_1
+            vol2 = numerix.take(mesh.cellVolumes, id2)
+            oldArray2 += 0.5 * self._getGradient(
+                numerix.dot(numerix.take(grad, id2, axis=-1), -normals), -gradUpwind) \
+                * (vol2 - interiorCFL) / geom.reach_2
+            return oldArray1, oldArray2
+
+    _Term.__name__ = _Term.__qualname__ = "AxisymmetricVanLeerConvectionTerm"
+    AxisymmetricVanLeerConvectionTerm = _Term
+    return _Term
+
+
+#: FiPy's van Leer convection term with the bounded axisymmetric reconstruction (a subclass
+#: of ``fipy.VanLeerConvectionTerm``, made on first use by :func:`_axisymmetric_term_class`).
+AxisymmetricVanLeerConvectionTerm = None
+
+
 class FiPyTransport:
     """Transport (1) as FiPy equations, one per field, built once (the reference).
 
-    ``TransientTerm(coeff=kappa_eff, var=phi) + VanLeerConvectionTerm(coeff=u a, var=phi) == 0``
-    with ``u = u_n * mesh.faceNormals`` (a rank-1 ``FaceVariable`` updated by ``setValue``) and
+    ``TransientTerm(coeff=kappa_eff, var=phi) + Convection(coeff=u a, var=phi) == 0`` with
+    ``u = u_n * mesh.faceNormals`` (a rank-1 ``FaceVariable`` updated by ``setValue``) and
     ``phi.faceGrad.constrain(0., where=outflow)``; solved with FiPy's ``LinearLUSolver`` (the
-    matrix is diagonal).
+    matrix is diagonal).  ``scheme="axisymmetric"`` (the default, what the model runs):
+    ``Convection`` is :class:`AxisymmetricVanLeerConvectionTerm`; ``"fipy"``: FiPy's own
+    ``VanLeerConvectionTerm``.
     """
 
-    def __init__(self, mesh, kappa, aperture, outflow_faces, field_names):
+    def __init__(self, mesh, kappa, aperture, outflow_faces, field_names,
+                 scheme="axisymmetric"):
         import fipy
 
         self.mesh = mesh
-        self.geometry = geom = TransportGeometry.from_mesh(mesh, kappa, aperture, outflow_faces)
+        self.scheme = scheme
+        self.geometry = geom = TransportGeometry.from_mesh(mesh, kappa, aperture, outflow_faces,
+                                                           scheme=scheme)
         self.field_names = tuple(field_names)
         self._velocity = fipy.FaceVariable(mesh=mesh, rank=1, value=0.0)
         self._aperture = fipy.FaceVariable(mesh=mesh, value=geom.aperture)
@@ -273,7 +337,10 @@ class FiPyTransport:
             phi = fipy.CellVariable(mesh=mesh, name=name, value=0.0, hasOld=True)
             if geom.outflow.size:
                 phi.faceGrad.constrain(0.0, where=outflow)
-            convection = fipy.VanLeerConvectionTerm(coeff=coeff, var=phi)
+            if scheme == "axisymmetric":
+                convection = _axisymmetric_term_class()(coeff=coeff, var=phi, geometry=geom)
+            else:
+                convection = fipy.VanLeerConvectionTerm(coeff=coeff, var=phi)
             self.variables[name] = phi
             self.terms[name] = convection
             self.equations[name] = (fipy.TransientTerm(coeff=kappa_eff, var=phi)
@@ -646,14 +713,15 @@ class Transport:
     """Fast transport: FiPy's van Leer update (2) on FiPy's mesh arrays, all fields at once.
 
     Same constructor and ``step`` as ``FiPyTransport``, plus ``backend`` (``"numba"``, compiled,
-    for FiPy 2D grid meshes; ``"numpy"``, any 2D mesh) and ``scheme`` (``"fipy"``: FiPy's
-    arithmetic to round-off; ``"axisymmetric"``: planar reconstruction geometry, bounded on
-    cylindrical grids, see the module docstring).  ``step_stacked`` works on
-    ``(nFields, nCells)`` arrays without dicts.
+    for FiPy 2D grid meshes; ``"numpy"``, any 2D mesh) and ``scheme`` (``"axisymmetric"``, the
+    default: planar reconstruction geometry, bounded on cylindrical grids, see the module
+    docstring; ``"fipy"``: FiPy's own arithmetic); each is held by a test to
+    ``FiPyTransport`` of the same scheme.  ``step_stacked`` works on ``(nFields, nCells)``
+    arrays without dicts.
     """
 
     def __init__(self, mesh, kappa, aperture, outflow_faces, field_names, backend="numba",
-                 scheme="fipy"):
+                 scheme="axisymmetric"):
         if backend not in ("numba", "numpy"):
             raise ValueError(f"backend must be 'numba' or 'numpy', not {backend!r}")
         self.mesh = mesh
@@ -731,6 +799,13 @@ class Transport:
                 and fields.flags.writeable):
             raise ValueError("fields must be a writeable C-contiguous float64 (nF, nCells) "
                              "array")
+        if self.backend == "numpy":              # the reference: whole-array passes
+            geom = self.geometry
+            alpha_new, record = redistribute_overshoot(
+                fields[0], geom.kappa, geom.cell_volume, self.neighbours(), alpha_max=alpha_max,
+                sweeps=sweeps, tol=tol, room_min=room_min, fields=fields[1:], backend="numpy")
+            fields[0] = alpha_new
+            return record
         return _redistribute_compiled(fields[0], fields[1:], self._open_volume(),
                                       self.neighbours(), alpha_max, sweeps, tol, room_min)
 

@@ -1,4 +1,4 @@
-"""Lagrangian vs Eulerian discharge of the same hopper (issue 8): the Lagrangian mesh distorts and
+"""Lagrangian vs Eulerian discharge of the same hopper: the Lagrangian mesh distorts and
 stops, the Eulerian grid follows the material through the complete emptying.
 
 Both runs use the same configuration and the same filling stage (gravity ramp, damping, the same

@@ -1,4 +1,4 @@
-"""Robustness (issue 7): does the discharge rate hinge on stiffness, cell size or hourglass control?
+"""Robustness: does the discharge rate hinge on stiffness, cell size or hourglass control?
 
 The reference hopper (``HopperConfig()``: D = 0.3 m, 20 deg cone, D0 = 0.06 m, 0.3 m fill,
 phi = 30 deg, phi_w = 15 deg, E = 5 MPa, 5 mm cells, hourglass coefficient 0.1) and the
@@ -13,7 +13,7 @@ seven runs per hopper.  Every run records the smallest and largest ``alpha`` aft
 transport step (the only place ``alpha`` changes), so the bounds hold at all times, and its
 mass-balance error ``|M + discharged - M0| / M0`` at the end.
 
-The bands of issue 7, evaluated per hopper (``bands.csv``, PASS/FAIL with the numbers):
+The robustness bands, evaluated per hopper (``bands.csv``, PASS/FAIL with the numbers):
 
 1. **stiffness**: ``(max - min) / W(5 MPa)`` of the steady rates at the three E < 5 %;
 2. **cell size**: with ``d1 = |W(5) - W(7.5)| / W(5)`` and ``d2 = |W(3.75) - W(5)| / W(3.75)``
@@ -124,7 +124,7 @@ def _rate(r):
 
 
 def evaluate_bands(rows: list, options: dict) -> list:
-    """The bands of issue 7 for each hopper: a list of ``{"hopper", "band", "requirement",
+    """The robustness bands for each hopper: a list of ``{"hopper", "band", "requirement",
     "value", "passed", "detail"}`` (``passed`` is None when the band cannot be judged)."""
     base_e = float(options["base_modulus"]) / 1e6
     base_h = 1000 * float(options["base_cell"])
@@ -318,7 +318,7 @@ def write_outputs(out, rows, bands, options, setting, argv=None):
     _sweep.save(plot_discharge(rows), out / "robustness_discharge.png")
     figures = [{"file": "robustness.png",
                 "caption": "Steady rate of each hopper against E, cell size and hourglass "
-                           "coefficient, with the band of issue 7 around the base rate."},
+                           "coefficient, with the robustness band around the base rate."},
                {"file": "robustness_discharge.png",
                 "caption": "Discharge rate W(t) of every run."}]
     findings = [f"{b['hopper']} hopper, {b['band'].replace('_', ' ')}: {status(b['passed'])} "
@@ -335,7 +335,7 @@ def write_outputs(out, rows, bands, options, setting, argv=None):
     numbers["bands_passed"] = sum(1 for b in bands if b["passed"] is True)
     numbers["bands_failed"] = sum(1 for b in bands if b["passed"] is False)
     numbers["bands_not_judged"] = sum(1 for b in bands if b["passed"] is None)
-    tables = [{"title": "Bands of issue 7",
+    tables = [{"title": "Robustness bands",
                "columns": ["hopper", "band", "status", "value", "requirement", "numbers"],
                "rows": [[b["hopper"], b["band"], status(b["passed"]),
                          (f"{b['value']:.3g}" if _sweep.finite(b["value"]) else ""),

@@ -43,7 +43,7 @@ CASES = [
     ("not TOML", "this is [not toml\n", ["not valid TOML"]),
     ("not TOML: a binary file", b"\x89PNG\r\n\x1a\n\x00\x00", ["not valid TOML"]),
     ("missing file", None, ["missing.toml", "cannot read configuration"]),
-    # absurd magnitudes (issue 16): a range error, never a traceback or an allocation
+    # absurd magnitudes: a range error, never a traceback or an allocation
     ("a 400-digit integer", "[hopper]\nbin_diameter = " + "9" * 400 + "\n",
      ["hopper.bin_diameter", "an integer of 400 digits", "[0.001, 100] m"]),
     ("a 400-digit integer for an integer key",

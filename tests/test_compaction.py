@@ -1,4 +1,4 @@
-"""Dense and loose material (issue 7): the rule of material.close_loose_volume in the model.
+"""Dense and loose material: the rule of material.close_loose_volume in the model.
 
 A material fraction ``alpha`` below its dense value 1 inside the material is loose volume
 ``loose`` (``alpha (1 + loose) = 1``); such material carries no stress until compression has

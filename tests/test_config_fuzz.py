@@ -1,4 +1,4 @@
-"""Property-based fuzzing of the configuration (issue 16): any TOML-able input gives either a
+"""Property-based fuzzing of the configuration: any TOML-able input gives either a
 valid :class:`HopperConfig` or a one-line :class:`ConfigError`, never another exception.
 
 The inputs are random tables with every key of every section, each either left out, given a

@@ -1,4 +1,4 @@
-"""Discharge (issue 4): mass balance, the hourglass property, flow modes, the switch peak.
+"""Discharge: mass balance, the hourglass property, flow modes, the switch peak.
 
 Coarse grids (1 cm cells, a 0.2 m bin), about a second of discharge each.  The slower
 validation (outlet-size scaling, the reference hopper emptying) is marked ``slow``.

@@ -1,4 +1,4 @@
-"""Filling to rest: hydrostatic column, Janssen's bin, a conical hopper at rest (issue 3).
+"""Filling to rest: hydrostatic column, Janssen's bin, a conical hopper at rest .
 
 Coarse grids (1 cm cells); each case fills in a few seconds.  The fill is at rest by the
 criterion of :mod:`fipy_hopper.simulation` (kinetic energy below 1e-6 M g L after the ramp).
@@ -58,20 +58,21 @@ def tall_janssen_bin():
 
 
 def test_bin_wall_pressure_follows_janssen(tall_janssen_bin):
+    """A quasi-static fill of an elastic material against rough walls is oedometric away from
+    the wall: the lateral ratio is nu / (1 - nu) = 0.43 for nu = 0.3.  With that K, not one
+    fitted to the run, Janssen gives the wall pressure (from the wall's reaction) within 10 %
+    over the middle of the bin (the top bins feel the free surface, the bottom ones the
+    floor's corner)."""
     H, model, sim = tall_janssen_bin
-    st, g = sim.state, model.grid
     mu = math.tan(math.radians(20.0))
-    # K measured at the wall: sigma_rr / sigma_zz in the cell column next to the bin wall
-    col = int(round(0.1 / g.h)) - 1
-    rows = (g.z_cells > 0.1 * H) & (g.z_cells < 0.9 * H)
-    K = float(np.median(st.sigma[rows, col, 0] / st.sigma[rows, col, 1]))
-    assert 0.3 < K < 0.6
+    K = 0.3 / 0.7
+    assert sim.record.wall_k == pytest.approx(K, rel=0.1)        # measured at the wall
     _, s, r, z, p, tau = sim.record.wall["filling"]
     on_bin = (r > 0.099) & (z > 0.1 * H) & (z < 0.85 * H)
     janssen = theory.janssen_wall_pressure(H - z[on_bin], RHO, 0.2, K, mu)
     assert np.max(np.abs(p[on_bin] / janssen - 1)) < 0.10
     # friction is mobilised up the wall (material hangs on it) and bounded by Coulomb
-    assert np.all(tau[on_bin] > 0) and np.all(tau[on_bin] <= mu * p[on_bin] * 1.05)
+    assert np.all(tau[on_bin] > 0) and np.all(tau[on_bin] <= mu * p[on_bin] * (1 + 1e-9))
 
 
 def test_tall_bin_approaches_janssen_asymptote(tall_janssen_bin):
@@ -94,8 +95,18 @@ def test_conical_hopper_comes_to_rest_with_walker_like_cone_pressure(tmp_path):
     assert model.kinetic_energy(st) < 1e-6 * mass * G * L
     _, s, r, z, p, tau = sim.record.wall["filling"]
     assert np.all(np.isfinite(p)) and len(p) > 10
-    hc = model.cfg.hopper.cone_height
-    cone = (z > 0.2 * hc) & (z < 0.9 * hc)
-    # pressures are compressive and of the order of the overburden (Walker's filling ratio)
-    assert np.all(p[cone] > 0)
-    assert np.all(p[cone] < RHO * G * (model.cfg.hopper.fill_level - z[cone]))
+    geom = model.cfg.hopper
+    hc = geom.cone_height
+    cone = (z > 0.2 * hc) & (z < 0.8 * hc)
+    # Walker's slice method with the EN filling ratio on the Janssen vertical stress at the
+    # transition (K = nu / (1 - nu), the oedometric ratio of the elastic fill): the mean over
+    # the middle of the cone within 15 % (the slice method assumes a uniform vertical stress
+    # across each slice; the simulated one is not)
+    mu = math.tan(math.radians(15.0))
+    sigma_vt = float(theory.janssen_vertical_stress(geom.fill_height, RHO, geom.bin_diameter,
+                                                    0.3 / 0.7, mu))
+    h = geom.bin_radius / math.tan(geom.half_angle)
+    x = z[cone] + geom.outlet_radius / math.tan(geom.half_angle)
+    walker = theory.walker_hopper_wall_pressure(x, h, geom.half_angle_deg, RHO, 30.0, 15.0,
+                                                sigma_vt, mode="filling")
+    assert np.mean(p[cone]) == pytest.approx(np.mean(walker), rel=0.15)

@@ -1,4 +1,4 @@
-"""The Lagrangian mode (issue 8): same physics, moving mesh; it stops by distortion, the Eulerian
+"""The Lagrangian mode: same physics, moving mesh; it stops by distortion, the Eulerian
 run of the same hopper empties.
 
 Coarse case (1 cm cells, a 0.2 m bin, 0.06 m outlet, 20 deg cone, 0.15 m fill, wall 15 deg):

@@ -22,7 +22,7 @@ def small_cfg():
 
 def test_compiled_step_equals_numpy_reference(small_cfg):
     """600 steps (filling, then 200 of discharge, with transports) agree to round-off."""
-    fast, ref = HopperModel(small_cfg, kernels="numba"), HopperModel(small_cfg, kernels="numpy")
+    fast, ref = HopperModel(small_cfg, backend="numba"), HopperModel(small_cfg, backend="numpy")
     a, b = fast.initial_state(), ref.initial_state()
     for k in range(600):
         if k == 400:

@@ -1,4 +1,4 @@
-"""Reliability gaps of issue 16 in configuration, I/O and the command line.
+"""Reliability in configuration, I/O and the command line: one-line errors, size checks, locks, checkpoints.
 
 Bad paths and values give one line and exit code 2, never a traceback; the grid's size and the
 number of time steps are checked before anything is allocated (against the measured memory a

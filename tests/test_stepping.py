@@ -69,7 +69,7 @@ def test_compiled_steps_equal_the_numpy_reference_in_discharge(small_cfg, discha
     reference agree to round-off (1e-9 relative: the returns of the two paths differ by
     their 1e-12 tolerance, and a few hundred steps of flow amplify it)."""
     model, state = discharging
-    ref = HopperModel(small_cfg, kernels="numpy")
+    ref = HopperModel(small_cfg, backend="numpy")
     a = _run(model, state.copy(), 300, threads=1)
     b = state.copy()
     done = 0

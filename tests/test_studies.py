@@ -1,4 +1,4 @@
-"""The validation studies (issues 6 and 7) run on their quick settings and their outputs hold.
+"""The validation studies run on their quick settings and their outputs hold.
 
 Every study runs serially (no Dask) on tiny hoppers with 1 cm cells; one test runs two tiny
 cases on a one-worker Dask ``LocalCluster`` when dask.distributed is installed.  The report

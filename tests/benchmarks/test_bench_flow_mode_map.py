@@ -1,4 +1,4 @@
-"""Benchmark of the whole flow-mode map at its default resolution (issue 6, target: the map of
+"""Benchmark of the whole flow-mode map at its default resolution (target: the map of
 at least 30 cases in under 30 minutes on 2 cores).
 
 ``pytest tests/benchmarks/test_bench_flow_mode_map.py --benchmark-enable`` runs
