@@ -352,6 +352,38 @@ def relative_l2(a, b) -> float:
     return float(np.linalg.norm(a[ok] - b[ok]) / np.linalg.norm(b[ok]))
 
 
+def estimates_analysis(rows: list) -> list:
+    """Where the two estimates of the filled wall pressure differ: the reaction's and the
+    stress-sampled mean ``p_n`` per region (the outlet lip's bin, the cone's middle, the two
+    bins at the transition, the bin's middle) and ``100 (stress - reaction) / reaction``."""
+    out = []
+    for row in rows:
+        try:
+            res = load_case(row)
+        except FileNotFoundError:
+            continue
+        sel = res.wall_stage("filling")
+        if not len(sel["s_m"]) or "p_n_stress_Pa" not in sel:
+            continue
+        geom = res.config.hopper
+        s, p, q = sel["s_m"], sel["p_n_Pa"], sel["p_n_stress_Pa"]
+        s_t = float(geometry.transition_arc_length(geom))
+        s_top = float(geometry.arc_length(geom.fill_level, geom))
+        width = 3.0 * res.config.numerics.cell_size
+        regions = {"outlet lip": s < width,
+                   "cone middle": (s > 0.2 * s_t) & (s < 0.8 * s_t),
+                   "transition": np.abs(s - s_t) < width,
+                   "bin middle": (s > s_t + 0.2 * (s_top - s_t)) & (s < s_top - 0.2 * (s_top - s_t))}
+        for region, mask in regions.items():
+            mask = mask & np.isfinite(q)
+            if not mask.any():
+                continue
+            a, b = float(np.mean(p[mask])), float(np.mean(q[mask]))
+            out.append({"case": row["case"], "region": region, "reaction_Pa": a,
+                        "stress_sampled_Pa": b, "diff_pct": _sweep.pct(b, a)})
+    return out
+
+
 def series_analysis(rows: list) -> tuple:
     """Convergence with the cell size and the spread with E: ``(table rows, numbers,
     profiles {case: {stage: (centres, p)}})``."""
@@ -531,6 +563,9 @@ def write_outputs(out, rows, profiles, comparison, switch, numbers, options, set
         "overpressure_factor_cone_max", "wall_time_s", "error"))
     figures = []
     series_table, series_numbers, common = series if series is not None else ([], {}, {})
+    estimates = estimates_analysis(rows)
+    if estimates:
+        _sweep.write_rows_csv(out / "estimates.csv", estimates)
     numbers = {**numbers, **series_numbers}
     if series_table:
         _sweep.write_rows_csv(out / "convergence.csv", series_table)
@@ -606,6 +641,21 @@ def write_outputs(out, rows, profiles, comparison, switch, numbers, options, set
                    round(sw["peak_filling_sim_Pa"]), round(sw["sim_ratio_discharge_to_filling"], 2),
                    round(sw["walker_hopper_Pa"]), round(sw["diff_peak_vs_walker_pct"], 1),
                    round(sw["walker_ratio_Fe_over_K"], 2)] for sw in switch]}]
+    if estimates:
+        tables.append({"title": "The two estimates at rest: the wall's reaction and the stress "
+                                "of the cells next to the wall (diff = stress-sampled against "
+                                "reaction)",
+                       "columns": ["case", "region", "reaction (Pa)", "stress-sampled (Pa)",
+                                   "diff %"],
+                       "rows": [[e["case"], e["region"], round(e["reaction_Pa"]),
+                                 round(e["stress_sampled_Pa"]), round(e["diff_pct"], 1)]
+                                for e in estimates]})
+        findings.append(
+            "The stress-sampled estimate reads the stress 0.5 to 2.5 cells from the wall, the "
+            "reaction the force on the wall itself: they differ most where the stress varies "
+            "over that distance (" + "; ".join(
+                f"{e['region']} {e['diff_pct']:+.0f} %" for e in estimates
+                if e["case"] == estimates[0]["case"]) + f", {estimates[0]['case']}).")
     if series_table:
         tables.append({"title": "Convergence and stiffness (relative L2 over the whole wall, "
                                 "45 mm bins)",

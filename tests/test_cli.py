@@ -308,6 +308,23 @@ def test_demo_runs_the_reference_hopper(monkeypatch):
     assert seen["checkpoint_interval"] == 60.0 and not seen["force"]
 
 
+@pytest.mark.slow
+def test_demo_really_runs_the_reference_hopper_to_empty(tmp_path):
+    """The demo itself, not a stand-in: the reference hopper from filling to empty with every
+    output (about two minutes on two cores; in the slow suite)."""
+    out = tmp_path / "demo"
+    assert main(["demo", "--out", str(out), "--quiet"]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["stop_reason"] == "empty" and summary["flow_mode"] == "mass"
+    assert summary["mass_balance_error"] < 1e-9
+    assert summary["fill_equilibrium_residual"] < 0.005
+    beverloo = summary["beverloo_rate_kg_s"]
+    assert abs(summary["steady_discharge_rate_kg_s"] / beverloo - 1) < 0.1
+    for name in ("flow_pattern.png", "discharge.png", "wall_pressure.png", "stress_pattern.png",
+                 "loads.csv", "wall_pressure.csv", "timeseries.csv", "fields/fields.pvd"):
+        assert (out / name).is_file(), name
+
+
 @pytest.mark.parametrize("argv", [["--help"], ["run", "--help"], ["demo", "--help"],
                                   ["plot", "--help"], ["validate", "--help"], ["--version"]])
 def test_help_everywhere(argv, capsys):
