@@ -176,3 +176,40 @@ def test_compiled_marker_advance_equals_reference(small_cfg, discharging):
                              geom.bin_radius, geom.cone_height, np.tan(geom.half_angle),
                              vertices, normals, 0.0, 0, r_mid, z_mid)
     assert np.count_nonzero(geometry.in_solid(r_mid, z_mid, geom)) >= 5
+
+
+def test_stress_rotates_with_the_material_jaumann(small_cfg):
+    """A rigid rotation of the nodes about a point of row j (``v_r = w (z - z0)``,
+    ``v_z = -w (r - r0)``): the cells of that row have no strain (``D = 0``, their mean ``v_r``
+    and divergence vanish), only spin ``w``, so their stress changes only by the Jaumann
+    rotation, ``d s_rr = 2 w dt s_rz``, ``d s_zz = -2 w dt s_rz``, ``d s_rz = w dt (s_zz -
+    s_rr)``, ``s_tt`` unchanged (an elastic state: no return)."""
+    model = HopperModel(small_cfg)
+    g, num = model.grid, small_cfg.numerics
+    j = g.nz // 2
+    z0 = g.z_cells[j]
+    omega = 2.0                                                   # 1/s
+    R, Z = np.meshgrid(g.r_nodes, g.z_nodes)
+    v = np.ascontiguousarray(np.stack([omega * (Z - z0), -omega * (R - 0.3)]))
+    alpha = np.where(g.kappa > 0, 1.0, 0.0)
+    sigma = np.zeros((g.nz, g.nr, 4))
+    sigma[...] = (-1000.0, -2000.0, -1200.0, -300.0)             # inside the yield surface
+    loose, eps_p = np.zeros_like(alpha), np.zeros_like(alpha)
+    carry_runs, load_runs, block_ptr, contrib, _, _ = model._work
+    _, _, n_blocks, _, _ = stepping._runs(alpha, num.alpha_min, sigma, loose, v.copy(), contrib,
+                                          carry_runs, load_runs, block_ptr)
+    before = sigma.copy()
+    stepping._stress_update(block_ptr, n_blocks, load_runs, v, sigma, loose, eps_p, model.r_c,
+                            g.r_nodes, g.h, model.dt, g.kappa, model._zface_aperture,
+                            model._rface_aperture, model._prm,
+                            stepping.mc._fast_constants(model._prm))
+    cells = np.flatnonzero(g.kappa[j] == 1.0)
+    assert cells.size >= 3
+    w = omega * model.dt
+    s = before[j, cells]
+    expected = s.copy()
+    expected[:, 0] += 2 * w * s[:, 3]
+    expected[:, 1] -= 2 * w * s[:, 3]
+    expected[:, 3] += w * (s[:, 1] - s[:, 0])
+    assert np.max(np.abs(sigma[j, cells] - expected)) < 1e-9 * np.max(np.abs(s))
+    assert np.max(np.abs(sigma[j, cells] - s)) > 1e-3 * 2 * w * 300.0   # it did rotate
