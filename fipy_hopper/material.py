@@ -1099,36 +1099,6 @@ def equivalent_plastic_strain(d_eps_plastic):
                                 + 2.0 * e[..., 3] ** 2))
 
 
-@numba.njit(cache=True, error_model="numpy")
-def close_loose_volume_kernel(d_eps, loose, d_skeleton, loose_out):
-    """Compiled :func:`close_loose_volume` on (N, 4) and (N,) arrays, into the outputs."""
-    for n in range(d_eps.shape[0]):
-        compression = -(d_eps[n, 0] + d_eps[n, 1] + d_eps[n, 2])
-        closed = min(loose[n], max(compression, 0.0))
-        share = 1.0 - closed / compression if closed > 0.0 else 1.0
-        for k in range(4):
-            d_skeleton[n, k] = d_eps[n, k] * share
-        loose_out[n] = loose[n] - closed
-
-
-@numba.njit(cache=True, error_model="numpy")
-def finish_update_kernel(sigma_new, d_eps_plastic, status, loaded, loose, eps_p):
-    """After the return, in place on (N, ...) arrays: points not ``loaded`` get zero stress and
-    loose strain; loaded points add :func:`separation_strain` to ``loose`` and
-    :func:`equivalent_plastic_strain` to ``eps_p``."""
-    for n in range(sigma_new.shape[0]):
-        if not loaded[n]:
-            for k in range(4):
-                sigma_new[n, k] = 0.0
-            loose[n] = 0.0
-            continue
-        e = d_eps_plastic[n]
-        if status[n] == APEX:
-            loose[n] += max(e[0] + e[1] + e[2], 0.0)
-        eps_p[n] += math.sqrt(2.0 / 3.0 * (e[0] ** 2 + e[1] ** 2 + e[2] ** 2
-                                           + 2.0 * e[3] ** 2))
-
-
 # ---------------------------------------------------------------------------------------------
 # Return mapping, numpy reference (same algorithm, vectorised over points, no per-point loops)
 # ---------------------------------------------------------------------------------------------

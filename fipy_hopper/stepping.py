@@ -120,7 +120,7 @@ def _runs(alpha, alpha_min, sigma, loose, v, contrib, carry_runs, load_runs, blo
 @_jit_parallel
 def _cell_forces(carry_runs, n_carry, alpha, sigma, v, open_volume, r_c, h, hg_base, contrib):
     """Corner forces ``-f_int + f_hg`` of the carrying cells into ``contrib`` (8, nz, nr):
-    (r, z) at SW, SE, NE, NW, each as ``momentum.nodal_update_kernel`` computes it."""
+    (r, z) at SW, SE, NE, NW, as ``momentum.internal_force`` and ``hourglass_force`` sum them."""
     g = 1.0 / (2.0 * h)
     for run in prange(n_carry):
         j, i0, i1 = carry_runs[run, 0], carry_runs[run, 1], carry_runs[run, 2]
@@ -149,8 +149,8 @@ def _cell_forces(carry_runs, n_carry, alpha, sigma, v, open_volume, r_c, h, hg_b
 def _project(vr, vz, n_r, n_z, mu):
     """The velocity after an impulse Coulomb contact against one wall of normal (n_r, n_z)
     (into the wall): the normal part removed if pressing, the tangential speed reduced by
-    ``mu`` times the removed normal speed (not below zero); ``momentum.contact_kernel`` for
-    one node and one wall."""
+    ``mu`` times the removed normal speed (not below zero); ``momentum.apply_wall_contact``
+    for one node and one wall."""
     vn = vr * n_r + vz * n_z
     if vn > 0.0:
         vr -= vn * n_r
@@ -335,8 +335,8 @@ def _strain_run(j, i0, i1, out, v, sigma, loose, r_c, r_nodes, h, dt, kappa, zfa
                 rface_aperture, scratch):
     """First pass over the run ``(j, i0, i1)`` into ``scratch[:, out:out + i1 - i0]``: the
     rotated stress (rows 0-3), the strain increment that loads the skeleton (rows 4-7) and the
-    loose strain left (row 8), as ``momentum.strain_rate_jaumann_kernel``,
-    ``momentum.open_volumetric_kernel`` and ``material.close_loose_volume_kernel``."""
+    loose strain left (row 8), as ``momentum.strain_rate``, ``jaumann_rotate`` and
+    ``open_divergence`` and ``material.close_loose_volume``."""
     g = 1.0 / (2.0 * h)
     for i in range(i0, i1):
         q = out + i - i0
@@ -394,7 +394,8 @@ def _stress_block(r0, r1, load_runs, v, sigma, loose, eps_p, r_c, r_nodes, h, dt
                   zface_aperture, rface_aperture, prm, cst):
     """Stress update of the loaded cells of the runs ``r0 <= run < r1`` (one block), in place:
     :func:`_strain_run`, then the elastic predictor, the return and the plastic and loose
-    strains as ``material._update_kernel`` and ``material.finish_update_kernel``."""
+    strains as ``material._update_kernel``, ``separation_strain`` and
+    ``equivalent_plastic_strain``."""
     lam, mu, K, E, nu, sp, cp, tp, tpsi, c, a, e, rc3 = mc._unpack(prm)
     n = 0
     for run in range(r0, r1):

@@ -80,40 +80,6 @@ def test_volumetric_strain_is_the_transport_divergence_over_the_open_volume():
              & ((ra[:, :-1] == 1) | (g.r_nodes[:-1] == 0)[None, :]))
     trace = D[..., 0] + D[..., 1] + D[..., 2]
     assert np.allclose(div[whole], trace[whole], rtol=1e-12, atol=1e-12 * np.abs(trace).max())
-    # the compiled kernel sets exactly this volumetric part and keeps the deviator
-    d_eps = rng.normal(size=(g.nz, g.nr, 4))
-    out = d_eps.copy()
-    momentum.open_volumetric_kernel(v, za, ra, g.kappa, g.r_nodes, g.h, 0.5, out)
-    assert np.allclose(out[..., 0] + out[..., 1] + out[..., 2], 0.5 * div, atol=1e-12)
-    dev = lambda e: e[..., :3] - e[..., :3].mean(-1, keepdims=True)  # noqa: E731
-    assert np.allclose(dev(out), dev(d_eps), atol=1e-12) and np.array_equal(out[..., 3],
-                                                                              d_eps[..., 3])
-
-
-def test_compiled_loose_rule_equals_the_numpy_functions():
-    rng = np.random.default_rng(5)
-    n = 2000
-    d_eps = rng.normal(scale=1e-3, size=(n, 4))
-    loose = np.where(rng.random(n) < 0.5, rng.random(n) * 2e-3, 0.0)
-    skeleton, left = material.close_loose_volume(d_eps, loose)
-    out, out_loose = np.empty((n, 4)), np.empty(n)
-    material.close_loose_volume_kernel(d_eps, loose, out, out_loose)
-    assert np.allclose(out, skeleton, rtol=1e-14, atol=1e-18)
-    assert np.allclose(out_loose, left, rtol=1e-14, atol=1e-18)
-    mat = material.MohrCoulomb(E=5e6, nu=0.3, rho=RHO, phi=30.0)
-    sigma = -np.abs(rng.normal(scale=1e3, size=(n, 4))) * [1, 1, 1, 0] + [0, 0, 0, 1] * \
-        rng.normal(scale=300, size=(n, 4))
-    new, d_p, status = material.update(sigma, skeleton, mat, return_status=True)
-    loaded = rng.random(n) > 0.1
-    eps_p = rng.random(n)
-    ref_sigma = np.where(loaded[:, None], new, 0.0)
-    ref_loose = np.where(loaded, left + material.separation_strain(d_p, status), 0.0)
-    ref_eps = eps_p + np.where(loaded, material.equivalent_plastic_strain(d_p), 0.0)
-    assert (status == material.APEX).sum() > 10
-    material.finish_update_kernel(new, d_p, status, loaded, left, eps_p)
-    assert np.array_equal(new, ref_sigma)
-    assert np.allclose(left, ref_loose, rtol=1e-14, atol=1e-18)
-    assert np.allclose(eps_p, ref_eps, rtol=1e-14)
 
 
 # ---------------------------------------------------------------- the model
