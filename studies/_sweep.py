@@ -403,7 +403,7 @@ def write_study_json(out, study: str, title: str, setting: str, settings: dict,
     wall = [r.get("wall_time_s") for r in rows if isinstance(r.get("wall_time_s"), (int, float))]
     data = {"study": study, "title": title, "setting": setting,
             "created": datetime.datetime.now().astimezone().isoformat(timespec="seconds"),
-            "fipy_hopper_version": fipy_hopper.__version__,
+            "fipy_hopper_version": fipy_hopper.__version__, "commit": _git_commit(),
             "command": " ".join(["python", f"studies/{study}.py",
                                  *(sys.argv[1:] if argv is None else argv)]),
             "cases": len(rows),
@@ -415,6 +415,25 @@ def write_study_json(out, study: str, title: str, setting: str, settings: dict,
     path = Path(out) / "study.json"
     write_json(path, data)
     return path
+
+
+def _git_commit() -> str:
+    """The commit of the code that wrote the study (short hash, and whether the working tree
+    had uncommitted changes), or "" outside a git checkout."""
+    import subprocess
+
+    here = Path(__file__).resolve().parent
+    try:
+        head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=here,
+                              capture_output=True, text=True, timeout=10)
+        dirty = subprocess.run(["git", "status", "--porcelain", "--", "../fipy_hopper",
+                                "."], cwd=here, capture_output=True, text=True, timeout=10)
+    except (OSError, subprocess.SubprocessError):
+        return ""
+    if head.returncode != 0:
+        return ""
+    return head.stdout.strip() + (" (with uncommitted changes to the package or the studies)"
+                                  if dirty.stdout.strip() else "")
 
 
 def setting_label(quick: bool, options: dict, cosmetic=("case_plots", "thumbnails")) -> str:

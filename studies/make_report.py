@@ -107,7 +107,8 @@ def study_section(name: str, data: dict, folder: Path, figures: Figures) -> list
     meta = (f"Study `{name}` — setting **{setting}**, {data.get('cases', '?')} case(s)"
             f" ({data.get('cases_failed', 0)} failed), {minutes:.1f} min of run wall time summed "
             f"over the cases, written {data.get('created', '?')} by fipy_hopper "
-            f"{data.get('fipy_hopper_version', '?')}.")
+            f"{data.get('fipy_hopper_version', '?')}"
+            + (f", git {data['commit']}" if data.get("commit") else "") + ".")
     lines += [meta, "", f"Command: `{data.get('command', '')}`", ""]
     if setting == "quick":
         lines += ["> **Quick setting**: tiny hoppers on coarse grids, the test-suite size. These "
