@@ -67,6 +67,7 @@ import _sweep  # noqa: E402
 
 from fipy_hopper import geometry, theory  # noqa: E402
 from fipy_hopper.config import HopperConfig  # noqa: E402
+from fipy_hopper.diagnostics import coarse_wall_profile, relative_l2  # noqa: E402
 
 NAME = "wall_pressure"
 TITLE = "Wall pressure at rest and in discharge against Janssen, Walker and EN 1991-4"
@@ -328,28 +329,14 @@ def analyse(rows: list, options: dict) -> tuple:
 # ---------------------------------------------------------------- convergence, stiffness
 def common_profile(res, stage: str, width: float = COMMON_BIN):
     """``(centres, p_n)`` of a stage on common bins of ``width`` m of wall up to the fill
-    surface: each common bin's force (the sum of its 3-cell bins' ``p_n`` times their wall
-    area ``3 h r``) over its area.  ``None`` when the stage is missing."""
+    surface (:func:`fipy_hopper.diagnostics.coarse_wall_profile` of its 3-cell bins).
+    ``None`` when the stage is missing."""
     sel = res.wall_stage(stage)
     if not len(sel["s_m"]):
         return None
-    h = res.config.numerics.cell_size
-    s, r, p = sel["s_m"], sel["r_m"], sel["p_n_Pa"]
-    area = 3.0 * h * r
     s_top = float(geometry.arc_length(res.config.hopper.fill_level, res.config.hopper))
-    n = int(math.floor(s_top / width + 1e-9))
-    index = np.floor(s / width + 1e-9).astype(int)
-    keep = index < n
-    force = np.bincount(index[keep], (p * area)[keep], n)
-    total = np.bincount(index[keep], area[keep], n)
-    centres = (np.arange(n) + 0.5) * width
-    return centres, np.where(total > 0, force / np.where(total > 0, total, 1.0), np.nan)
-
-
-def relative_l2(a, b) -> float:
-    """``|a - b| / |b|`` over the bins where both are finite."""
-    ok = np.isfinite(a) & np.isfinite(b)
-    return float(np.linalg.norm(a[ok] - b[ok]) / np.linalg.norm(b[ok]))
+    return coarse_wall_profile(sel["s_m"], sel["r_m"], sel["p_n_Pa"],
+                               3.0 * res.config.numerics.cell_size, s_top, width)
 
 
 def estimates_analysis(rows: list) -> list:

@@ -1,0 +1,194 @@
+"""Validation: the README's headline numbers, each held by a reduced ("sandglass") case.
+
+Every claim of the README's Validation section is measured at full size by a study
+(``studies/``, reported in ``studies/REPORT.md``); here each is held by the smallest run that
+still shows it, with a tolerance whose reason is stated beside it.  A claim held elsewhere:
+
+- the rate does not depend on the fill height: ``test_discharge.py::
+  test_hourglass_rate_independent_of_fill_height``;
+- the outlet exponent at 4 mm cells (n = 2.5 +- 0.25): ``test_discharge.py::
+  test_outlet_scaling_exponent`` (slow);
+- the filled loads do not depend on E, and the wall and plate carry the weight:
+  ``test_wall_loads.py``.
+
+Cases: the discharge study's hopper (0.24 m bin, 0.12 m fill, 30 deg cone, phi = 30 deg,
+phi_w = 15 deg, 5 mm cells, 0.8 s of discharge), the convergence study's hopper (0.2 m bin,
+0.15 m fill, 30 deg cone, 0.06 m outlet), and the reference hopper (0.3 m bin, 20 deg cone)
+filled to rest.  About 90 s on one core.
+"""
+
+import math
+import warnings
+
+import numpy as np
+import pytest
+
+from fipy_hopper import geometry, theory
+from fipy_hopper.config import HopperConfig
+from fipy_hopper.diagnostics import coarse_wall_profile, fit_power_law, relative_l2
+from fipy_hopper.model import HopperModel
+from fipy_hopper.simulation import Simulation
+
+RHO, PHI, PHI_W = 1500.0, 30.0, 15.0
+
+
+def config(hopper: dict, cell: float, youngs_modulus: float = 5.0e6, end_time=0.8):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")        # coarse outlets: the resolution warning
+        return HopperConfig.from_dict({
+            "hopper": {**hopper, "bin_height": hopper["fill_height"] + 0.02},
+            "material": {"friction_angle_deg": PHI, "density": RHO,
+                         "youngs_modulus": youngs_modulus},
+            "wall": {"friction_angle_deg": PHI_W},
+            "numerics": {"cell_size": cell},
+            "run": {"end_time": end_time, "output_interval": 0.02, "markers_per_side": 0}})
+
+
+def steady_rate(hopper: dict, cell: float, youngs_modulus: float = 5.0e6) -> float:
+    """The steady discharge rate (kg/s) of 0.8 s of discharge after a quasi-static fill."""
+    sim = Simulation(HopperModel(config(hopper, cell, youngs_modulus)), progress=False)
+    sim.run()
+    summary = sim.summary()
+    assert summary["mass_balance_error"] < 1e-9
+    return summary["steady_discharge_rate_kg_s"]
+
+
+def rate_hopper(half_angle, outlet):
+    return {"bin_diameter": 0.24, "fill_height": 0.12, "half_angle_deg": half_angle,
+            "outlet_diameter": outlet}
+
+
+CONVERGENCE_HOPPER = {"bin_diameter": 0.2, "fill_height": 0.15, "half_angle_deg": 30.0,
+                      "outlet_diameter": 0.06}
+OUTLETS = (0.04, 0.06, 0.08)
+
+
+@pytest.fixture(scope="module")
+def outlet_sweep():
+    """``{(theta, D0): W}`` at 5 mm: the 30 deg cone at three outlets and a 20 deg cone."""
+    cases = [(30.0, d0) for d0 in OUTLETS] + [(20.0, 0.06)]
+    return {case: steady_rate(rate_hopper(*case), 0.005) for case in cases}
+
+
+def beverloo_rose_tanaka(theta, d0):
+    return float(theory.beverloo_rate(RHO, d0) * theory.rose_tanaka_factor(theta))
+
+
+def test_rate_against_beverloo_times_rose_tanaka(outlet_sweep):
+    """README: within 4.2 % of Beverloo x Rose-Tanaka on average over the study's 11 hoppers.
+
+    Here 4 of them: the mean |difference| below 5 % and each below 12 %.  Why so wide:
+    Beverloo's C is 0.55-0.65 over the cohesionless materials it was fitted to (+-8 % about
+    the 0.58 used), and the smallest outlet (4 cells across its radius) runs about 10 %
+    slow on this grid (the convergence study: the rate still rises by 1.4 % from 5 to
+    3.75 mm with 6 cells).  Measured: -10.3, -1.2, +0.7 % (30 deg; D0 = 40, 60, 80 mm) and
+    -2.8 % (20 deg), mean 3.7 %."""
+    diffs = {case: w / beverloo_rose_tanaka(*case) - 1 for case, w in outlet_sweep.items()}
+    assert np.mean([abs(d) for d in diffs.values()]) < 0.05, diffs
+    assert max(abs(d) for d in diffs.values()) < 0.12, diffs
+
+
+def test_outlet_exponent_and_beverloo_constant(outlet_sweep):
+    """README: W ~ D0^2.66 with Beverloo's C = 0.554 (30 deg cone, five outlets at 5 mm).
+
+    Over three outlets the exponent is 2.5 +- 0.25 (Beverloo's 5/2 is exact for a continuum,
+    which has no particle size; the under-resolved smallest outlet steepens the fit by about
+    0.15 at 5 mm, and at 4 mm the fit gives 2.505), and C fitted with the exponent held at
+    5/2 and the Rose-Tanaka factor divided out is inside Beverloo's range 0.55-0.65 for
+    cohesionless solids.  Measured: n = 2.67, C = 0.558."""
+    rates = [outlet_sweep[(30.0, d0)] for d0 in OUTLETS]
+    _, n = fit_power_law(OUTLETS, rates)
+    assert abs(n - 2.5) <= 0.25, (rates, n)
+    factor = float(theory.rose_tanaka_factor(30.0))
+    c = [w / (RHO * math.sqrt(theory.G) * d0 ** 2.5) / factor for d0, w in zip(OUTLETS, rates)]
+    c_fit = float(np.exp(np.mean(np.log(c))))
+    assert 0.55 <= c_fit <= 0.65, (c, c_fit)
+
+
+@pytest.fixture(scope="module")
+def convergence_rates():
+    """``{(cell, E): W}``: 7.5, 5 and 3.75 mm at 5 MPa, and 2 and 20 MPa at 7.5 mm."""
+    pairs = [(0.0075, 5e6), (0.005, 5e6), (0.00375, 5e6), (0.0075, 2e6), (0.0075, 20e6)]
+    return {pair: steady_rate(CONVERGENCE_HOPPER, *pair) for pair in pairs}
+
+
+def test_rate_converges_with_the_cell_size(convergence_rates):
+    """README: the rate changes by +3.4 and +1.4 % from 7.5 to 5 and 3.75 mm.
+
+    Held: the change from 5 to 3.75 mm is below 2.5 % and smaller than the one before it
+    (a first-order scheme at the free surfaces and the wall halves its error with the cell
+    size; 2.5 % leaves room for the +-1 % scatter of the steady-rate median)."""
+    w75, w5, w375 = (convergence_rates[(c, 5e6)] for c in (0.0075, 0.005, 0.00375))
+    first, second = abs(w5 / w75 - 1), abs(w375 / w5 - 1)
+    assert second < 0.025, (w75, w5, w375)
+    assert second < first, (w75, w5, w375)
+
+
+def test_rate_does_not_depend_on_the_stiffness(convergence_rates):
+    """README: the rate changes by 0.7 % over E = 2-20 MPa (5 mm).
+
+    Held at 7.5 mm: the spread (max - min) / mean over E = 2, 5 and 20 MPa is below 2 %.  A
+    rate-independent continuum has no time scale from E in its discharge rate; what is left
+    is the elastic transient at the opening (its period scales as 1/sqrt(E)), which moves the
+    steady-rate median by under 1 %; a stiffness-dependent rate would move it by sqrt(10)."""
+    rates = [convergence_rates[(0.0075, e)] for e in (2e6, 5e6, 20e6)]
+    spread = (max(rates) - min(rates)) / np.mean(rates)
+    assert spread < 0.02, rates
+
+
+# ---------------------------------------------------------------- wall loads at rest
+REFERENCE = {"bin_diameter": 0.3, "fill_height": 0.3, "half_angle_deg": 20.0,
+             "outlet_diameter": 0.06}
+WALL_CELLS = (0.0075, 0.005, 0.00375, 0.0025)
+COMMON_BIN = 0.045          # m of wall: 6, 9, 12 and 18 three-cell bins at 7.5-2.5 mm
+
+
+@pytest.fixture(scope="module")
+def filled_reference():
+    """``{cell: (cfg, s, r, z, p_n)}``: the reference hopper filled to rest (fill-only runs)."""
+    out = {}
+    for cell in WALL_CELLS:
+        cfg = config(REFERENCE, cell, end_time=0.0)
+        sim = Simulation(HopperModel(cfg), progress=False)
+        assert sim.fill(), "the fill did not come to rest"
+        _, s, r, z, p, _ = sim.record.wall["filling"]
+        out[cell] = (cfg, s, r, z, p)
+    return out
+
+
+def test_filled_cone_pressure_against_walker(filled_reference):
+    """README: the cone's filled pressure is within 3 % of Walker's slice method (5 mm).
+
+    Held on every grid from 7.5 to 2.5 mm: the mean wall pressure over the cone within 5 % of
+    Walker's filling solution started from Janssen's vertical stress at the transition
+    (K = 1 - sin phi).  Why 5 %: the slice method takes the vertical stress uniform across each
+    slice; taking the oedometric K = nu / (1 - nu) = 0.43 of the elastic fill (the measured wall
+    K is 0.41) in place of 0.5 moves Walker's mean by 2 %.  Measured -1.3 to -2.7 %."""
+    for cell, (cfg, s, r, z, p) in filled_reference.items():
+        geom = cfg.hopper
+        cone = z < geom.cone_height
+        mu = math.tan(math.radians(PHI_W))
+        sigma_vt = float(theory.janssen_vertical_stress(geom.fill_height, RHO, geom.bin_diameter,
+                                                        float(theory.k_jaky(PHI)), mu))
+        h = geom.bin_radius / math.tan(geom.half_angle)
+        x = np.clip(z[cone] + geom.outlet_radius / math.tan(geom.half_angle), 0.0, h)
+        walker = theory.walker_hopper_wall_pressure(x, h, geom.half_angle_deg, RHO, PHI, PHI_W,
+                                                    sigma_vt, mode="filling")
+        assert np.mean(p[cone]) == pytest.approx(np.mean(walker), rel=0.05), cell
+
+
+def test_filled_wall_pressure_converges_with_the_cell_size(filled_reference):
+    """README: the filled profile's relative L2 changes are 10.8, 6.0 and 4.4 % from 7.5 to 5,
+    3.75 and 2.5 mm (over the whole wall, the outlet lip included, on 45 mm bins).
+
+    Held: the successive changes decrease and the last is below 5 % (the wall-load
+    convergence criterion of the wall-pressure study).  The bins are common to every grid and
+    merge whole 3-cell bins, so the comparison has no interpolation error of its own."""
+    profiles = []
+    for cell in WALL_CELLS:
+        cfg, s, r, z, p = filled_reference[cell]
+        s_top = float(geometry.arc_length(cfg.hopper.fill_level, cfg.hopper))
+        profiles.append(coarse_wall_profile(s, r, p, 3.0 * cell, s_top, COMMON_BIN)[1])
+    changes = [relative_l2(a, b) for a, b in zip(profiles, profiles[1:])]
+    assert all(later < earlier for earlier, later in zip(changes, changes[1:])), changes
+    assert changes[-1] < 0.05, changes
