@@ -42,7 +42,12 @@ import warnings
 
 import numpy as np
 
-from fipy_hopper import geometry
+HERE = pathlib.Path(__file__).resolve().parent
+if str(HERE) not in sys.path:
+    sys.path.insert(0, str(HERE))
+import _sweep  # noqa: E402
+
+from fipy_hopper import geometry  # noqa: E402
 from fipy_hopper.config import HopperConfig, reference_config
 from fipy_hopper.lagrangian import DistortionLimits, LagrangianModel
 from fipy_hopper.model import HopperModel
@@ -431,10 +436,7 @@ def write_tables(data, out):
 
 
 def write_study_json(data, out, argv=None):
-    """``study.json`` for ``studies/make_report.py`` (same keys as the other studies)."""
-    import datetime
-    import fipy_hopper
-
+    """``study.json`` for ``studies/make_report.py`` (:func:`_sweep.write_study_json`)."""
     res = data["results"]
     lag, eul, agr = res["lagrangian"], res["eulerian"], res["agreement"]
     opts = data["options"]
@@ -486,34 +488,26 @@ def write_study_json(data, out, argv=None):
                 "max_aspect": opts["max_aspect"], "min_angle_deg": opts["min_angle_deg"],
                 "erode_discharged": opts["erode_discharged"],
                 "eulerian_end": opts["eulerian_end"]}
-    study = {"study": NAME, "title": TITLE, "setting": "default" if default else "custom",
-             "created": datetime.datetime.now().astimezone().isoformat(timespec="seconds"),
-             "fipy_hopper_version": fipy_hopper.__version__,
-             "command": " ".join(["python", f"studies/{NAME}.py",
-                                  *(sys.argv[1:] if argv is None else argv)]),
-             "cases": 2, "cases_failed": 0,
-             "case_wall_time_total_s": float(lag["wall_time_s"] + eul["wall_time_s"]),
-             "headline": headline, "settings": settings,
-             "numbers": {row[0]: row[1] for row in numbers}, "findings": findings,
-             "figures": [
-                 {"file": "mesh_vs_layers.png",
-                  "caption": "The deformed Lagrangian mesh at its last valid step (elements "
-                             "coloured by initial layer; faint: elements that left the hopper) "
-                             "beside the Eulerian layers at the same time, half-way and at the "
-                             "end."},
-                 {"file": "discharge_rate.png",
-                  "caption": "W(t) of both over the time both ran; the discharged fraction of "
-                             "both; the worst Lagrangian element against its limits."},
-                 {"file": "wall_pressure_fill.png",
-                  "caption": "Wall pressure of the two filled states (3-cell bins); circled: "
-                             "the bins compared."}],
-             "tables": [{"title": "Headline numbers", "columns": ["quantity", "value"],
-                         "rows": numbers},
-                        {"title": "Filled-state wall pressure",
-                         "columns": ["s (m)", "Eulerian p_n (Pa)", "Lagrangian p_n (Pa)",
-                                     "L/E - 1", "compared"], "rows": wall_rows}]}
-    with open(pathlib.Path(out) / "study.json", "w") as fh:
-        json.dump(study, fh, indent=2, default=float)
+    figures = [
+        {"file": "mesh_vs_layers.png",
+         "caption": "The deformed Lagrangian mesh at its last valid step (elements coloured by "
+                    "initial layer; faint: elements that left the hopper) beside the Eulerian "
+                    "layers at the same time, half-way and at the end."},
+        {"file": "discharge_rate.png",
+         "caption": "W(t) of both over the time both ran; the discharged fraction of both; the "
+                    "worst Lagrangian element against its limits."},
+        {"file": "wall_pressure_fill.png",
+         "caption": "Wall pressure of the two filled states (3-cell bins); circled: the bins "
+                    "compared."}]
+    tables = [{"title": "Headline numbers", "columns": ["quantity", "value"], "rows": numbers},
+              {"title": "Filled-state wall pressure",
+               "columns": ["s (m)", "Eulerian p_n (Pa)", "Lagrangian p_n (Pa)", "L/E - 1",
+                           "compared"], "rows": wall_rows}]
+    _sweep.write_study_json(
+        out, NAME, TITLE, "default" if default else "custom", settings,
+        {row[0]: row[1] for row in numbers}, findings, figures, tables,
+        rows=[{"wall_time_s": lag["wall_time_s"]}, {"wall_time_s": eul["wall_time_s"]}],
+        argv=argv, headline=headline)
 
 
 def main(argv=None):
