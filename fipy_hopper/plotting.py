@@ -257,16 +257,20 @@ def animate(run, path=None, max_frames: int = 80, fps: int = 6) -> Path:
     vmax = _speed_scale(snaps)
     fig = _figure(3.6, 4.6)
     writer = PillowWriter(fps=fps)
+    ax = fig.add_subplot()
     with atomic_path(path) as tmp:
         with writer.saving(fig, str(tmp), dpi=80):
-            for snap in snaps:
-                fig.clear()
-                ax = fig.add_subplot()
+            for k, snap in enumerate(snaps):
+                if k:
+                    ax.clear()             # same axes, same colour bar (one speed scale)
                 mesh = _draw_section(ax, snap, cfg, n_layers, vmax)
                 ax.set_ylabel("z (m)")
                 ax.set_title(_label(snap), fontsize=9)
-                fig.colorbar(mesh, ax=ax, label="speed (m/s)", shrink=0.8)
+                if not k:
+                    fig.colorbar(mesh, ax=ax, label="speed (m/s)", shrink=0.8)
                 writer.grab_frame()
+                if not k:                  # the layout of the first frame serves them all
+                    fig.set_layout_engine("none")
     return path
 
 
@@ -297,7 +301,9 @@ def discharge_curves(run):
     ax_w.set_ylim(bottom=0.0)
     ax_w.legend(loc="best", fontsize=8)
     mode = summary.get("flow_mode")
-    fig.suptitle("Discharge" + (f" ({mode} flow)" if mode else ""), fontsize=10)
+    label = {"mass": "mass flow", "funnel": "funnel flow", "no_flow": "no flow: an arch",
+             "rathole": "a rathole"}.get(mode, mode)
+    fig.suptitle("Discharge" + (f" ({label})" if mode else ""), fontsize=10)
     return fig
 
 
