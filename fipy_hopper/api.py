@@ -62,6 +62,13 @@ def expected_quantities(cfg: HopperConfig) -> dict:
     Rose-Tanaka hopper factor of the cone; ``jenike_critical_half_angle_deg`` uses the internal
     friction angle as the effective angle of internal friction; ``fill_mass_kg`` is the density
     times the filled volume (3D).
+
+    With a cohesion ``c > 0`` also Jenike's design numbers (``docs/theory.md`` section g):
+    ``unconfined_yield_strength_Pa`` ``sigma_c = 2 c cos(phi)/(1 - sin(phi))``;
+    ``jenike_critical_outlet_m`` ``H(theta) sigma_c/(rho g)`` (NaN for a flat bottom, outside
+    the fit of H); ``critical_outlet_simplified_m`` ``2 sigma_c/(rho g)``; and
+    ``jenike_rathole_diameter_m`` ``G(phi) sigma_c/(rho g)`` (NaN for phi outside the
+    30-70 deg of the fit of G).  An outlet smaller than the critical outlet may arch.
     """
     from . import theory
 
@@ -82,6 +89,20 @@ def expected_quantities(cfg: HopperConfig) -> dict:
         out["jenike_critical_half_angle_deg"] = math.nan
         out["jenike_flow_mode"] = "unknown"
     out["expected_discharge_time_s"] = out["fill_mass_kg"] / out["beverloo_rate_kg_s"]
+    if mat.cohesion > 0:
+        sigma_c = float(theory.unconfined_yield_strength(mat.cohesion, mat.friction_angle_deg))
+        out["unconfined_yield_strength_Pa"] = sigma_c
+        out["critical_outlet_simplified_m"] = float(theory.critical_outlet_simplified(
+            sigma_c, mat.density))
+        for key, formula in (
+                ("jenike_critical_outlet_m", lambda: theory.jenike_critical_outlet(
+                    sigma_c, mat.density, geom.half_angle_deg)),
+                ("jenike_rathole_diameter_m", lambda: theory.jenike_rathole_diameter(
+                    sigma_c, mat.density, mat.friction_angle_deg))):
+            try:
+                out[key] = float(formula())
+            except ValueError:   # outside the range of Jenike's fit
+                out[key] = math.nan
     return out
 
 
@@ -231,6 +252,10 @@ def _summary(sim, cfg, reason: str) -> dict:
     summary["beverloo_rate_kg_s"] = expected["beverloo_rate_kg_s"]
     summary["jenike_critical_half_angle_deg"] = expected["jenike_critical_half_angle_deg"]
     summary["jenike_flow_mode"] = expected["jenike_flow_mode"]
+    for key in ("unconfined_yield_strength_Pa", "jenike_critical_outlet_m",
+                "critical_outlet_simplified_m", "jenike_rathole_diameter_m"):
+        if key in expected:
+            summary[key] = expected[key]
     return summary
 
 

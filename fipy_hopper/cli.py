@@ -149,6 +149,8 @@ def _validate(args) -> int:
         f"  run                until {end}, samples every {run.output_interval:g} s, "
         f"fields every {run.field_interval:g} s",
     ]
+    if "unconfined_yield_strength_Pa" in e:
+        lines[-1:-1] = _cohesion_lines(cfg, e)
     print("\n".join(lines))
     return EXIT_OK
 
@@ -252,6 +254,34 @@ class _sigterm_as_interrupt:
         return False
 
 
+def _cohesion_lines(cfg, e: dict) -> list:
+    """The lines of ``validate`` for a cohesive material: Jenike's design numbers."""
+    mat, geom = cfg.material, cfg.hopper
+    d0 = geom.outlet_diameter
+
+    def length(value, why):
+        return f"{value:.4g} m" if value == value else f"n/a ({why})"
+
+    jenike, simple = e["jenike_critical_outlet_m"], e["critical_outlet_simplified_m"]
+    critical = jenike if jenike == jenike else simple
+
+    def verdict(value):
+        if value != critical:
+            return ""
+        return (f"; the outlet, {d0:g} m, is {'below' if d0 < value else 'above'} it: "
+                f"{'it may arch' if d0 < value else 'no stable arch expected'}")
+
+    return [
+        f"  cohesion           c = {mat.cohesion:g} Pa: unconfined yield strength "
+        f"sigma_c = {e['unconfined_yield_strength_Pa']:.4g} Pa",
+        f"  critical outlet    Jenike H(theta) sigma_c/(rho g) = "
+        f"{length(jenike, 'flat bottom, outside the fit of H')}{verdict(jenike)}",
+        f"                     simplified 2 sigma_c/(rho g) = {simple:.4g} m{verdict(simple)}",
+        f"  critical rathole   Jenike G(phi) sigma_c/(rho g) = "
+        f"{length(e['jenike_rathole_diameter_m'], 'phi outside the 30-70 deg of the fit')}",
+    ]
+
+
 def _print_summary(s: dict, out) -> None:
     def num(key, fmt):
         value = s.get(key)
@@ -267,6 +297,14 @@ def _print_summary(s: dict, out) -> None:
           f"{num('remaining_mass_kg', '.4g')} kg left "
           f"(mass balance error {num('mass_balance_error', '.1e')})\n"
           f"  results in             {out}/")
+    stopped = s.get("flow_stopped_time_s")
+    if stopped is not None and stopped == stopped:
+        left = s.get("remaining_mass_fraction")
+        channel = s.get("rathole_diameter_m")
+        print(f"  outcome                {s.get('flow_mode')}: the flow stopped {stopped:.3g} s "
+              f"after the opening with {100 * left:.2f} % of the mass left"
+              + (f", a rathole {channel:.3g} m wide"
+                 if channel is not None and channel == channel else ""))
 
 
 def main(argv=None) -> int:

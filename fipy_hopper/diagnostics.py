@@ -3,6 +3,7 @@
 - discharge rate ``W`` from the mass booked through the outlet faces (the same face values the
   transport uses, so ``M(t) + discharged(t) = M(0)`` to round-off), and its steady value;
 - the mass-flow index and stagnant fraction of the cone, and the ``mass``/``funnel`` call;
+  once the flow has stopped, ``no_flow`` (an arch) or ``rathole`` (:class:`OutcomeRule`);
 - the normal wall pressure ``p_n = -n.sigma.n`` and shear ``tau = t.sigma.n`` along the wall.
 """
 
@@ -110,6 +111,68 @@ def classify_flow_mode(index, stagnant, rule: FlowModeRule = FlowModeRule()) -> 
     mass = index >= rule.index_threshold and (
         not np.isfinite(stagnant) or stagnant <= rule.stagnant_threshold)
     return "mass" if mass else "funnel"
+
+
+@dataclass(frozen=True)
+class OutcomeRule:
+    """How a discharge whose flow has stopped is named (stated rule).
+
+    Once the flow has stopped (the ``at_rest`` rule of :mod:`fipy_hopper.simulation`), the
+    stopped state is searched for an empty channel: the cells of the first column (at the axis)
+    hold less than ``full`` material in every row from the outlet plane up to the top of the
+    material (the highest row with a cell above ``full``).  Its radius in each of those rows
+    is where ``alpha`` first reaches ``full`` going out from the axis (linear between cell
+    centres); the channel's diameter is twice their median.
+
+    With at least ``most_left`` of the initial mass left:
+
+    - ``"rathole"``: such a channel whose height (outlet plane to the top of the material) is
+      at least its diameter: most of the material stands around it, with walls steeper than
+      the 45 deg of a channel as high as it is wide (a crater at the angle of repose is wider);
+    - ``"no_flow"``: otherwise (an arch over the outlet, or over the hollow that the material
+      which fell out left below it).
+
+    With less left, the mass/funnel call of the flowing discharge (a heel on a shallow cone, or
+    a cohesive heel around a crater).
+    """
+
+    full: float = 0.5
+    most_left: float = 0.5
+
+
+def empty_channel(model, state, rule: OutcomeRule = OutcomeRule()):
+    """``(diameter, height)`` (m) of the empty channel of :class:`OutcomeRule` from the outlet
+    through the material to its top; ``(nan, nan)`` where the material closes the axis (or
+    there is none)."""
+    g = model.grid
+    full = state.alpha > rule.full
+    above = g.z_cells > 0.0
+    rows = np.flatnonzero(above & full.any(axis=1))
+    if len(rows) == 0:
+        return math.nan, math.nan
+    j0, top = int(np.flatnonzero(above)[0]), int(rows[-1])
+    band = full[j0:top + 1]
+    if band[:, 0].any():
+        return math.nan, math.nan
+    held = band.any(axis=1)
+    k = np.argmax(band, axis=1)[held]                      # first full cell from the axis
+    a = state.alpha[j0:top + 1][held]
+    rows_ = np.arange(len(k))
+    a0, a1 = a[rows_, k - 1], a[rows_, k]
+    r0, r1 = g.r_cells[k - 1], g.r_cells[k]
+    radius = r0 + (rule.full - a0) / (a1 - a0) * (r1 - r0)
+    return 2.0 * float(np.median(radius)), float(g.z_nodes[top + 1])
+
+
+def classify_outcome(mode: str, stopped: bool, left_fraction: float, channel_diameter: float,
+                     channel_height: float, rule: OutcomeRule = OutcomeRule()) -> str:
+    """``"rathole"``, ``"no_flow"`` or ``mode`` (the mass/funnel call) by
+    :class:`OutcomeRule`, for a discharge whose flow has ``stopped`` (else ``mode``)."""
+    if not stopped or not left_fraction >= rule.most_left:
+        return mode
+    if np.isfinite(channel_diameter) and channel_height >= channel_diameter:
+        return "rathole"
+    return "no_flow"
 
 
 # ---------------------------------------------------------------- wall pressure

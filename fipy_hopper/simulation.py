@@ -17,8 +17,9 @@ Stages:
   up at ``max_fill_time`` and says so.  ``end_time = 0`` stops there (``"filled"``).
 - **discharge**: the plate is removed; the run stops at ``end_time`` or, for ``"empty"``, when
   less than ``empty_fraction`` of the initial mass is left in the hopper (``"empty"``), or when
-  nothing has left for 0.25 s and the kinetic energy is tiny (``"at_rest"``: a heel on a
-  shallow cone), or at ``max_time`` (``"max_time"``); any run stops at ``wall_time_limit``.
+  the flow has stopped (``"at_rest"``, :data:`AT_REST_AFTER`: a heel on a shallow cone, an
+  arch, a rathole; the summary names which, :class:`~fipy_hopper.diagnostics.OutcomeRule`, and
+  when it stopped), or at ``max_time`` (``"max_time"``); any run stops at ``wall_time_limit``.
 
 What is measured, and when:
 
@@ -51,6 +52,11 @@ import numpy as np
 from . import diagnostics
 from .model import GRAVITY, HopperModel, InstabilityError, State
 
+#: The flow has stopped (stop reason ``"at_rest"``) when, later than ``AT_REST_AFTER`` s after
+#: the opening, every sample of the last ``AT_REST_WINDOW`` s had a discharge rate below
+#: ``AT_REST_RATE`` of the initial mass per second: a heel on a shallow cone, an arch over the
+#: outlet, a rathole (named by :class:`fipy_hopper.diagnostics.OutcomeRule`).
+AT_REST_AFTER, AT_REST_WINDOW, AT_REST_RATE = 0.5, 0.25, 1e-3
 #: Stages whose wall loads are measured from the moment this fraction of the mass is left.
 STAGE_MARKS = {"early_discharge": 0.9, "mid_discharge": 0.5}
 #: Wall-load stages in the order they are written.
@@ -99,7 +105,8 @@ class Simulation:
 
     def __init__(self, model: HopperModel, state: Optional[State] = None,
                  end_time=None, wall_time_limit: Optional[float] = None,
-                 progress: Optional[bool] = None, flow_rule=diagnostics.FlowModeRule()):
+                 progress: Optional[bool] = None, flow_rule=diagnostics.FlowModeRule(),
+                 outcome_rule=diagnostics.OutcomeRule()):
         run = model.cfg.run
         self.model = model
         self.state = state if state is not None else model.initial_state()
@@ -107,6 +114,8 @@ class Simulation:
         self.wall_time_limit = run.wall_time_limit if wall_time_limit is None else wall_time_limit
         self.progress = sys.stderr.isatty() if progress is None else progress
         self.flow_rule = flow_rule
+        self.outcome_rule = outcome_rule
+        self._rest_samples = 0           # samples that the last check found at rest (0: flowing)
         self.record = RunRecord()
         self.schedules: list[Schedule] = []
         self.wall_sampler = diagnostics.WallSampler(model)
@@ -279,11 +288,13 @@ class Simulation:
             t_dis = st.t - self.t_open
             mass = m.mass_in_hopper(st)
             self._discharge_windows(mass, m0)
+            resting = t_dis > AT_REST_AFTER and self._at_rest()
+            self._rest_samples = len(rec.rate) if resting else 0
             if self.end_time != "empty" and t_dis >= float(self.end_time) - 1e-12:
                 reason = "end_time"
             elif self.end_time == "empty" and mass < run.empty_fraction * m0:
                 reason = "empty"
-            elif self.end_time == "empty" and t_dis > 0.5 and self._at_rest():
+            elif self.end_time == "empty" and resting:
                 reason = "at_rest"
             elif t_dis >= run.max_time:
                 reason = "max_time"
@@ -326,11 +337,26 @@ class Simulation:
     # -------------------------------------------------------------- measuring
     def _at_rest(self) -> bool:
         rec = self.record
-        n = max(1, int(round(0.25 / self.model.cfg.run.output_interval)))
+        n = max(1, int(round(AT_REST_WINDOW / self.model.cfg.run.output_interval)))
         if len(rec.rate) < n:
             return False
         recent = np.asarray(rec.rate[-n:])
-        return bool(np.all(np.abs(recent) < 1e-3 * max(rec.initial_mass, 1e-9)))
+        return bool(np.all(np.abs(recent) < AT_REST_RATE * max(rec.initial_mass, 1e-9)))
+
+    def flow_stopped_time(self) -> float:
+        """When the flow stopped (s after the opening), NaN if it had not by the end of the
+        run: if the last check of the discharge found the flow at rest (the ``at_rest`` rule,
+        :data:`AT_REST_AFTER`; evaluated whatever ``end_time``), the end of the last sample
+        interval before that check with a rate of at least ``AT_REST_RATE`` of the initial
+        mass per second, or 0 if there was none (the outlet opened on an arch).  The sample
+        taken when the run stops is left out: its interval can be a few steps, over which the
+        elastic sway of an arch moves more than the rule's rate."""
+        rec, n = self.record, self._rest_samples
+        if not n:
+            return math.nan
+        fast = np.flatnonzero(np.abs(np.asarray(rec.rate[:n]))
+                              >= AT_REST_RATE * max(rec.initial_mass, 1e-9))
+        return float(rec.t[fast[-1]]) if len(fast) else 0.0
 
     def _eta(self, t_dis: float, mass: float) -> str:
         """`` ETA ...`` of the progress line: the wall time to the end, from the discharge's
@@ -573,17 +599,28 @@ class Simulation:
         remaining = m.mass_in_hopper(st)
         if np.isfinite(m0) and m0 > 0:
             balance = abs(remaining + st.discharged - m0) / m0
+            left = remaining / m0
         else:
-            balance = math.nan
+            balance = left = math.nan
+        mode = diagnostics.classify_flow_mode(index, stagnant, self.flow_rule) if len(t) \
+            else "none"
+        stopped = self.flow_stopped_time()
+        channel, height = math.nan, math.nan
+        if math.isfinite(stopped):
+            channel, height = diagnostics.empty_channel(m, st, self.outcome_rule)
+            mode = diagnostics.classify_outcome(mode, True, left, channel, height,
+                                                self.outcome_rule)
         out = {
             "steady_discharge_rate_kg_s": rate,
             "steady_rate_spread": spread,
-            "flow_mode": diagnostics.classify_flow_mode(index, stagnant, self.flow_rule)
-            if len(t) else "none",
+            "flow_mode": mode,
             "mass_flow_index": index,
             "stagnant_fraction": stagnant,
             "initial_mass_kg": m0 if np.isfinite(m0) else m.mass_in_hopper(st),
             "remaining_mass_kg": remaining,
+            "remaining_mass_fraction": left,
+            "flow_stopped_time_s": stopped,
+            "rathole_diameter_m": channel if mode == "rathole" else math.nan,
             "discharged_kg": st.discharged,
             "mass_balance_error": balance,
             "discharge_time_s": float(t[-1]) if len(t) else 0.0,
