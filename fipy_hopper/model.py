@@ -135,6 +135,10 @@ class HopperModel:
             raise ValueError(f"backend must be 'numba' or 'numpy', not {backend!r}")
         self.backend = backend
         self.cfg = cfg
+        #: callables ``hook(state)`` run after every transport step (the only place alpha,
+        #: the carried fields and the markers change): measurements that read the state and
+        #: never change it, e.g. the bounds of alpha over a run
+        self.after_transport: list = []
         self.grid = grid if grid is not None else build_grid(cfg)
         self.material = cfg.material.mohr_coulomb()
         self._material_update = update if backend == "numba" else update_reference
@@ -512,6 +516,8 @@ class HopperModel:
             bad = np.argwhere(~np.isfinite(state.sigma).all(axis=-1))
             raise InstabilityError(f"non-finite field at step {state.step}, t = {state.t:.6g} s,"
                                    f" cell(s) {bad[:3].tolist()}")
+        for hook in self.after_transport:
+            hook(state)
 
 
 def _contact_list(passes):

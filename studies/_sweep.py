@@ -163,14 +163,7 @@ class _AlphaBounds:
         self.checks += 1
 
     def attach(self, sim) -> None:
-        model = sim.model
-        original = model.transport_step
-
-        def transport_step(state):
-            original(state)
-            self.update(state.alpha)
-
-        model.transport_step = transport_step      # instance attribute: this run only
+        sim.model.after_transport.append(lambda state: self.update(state.alpha))
         self.update(sim.state.alpha)
         sim.add_wall_time_callback(lambda sim_, state: self.write(), 30.0)
 
