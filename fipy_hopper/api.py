@@ -61,7 +61,10 @@ def expected_quantities(cfg: HopperConfig) -> dict:
     ``beverloo_rate_kg_s`` is Beverloo's flat-bottom rate (C = 0.58, k d = 0) times the
     Rose-Tanaka hopper factor of the cone; ``jenike_critical_half_angle_deg`` uses the internal
     friction angle as the effective angle of internal friction; ``fill_mass_kg`` is the density
-    times the filled volume (3D).
+    times the filled volume (3D).  For a wedge the masses and rates are per metre of length
+    (the keys keep their names here; :func:`per_metre` renames them for the files): Beverloo's
+    slot rate (C' = 1.03, no hopper factor: ``rose_tanaka_factor`` is 1) and Jenike's
+    plane-flow angle (the conical one plus 10 deg, :func:`theory.jenike_critical_half_angle_plane`).
 
     With a cohesion ``c > 0`` also Jenike's design numbers (``docs/theory.md`` section g):
     ``unconfined_yield_strength_Pa`` ``sigma_c = 2 c cos(phi)/(1 - sin(phi))``;
@@ -76,15 +79,22 @@ def expected_quantities(cfg: HopperConfig) -> dict:
     out = {"fill_mass_kg": mat.density * geom.fill_volume(),
            "p_wave_speed_m_s": mat.p_wave_speed,
            "cone_height_m": geom.cone_height}
-    flat = float(theory.beverloo_rate(mat.density, geom.outlet_diameter))
-    factor = float(theory.rose_tanaka_factor(geom.half_angle_deg))
+    if geom.axisymmetric:
+        flat = float(theory.beverloo_rate(mat.density, geom.outlet_diameter))
+        factor = float(theory.rose_tanaka_factor(geom.half_angle_deg))
+        critical = theory.jenike_critical_half_angle
+    else:     # per metre of slot; no plane hopper factor from a readable source
+        flat = float(theory.beverloo_slot_rate(mat.density, geom.outlet_diameter))
+        factor = 1.0
+        critical = theory.jenike_critical_half_angle_plane
     out.update(beverloo_flat_rate_kg_s=flat, rose_tanaka_factor=factor,
                beverloo_rate_kg_s=flat * factor)
     try:
-        out["jenike_critical_half_angle_deg"] = float(theory.jenike_critical_half_angle(
+        out["jenike_critical_half_angle_deg"] = float(critical(
             mat.friction_angle_deg, wall.friction_angle_deg))
         out["jenike_flow_mode"] = str(theory.jenike_flow_mode(
-            geom.half_angle_deg, mat.friction_angle_deg, wall.friction_angle_deg))
+            geom.half_angle_deg, mat.friction_angle_deg, wall.friction_angle_deg,
+            geometry="conical" if geom.axisymmetric else "plane"))
     except ValueError:   # friction angle below the range of Jenike's fit
         out["jenike_critical_half_angle_deg"] = math.nan
         out["jenike_flow_mode"] = "unknown"
@@ -256,7 +266,25 @@ def _summary(sim, cfg, reason: str) -> dict:
                 "critical_outlet_simplified_m", "jenike_rathole_diameter_m"):
         if key in expected:
             summary[key] = expected[key]
-    return summary
+    return summary if cfg.hopper.axisymmetric else per_metre(summary)
+
+
+#: unit suffixes of extensive quantities and their per-metre forms (wedge hoppers)
+PER_METRE = (("_kg_s", "_kg_s_m"), ("_kg", "_kg_m"), ("_N", "_N_m"), ("_J", "_J_m"))
+
+
+def per_metre(values: dict) -> dict:
+    """The same values with the names of masses, rates, forces and energies per metre of
+    length (``steady_discharge_rate_kg_s`` -> ``steady_discharge_rate_kg_s_m``, ``_kg`` ->
+    ``_kg_m``, ``_N`` -> ``_N_m``): what a wedge's results are."""
+    out = {}
+    for key, value in values.items():
+        for suffix, metre in PER_METRE:
+            if key.endswith(suffix):
+                key = key[: -len(suffix)] + metre
+                break
+        out[key] = value
+    return out
 
 
 # ---------------------------------------------------------------- reading results

@@ -130,22 +130,29 @@ def _validate(args) -> int:
     else:
         theta_c_text = f"{theta_c:.1f} deg"
     end = run.end_time if isinstance(run.end_time, str) else f"{run.end_time:g} s"
+    hopper, per = ("cone", "") if geom.axisymmetric else ("wedge", "/m (per metre of length)")
     lines = [
         f"{args.config}: valid",
         f"  grid               {nr} x {nz} = {nr * nz} cells of {h:g} m "
-        f"({geom.outlet_radius / h:.1f} across the outlet radius), "
+        f"({geom.outlet_radius / h:.1f} across the outlet "
+        f"{'radius' if geom.axisymmetric else 'half-width'}), "
         f"about {cfg.memory_estimate() / 1e9:.2g} GB",
         f"  P-wave speed c_p   {e['p_wave_speed_m_s']:.4g} m/s",
         f"  time step          {cfg.time_step:.4g} s (at most {cfg.step_estimate():.3g} steps)",
-        f"  cone height        {geom.cone_height:.4g} m (transition to the bin)",
-        f"  fill mass          {e['fill_mass_kg']:.4g} kg",
-        f"  Beverloo rate      {e['beverloo_rate_kg_s']:.4g} kg/s = "
-        f"{e['beverloo_flat_rate_kg_s']:.4g} kg/s (flat bottom, C = 0.58) x "
-        f"{e['rose_tanaka_factor']:.3f} (Rose-Tanaka, {geom.half_angle_deg:g} deg cone)",
+        f"  {hopper + ' height':<18} {geom.cone_height:.4g} m (transition to the bin)",
+        f"  fill mass          {e['fill_mass_kg']:.4g} kg{per}",
+        (f"  Beverloo rate      {e['beverloo_rate_kg_s']:.4g} kg/s = "
+         f"{e['beverloo_flat_rate_kg_s']:.4g} kg/s (flat bottom, C = 0.58) x "
+         f"{e['rose_tanaka_factor']:.3f} (Rose-Tanaka, {geom.half_angle_deg:g} deg cone)"
+         if geom.axisymmetric else
+         f"  Beverloo rate      {e['beverloo_rate_kg_s']:.4g} kg/s per m of slot "
+         f"(plane flow, W' = C' rho sqrt(g) B^1.5, C' = 1.03, no hopper factor)"),
         f"  discharge time     about {e['expected_discharge_time_s']:.3g} s at that rate",
         f"  Jenike theta_c     {theta_c_text} (phi = {cfg.material.friction_angle_deg:g} deg, "
-        f"phi_w = {cfg.wall.friction_angle_deg:g} deg)",
-        f"  expected flow      {e['jenike_flow_mode']} flow ({geom.half_angle_deg:g} deg cone)",
+        f"phi_w = {cfg.wall.friction_angle_deg:g} deg"
+        + ("" if geom.axisymmetric else "; plane flow: the conical angle + 10 deg") + ")",
+        f"  expected flow      {e['jenike_flow_mode']} flow ({geom.half_angle_deg:g} deg "
+        f"{hopper})",
         f"  run                until {end}, samples every {run.output_interval:g} s, "
         f"fields every {run.field_interval:g} s",
     ]
@@ -283,18 +290,22 @@ def _cohesion_lines(cfg, e: dict) -> list:
 
 
 def _print_summary(s: dict, out) -> None:
+    wedge = "steady_discharge_rate_kg_s_m" in s       # per metre of length
+
     def num(key, fmt):
-        value = s.get(key)
+        value = s.get(key + ("_m" if wedge and key.endswith(("_kg", "_kg_s")) else ""))
         return "n/a" if value is None else format(value, fmt)
 
+    per = "/m" if wedge else ""
+    theory = "Beverloo, slot" if wedge else "Beverloo x Rose-Tanaka"
     print(f"{PROG}: {s.get('stop_reason')} after {num('discharge_time_s', '.3g')} s of discharge "
           f"({num('steps', 'd')} steps, {num('wall_time_s', '.0f')} s wall time)\n"
-          f"  steady discharge rate  {num('steady_discharge_rate_kg_s', '.4g')} kg/s "
-          f"(Beverloo x Rose-Tanaka {num('beverloo_rate_kg_s', '.4g')} kg/s)\n"
+          f"  steady discharge rate  {num('steady_discharge_rate_kg_s', '.4g')} kg/s{per} "
+          f"({theory} {num('beverloo_rate_kg_s', '.4g')} kg/s{per})\n"
           f"  flow mode              {s.get('flow_mode')} (mass-flow index "
           f"{num('mass_flow_index', '.2f')}; Jenike expects {s.get('jenike_flow_mode')})\n"
-          f"  mass                   {num('initial_mass_kg', '.4g')} kg filled, "
-          f"{num('remaining_mass_kg', '.4g')} kg left "
+          f"  mass                   {num('initial_mass_kg', '.4g')} kg{per} filled, "
+          f"{num('remaining_mass_kg', '.4g')} kg{per} left "
           f"(mass balance error {num('mass_balance_error', '.1e')})\n"
           f"  results in             {out}/")
     stopped = s.get("flow_stopped_time_s")

@@ -20,7 +20,7 @@ import math
 import warnings
 from dataclasses import dataclass, field, fields
 from pathlib import Path
-from typing import Any, Union
+from typing import Any, Optional, Union
 
 try:  # Python >= 3.11
     import tomllib
@@ -104,6 +104,8 @@ def _check_int(key: str, value: Any, low: int, high: int) -> int:
 #: Hopper lengths (m): below 1 mm a continuum of grains is meaningless; no silo is 100 m wide
 #: or tall.
 LENGTH_RANGE = (1e-3, 100.0)
+#: Hopper shapes: a cone (axisymmetric) or a wedge with a slot outlet (plane strain).
+SHAPES = ("conical", "wedge")
 #: Bulk density (kg/m3): the lightest powders (aerogel, ~10) to beyond tungsten (~19,300).
 DENSITY_RANGE = (1.0, 2.0e4)
 #: Young's modulus (Pa): 1 kPa (loose, cohesive powder) to 1 TPa (stiffer than diamond).
@@ -133,12 +135,18 @@ MAX_STEPS = 1e9
 
 @dataclass(frozen=True)
 class HopperGeometry:
-    """Conical hopper below a cylindrical bin; the outlet plane is ``z = 0``, ``z`` upward.
+    """A hopper below a bin; the outlet plane is ``z = 0``, ``z`` upward.
 
-    ``fill_height`` and ``bin_height`` are measured above the cone-cylinder transition.
-    ``half_angle_deg`` is the cone half-angle from the vertical, in ``(0, 90]``; 90 is a
-    flat-bottomed bin.  Lengths are in ``[1 mm, 100 m]`` (:data:`LENGTH_RANGE`), the cone's
-    height too (which bounds how steep a narrow-outlet cone can be).
+    ``shape``: ``"conical"`` (default: a cone below a cylindrical bin, axisymmetric, sized by
+    ``bin_diameter`` and ``outlet_diameter``) or ``"wedge"`` (a plane-flow hopper: a wedge
+    below a bin of parallel walls with a slot outlet, long in the third direction, sized by
+    ``bin_width`` and ``outlet_width``; every result is per metre of length).  For a wedge,
+    ``bin_diameter`` and ``outlet_diameter`` hold the two widths (the section is the same
+    half-section in ``(x, z)`` as the cone's in ``(r, z)``).  ``fill_height`` and
+    ``bin_height`` are measured above the transition.  ``half_angle_deg`` is the hopper's
+    half-angle from the vertical, in ``(0, 90]``; 90 is a flat bottom.  Lengths are in
+    ``[1 mm, 100 m]`` (:data:`LENGTH_RANGE`), the hopper's height too (which bounds how steep
+    a narrow-outlet hopper can be).
     """
 
     bin_diameter: float = 0.3
@@ -146,19 +154,38 @@ class HopperGeometry:
     outlet_diameter: float = 0.06
     bin_height: float = 0.35
     fill_height: float = 0.3
+    shape: str = "conical"
+    bin_width: Optional[float] = None
+    outlet_width: Optional[float] = None
 
     def __post_init__(self):
         lo, hi = LENGTH_RANGE
-        _check_range("hopper.bin_diameter", self.bin_diameter, lo, hi, unit=" m")
+        if not isinstance(self.shape, str) or self.shape not in SHAPES:
+            raise ConfigError(f"hopper.shape = {_show(self.shape)}: expected one of "
+                              f"{', '.join(repr(s) for s in SHAPES)}")
+        if self.shape == "wedge":
+            for key in ("bin_width", "outlet_width"):
+                if getattr(self, key) is None:
+                    raise ConfigError(f"hopper.{key} is required for shape = \"wedge\" "
+                                      f"(a length in [{lo:g}, {hi:g}] m)")
+            object.__setattr__(self, "bin_diameter", self.bin_width)
+            object.__setattr__(self, "outlet_diameter", self.outlet_width)
+        else:
+            for key in ("bin_width", "outlet_width"):
+                if getattr(self, key) is not None:
+                    raise ConfigError(f"hopper.{key} is for shape = \"wedge\"; a conical "
+                                      f"hopper takes hopper.{key.replace('width', 'diameter')}")
+        bin_key, outlet_key = self.size_keys
+        _check_range(f"hopper.{bin_key}", self.bin_diameter, lo, hi, unit=" m")
         _check_range("hopper.half_angle_deg", self.half_angle_deg, 0, 90, low_open=True,
                      unit=" deg")
-        _check_range("hopper.outlet_diameter", self.outlet_diameter, lo, hi, unit=" m")
+        _check_range(f"hopper.{outlet_key}", self.outlet_diameter, lo, hi, unit=" m")
         _check_range("hopper.bin_height", self.bin_height, lo, hi, unit=" m")
         _check_range("hopper.fill_height", self.fill_height, lo, hi, unit=" m")
         if self.outlet_diameter >= self.bin_diameter:
             raise ConfigError(
-                f"hopper.outlet_diameter = {self.outlet_diameter:g} m is not narrower than the "
-                f"bin, hopper.bin_diameter = {self.bin_diameter:g} m")
+                f"hopper.{outlet_key} = {self.outlet_diameter:g} m is not narrower than the "
+                f"bin, hopper.{bin_key} = {self.bin_diameter:g} m")
         if self.fill_height > self.bin_height:
             raise ConfigError(
                 f"hopper.fill_height = {self.fill_height:g} m is above the top of the bin, "
@@ -173,7 +200,19 @@ class HopperGeometry:
                 f"[{least:.3g}, 90] deg for this bin and outlet")
 
     @property
+    def axisymmetric(self) -> bool:
+        """True for a cone (axisymmetric), False for a wedge (plane strain, per metre)."""
+        return self.shape == "conical"
+
+    @property
+    def size_keys(self) -> tuple:
+        """The names of the bin's and the outlet's size: diameters, or widths for a wedge."""
+        return (("bin_diameter", "outlet_diameter") if self.axisymmetric
+                else ("bin_width", "outlet_width"))
+
+    @property
     def bin_radius(self) -> float:
+        """The bin's radius, or half its width for a wedge (m)."""
         return 0.5 * self.bin_diameter
 
     @property
@@ -204,8 +243,11 @@ class HopperGeometry:
         return self.cone_height + self.fill_height
 
     def fill_volume(self) -> float:
-        """Volume of the filled material (full 3D, m^3): frustum plus cylinder."""
+        """Volume of the filled material: frustum plus cylinder (m^3); for a wedge, trapezoid
+        plus rectangle per metre of length (m^3/m)."""
         r0, r1, h = self.outlet_radius, self.bin_radius, self.cone_height
+        if not self.axisymmetric:
+            return (r0 + r1) * h + 2.0 * r1 * self.fill_height
         cone = math.pi * h / 3.0 * (r0 * r0 + r0 * r1 + r1 * r1)
         return cone + math.pi * r1 * r1 * self.fill_height
 
@@ -456,10 +498,11 @@ class HopperConfig:
                 raise ConfigError(f"[{name}]: expected a {kind.__name__}, got "
                                   f"{_show(getattr(self, name))}")
         cells_across_outlet = self.hopper.outlet_radius / self.numerics.cell_size
+        across = "radius" if self.hopper.axisymmetric else "half-width"
         if cells_across_outlet < 3:
             raise ConfigError(
                 f"numerics.cell_size = {self.numerics.cell_size:g} m leaves "
-                f"{cells_across_outlet:.2f} cells across the outlet radius "
+                f"{cells_across_outlet:.2f} cells across the outlet {across} "
                 f"({self.hopper.outlet_radius:g} m); at least 3 are needed "
                 f"(cell_size <= {self.hopper.outlet_radius / 3:.4g} m)")
         self._check_grid_size()
@@ -483,7 +526,7 @@ class HopperConfig:
                           f"run.end_time = {run.end_time:g} s: the discharge gets only its "
                           "first and last field snapshots", SamplingWarning, stacklevel=3)
         if cells_across_outlet < 6:
-            warnings.warn(f"only {cells_across_outlet:.1f} cells across the outlet radius; "
+            warnings.warn(f"only {cells_across_outlet:.1f} cells across the outlet {across}; "
                           "6 or more are recommended for a discharge rate", ResolutionWarning,
                           stacklevel=3)
 
@@ -592,6 +635,12 @@ class HopperConfig:
                 if key not in allowed:
                     raise ConfigError(_unknown_message(f"key in [{name}]", key, allowed,
                                                        prefix=f"{name}."))
+            if name == "hopper" and values.get("shape") == "wedge":
+                for key in ("bin_diameter", "outlet_diameter"):
+                    if key in values:
+                        raise ConfigError(
+                            f"hopper.{key} is for a conical hopper; a wedge (shape = "
+                            f"\"wedge\") takes hopper.{key.replace('diameter', 'width')}")
             sections[name] = kind(**values)
         return cls(**sections)
 
@@ -613,7 +662,15 @@ class HopperConfig:
         return cls.from_dict(data)
 
     def to_dict(self) -> dict:
-        return dataclasses.asdict(self)
+        """The sections as dictionaries; the hopper's sizes under the keys its shape takes
+        (diameters for a cone, widths for a wedge), so that the dictionary reads back."""
+        out = dataclasses.asdict(self)
+        hopper = out["hopper"]
+        unused = (("bin_width", "outlet_width") if self.hopper.axisymmetric
+                  else ("bin_diameter", "outlet_diameter"))
+        for key in unused:
+            del hopper[key]
+        return out
 
     def to_toml(self) -> str:
         """The resolved configuration as TOML text (every key, defaults included)."""

@@ -308,7 +308,10 @@ class WallLoads:
     @staticmethod
     def _area(a, b, geom):
         """Wall area per radian ``int_a^b r(s) ds`` (m^2/rad) between arc lengths a <= b; 0 if
-        ``b <= a``."""
+        ``b <= a``; for a wedge, per metre of length, ``b - a``."""
+        a, b = np.asarray(a, float), np.asarray(b, float)
+        if not geom.axisymmetric:
+            return np.where(b > a, b - a, 0.0)
         s_t = float(geometry.transition_arc_length(geom))
         sin_t = math.sin(geom.half_angle) if geom.cone_height > 0 else 1.0
 
@@ -342,8 +345,7 @@ class WallLoads:
         tau = (self.weights @ shear) / self.bin_area
         return self.centres, self.r_w, self.z_w, p_n, tau
 
-    @staticmethod
-    def balance(start: dict, end: dict) -> dict:
+    def balance(self, start: dict, end: dict) -> dict:
         """The vertical momentum balance of the whole grid over a window, as mean forces in N
         (3D, upward positive): ``weight`` (positive), ``wall`` and ``outlet`` (the plate's
         reaction), ``damping``, ``stopped`` (light nodes), ``outflow`` (momentum leaving
@@ -353,7 +355,7 @@ class WallLoads:
         duration = end["t"] - start["t"]
         if not duration > 0:
             raise ValueError("a load window needs a positive duration")
-        to_n = 2.0 * math.pi / duration
+        to_n = self.model.section_factor / duration
         budget = (end["budget"] - start["budget"]) * to_n
         out = {"weight": -budget[0],
                "wall": float(np.sum(end["wall"][:, 1] - start["wall"][:, 1])) * to_n,
@@ -471,8 +473,10 @@ def load_summary(sim) -> dict:
                 theory.k_jaky(mat.friction_angle_deg))
             mu = m.mu_wall
             if mu > 0:
-                sigma_vt = float(theory.janssen_vertical_stress(
-                    geom.fill_height, mat.density, geom.bin_diameter, K, mu))
+                janssen = (theory.janssen_vertical_stress if geom.axisymmetric
+                           else theory.janssen_plane_vertical_stress)
+                sigma_vt = float(janssen(geom.fill_height, mat.density, geom.bin_diameter, K,
+                                         mu))
                 out["walker_switch_pressure_Pa"] = float(theory.walker_switch_pressure(
                     sigma_vt, K, mat.friction_angle_deg, m.cfg.wall.friction_angle_deg,
                     geom.half_angle_deg).hopper)

@@ -575,8 +575,12 @@ class LagrangianModel:
     def __init__(self, cfg: HopperConfig, limits: DistortionLimits = DistortionLimits(),
                  erode_discharged: bool = True, erode_depth: float = 0.0,
                  n_layers: int = 8):
+        from .config import ConfigError
         from .material import update as material_update
 
+        if not cfg.hopper.axisymmetric:
+            raise ConfigError("the Lagrangian mode models conical hoppers only "
+                              "(hopper.shape = \"conical\"); run a wedge with the Eulerian model")
         self.cfg = cfg
         self.limits = limits
         self.erode_discharged = erode_discharged

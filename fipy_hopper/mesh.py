@@ -1,4 +1,5 @@
-"""The fixed Eulerian grid: a ``fipy.CylindricalGrid2D`` over the hopper and a free-fall zone.
+"""The fixed Eulerian grid: a ``fipy.CylindricalGrid2D`` over the hopper and a free-fall zone
+(a ``fipy`` ``Grid2D`` of the half-section for a wedge: plane strain, per metre of length).
 
 Layout (``x = r``, ``y = z``): ``nr`` square cells of size ``h`` from the axis to beyond the bin
 wall, ``nz`` rows from ``z_bottom = -free_fall_depth`` (aligned so that the outlet plane
@@ -19,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from fipy import CylindricalGrid2D
+from fipy.meshes.uniformGrid2D import UniformGrid2D
 
 from . import geometry
 from .config import HopperConfig
@@ -26,9 +28,10 @@ from .config import HopperConfig
 
 @dataclass
 class HopperGrid:
-    """The grid and its immersed-wall data (all lengths in m, volumes per radian)."""
+    """The grid and its immersed-wall data (all lengths in m, volumes per radian; for a wedge,
+    ``r`` is the distance from the mid-plane and volumes are per metre of length)."""
 
-    mesh: CylindricalGrid2D
+    mesh: CylindricalGrid2D | UniformGrid2D
     h: float
     nr: int
     nz: int
@@ -38,7 +41,7 @@ class HopperGrid:
     z_nodes: np.ndarray           # (nz + 1,)
     kappa: np.ndarray             # (nz, nr) open fraction of cells
     face_aperture: np.ndarray     # (n_faces,) FiPy face order
-    cell_volume: np.ndarray       # (nz, nr) r_c h^2, per radian (= mesh.cellVolumes)
+    cell_volume: np.ndarray       # (nz, nr) r_c h^2 per radian, h^2 for a wedge (mesh.cellVolumes)
     node_distance: np.ndarray     # (nz + 1, nr + 1) signed distance to the wall
     node_normal: np.ndarray       # (2, nz + 1, nr + 1) unit normal into the wall
     outflow_faces: np.ndarray     # (n_faces,) bool: bottom boundary, material leaves
@@ -71,7 +74,8 @@ class HopperGrid:
 
 
 def _open_fraction_cells(geom, r_nodes, z_nodes, n_sub):
-    """r-weighted open fraction of each cell, by ``n_sub x n_sub`` midpoint sub-sampling."""
+    """Open fraction of each cell (r-weighted for an axisymmetric grid), by ``n_sub x n_sub``
+    midpoint sub-sampling."""
     nr, nz = len(r_nodes) - 1, len(z_nodes) - 1
     h_r, h_z = np.diff(r_nodes), np.diff(z_nodes)
     t = (np.arange(n_sub) + 0.5) / n_sub
@@ -80,7 +84,7 @@ def _open_fraction_cells(geom, r_nodes, z_nodes, n_sub):
     R = rs[None, :, None, :]                                      # (1, nr, 1, s)
     Z = zs[:, None, :, None]                                      # (nz, 1, s, 1)
     open_ = ~geometry.in_solid(R, Z, geom)                        # (nz, nr, s, s)
-    weight = np.broadcast_to(R, open_.shape)
+    weight = np.broadcast_to(R if geom.axisymmetric else np.ones_like(R), open_.shape)
     return (open_ * weight).sum(axis=(2, 3)) / weight.sum(axis=(2, 3))
 
 
@@ -90,9 +94,10 @@ def _open_fraction_faces(geom, r_nodes, z_nodes, n_sub):
     h_r, h_z = np.diff(r_nodes), np.diff(z_nodes)
     rs = r_nodes[:-1, None] + h_r[:, None] * t[None, :]          # (nr, s)
     zs = z_nodes[:-1, None] + h_z[:, None] * t[None, :]          # (nz, s)
-    # z-faces: area weight r
+    # z-faces: area weight r (axisymmetric) or uniform (plane)
     open_z = ~geometry.in_solid(rs[None, :, :], z_nodes[:, None, None] + 1e-12, geom)
-    w = np.broadcast_to(rs[None, :, :], open_z.shape)
+    w = np.broadcast_to(rs[None, :, :] if geom.axisymmetric else np.ones_like(rs)[None],
+                        open_z.shape)
     a_z = (open_z * w).sum(axis=2) / w.sum(axis=2)
     # r-faces: uniform weight along z
     open_r = ~geometry.in_solid(r_nodes[None, :, None], zs[:, None, :], geom)
@@ -109,8 +114,11 @@ def build_grid(cfg: HopperConfig, n_sub: int = 16) -> HopperGrid:
     n_above = int(math.ceil(geom.top / h - 1e-9)) + 1
     nz = n_below + n_above
     z_bottom = -n_below * h
-    mesh = CylindricalGrid2D(dx=np.full(nr, h), dy=np.full(nz, h),
-                             origin=((0.0,), (z_bottom,)))
+    if geom.axisymmetric:
+        mesh = CylindricalGrid2D(dx=np.full(nr, h), dy=np.full(nz, h),
+                                 origin=((0.0,), (z_bottom,)))
+    else:                       # plane: the half-section, per metre of length
+        mesh = UniformGrid2D(dx=h, dy=h, nx=nr, ny=nz, origin=((0.0,), (z_bottom,)))
     r_nodes = h * np.arange(nr + 1)
     z_nodes = z_bottom + h * np.arange(nz + 1)
     z_nodes[n_below] = 0.0

@@ -149,8 +149,18 @@ class HopperModel:
         self.c_p = cfg.material.p_wave_speed
         self.dt = cfg.numerics.dt_safety * g.h / self.c_p
         self.mu_wall = cfg.wall.friction_coefficient
-        self.r_c = g.r_cells
-        self.open_volume = g.kappa * g.cell_volume          # (nz, nr) m^3/rad
+        # the symmetry as data: an axisymmetric cone, or a wedge in plane strain (per metre)
+        axisymmetric = cfg.hopper.axisymmetric
+        #: radius of the hoop terms (infinite in plane strain: they vanish)
+        self.r_c = g.r_cells if axisymmetric else np.full(g.nr, np.inf)
+        #: radial weights of the face fluxes in the open divergence (1 in plane strain)
+        self.flux_radius = g.r_nodes if axisymmetric else np.ones(g.nr + 1)
+        #: normal strains that share the open-divergence correction
+        self.strain_dims = 3.0 if axisymmetric else 2.0
+        #: the computed half-section to the whole hopper: 2 pi rad (m^3/rad -> m^3), or both
+        #: halves of a wedge (per metre of length)
+        self.section_factor = 2.0 * math.pi if axisymmetric else 2.0
+        self.open_volume = g.kappa * g.cell_volume          # (nz, nr) m^3/rad (m^2 for a wedge)
         # "axisymmetric": FiPy's van Leer update with the reconstruction distances of the
         # cylindrical cells corrected; FiPy's own geometry over/undershoots on cylindrical
         # grids (see fipy_hopper.transport), this one stays within [0, 1]
@@ -262,18 +272,19 @@ class HopperModel:
         return self._mass
 
     def mass_in_hopper(self, state: State) -> float:
-        """Mass above the outlet plane (kg, 3D)."""
-        return 2 * math.pi * self.rho * float(np.sum((state.alpha * self.open_volume)
-                                                        [self.hopper_cells]))
+        """Mass above the outlet plane (kg, 3D; kg/m for a wedge)."""
+        return self.section_factor * self.rho * float(np.sum((state.alpha * self.open_volume)
+                                                             [self.hopper_cells]))
 
     def total_mass(self, state: State) -> float:
-        """Mass in the whole domain (kg, 3D)."""
-        return 2 * math.pi * self.rho * float(np.sum(state.alpha * self.open_volume))
+        """Mass in the whole domain (kg, 3D; kg/m for a wedge)."""
+        return self.section_factor * self.rho * float(np.sum(state.alpha * self.open_volume))
 
     def kinetic_energy(self, state: State) -> float:
-        """Kinetic energy of the nodal velocities (J, 3D)."""
+        """Kinetic energy of the nodal velocities (J, 3D; J/m for a wedge)."""
         m = self.node_mass(state)
-        return math.pi * float(np.sum(m * (state.v[0] ** 2 + state.v[1] ** 2)))
+        return (0.5 * self.section_factor) * float(np.sum(m * (state.v[0] ** 2
+                                                               + state.v[1] ** 2)))
 
     def gravity(self, state: State) -> float:
         """Gravity (m/s^2, downward) at this time: ramped linearly during filling."""
@@ -326,7 +337,8 @@ class HopperModel:
         done, due = stepping.material_steps(
             int(max_steps), clock, state.v, self.node_mass(state), state.alpha, state.sigma,
             state.loose, state.eps_p, state.face_flux_sum, displacement, with_markers,
-            self.open_volume, self.r_c, g.r_nodes, g.h, self.hourglass_base, g.kappa,
+            self.open_volume, self.r_c, self.flux_radius, self.strain_dims, g.h,
+            self.hourglass_base, g.kappa,
             self._zface_aperture, self._rface_aperture, self._face_sign, self._open_face,
             self._prm, self.dt, GRAVITY, ramp, damping, self.light_mass, num.alpha_min,
             num.transport_cfl, num.max_transport_interval, row_nodes, node_i, node_ptr,
@@ -357,9 +369,10 @@ class HopperModel:
         # separates by (material.close_loose_volume / separation_strain).
         loaded = (state.alpha >= alpha_min).ravel()
         div = momentum.open_divergence(v, self._zface_aperture, self._rface_aperture,
-                                       g.kappa, g.r_nodes, g.h) * dt
-        d_eps[..., :3] += ((div - (d_eps[..., 0] + d_eps[..., 1] + d_eps[..., 2]))
-                           / 3.0)[..., None]
+                                       g.kappa, self.flux_radius, g.h) * dt
+        dims = int(self.strain_dims)
+        d_eps[..., :dims] += ((div - (d_eps[..., 0] + d_eps[..., 1] + d_eps[..., 2]))
+                              / self.strain_dims)[..., None]
         d_skeleton, loose = material.close_loose_volume(d_eps.reshape(-1, 4),
                                                         state.loose.ravel())
         sig_new, deps_p, status = self._material_update(
@@ -466,7 +479,7 @@ class HopperModel:
         oriented = alpha_flux * self.face_sign          # transfer along +z / +r
         through_outlet = -float(np.sum(oriented[g.outlet_faces]))
         through_bottom = -float(np.sum(oriented[g.outflow_faces]))
-        to_kg = 2 * math.pi * self.rho
+        to_kg = self.section_factor * self.rho
         state.last_outlet_mass = to_kg * through_outlet
         state.discharged += to_kg * through_outlet
         state.lost += to_kg * through_bottom

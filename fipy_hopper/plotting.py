@@ -284,20 +284,27 @@ def discharge_curves(run):
     t = ts["t_s"]
     fig = _figure(6.4, 5.6)
     ax_m, ax_w = fig.subplots(2, 1, sharex=True)
+    axisymmetric = cfg.hopper.axisymmetric
+    per = "" if axisymmetric else " per m"            # a wedge: per metre of length
     ax_m.plot(t, ts["mass_in_hopper_kg"], "-", color="C0", label="M(t), in the hopper")
     ax_m.plot(t, ts["discharged_kg"], "--", color="C1", label="discharged")
-    ax_m.set_ylabel("mass (kg)")
+    ax_m.set_ylabel(f"mass (kg{per})")
     ax_m.legend(loc="best", fontsize=8)
     ax_w.step(t, ts["discharge_rate_kg_s"], where="pre", color="C0", label="W(t), simulated")
-    steady = summary.get("steady_discharge_rate_kg_s")
+    steady = summary.get("steady_discharge_rate_kg_s" + ("" if axisymmetric else "_m"))
     if steady is not None:
-        ax_w.axhline(steady, color="C0", ls=":", label=f"steady rate {steady:.3g} kg/s")
-    bev = float(theory.beverloo_rate(cfg.material.density, cfg.hopper.outlet_diameter)
-                * theory.rose_tanaka_factor(cfg.hopper.half_angle_deg))
-    ax_w.axhline(bev, color="k", ls="--",
-                 label=f"Beverloo x Rose-Tanaka {bev:.3g} kg/s (C = 0.58, k d = 0)")
+        ax_w.axhline(steady, color="C0", ls=":", label=f"steady rate {steady:.3g} kg/s{per}")
+    rho, d0 = cfg.material.density, cfg.hopper.outlet_diameter
+    if axisymmetric:
+        bev = float(theory.beverloo_rate(rho, d0)
+                    * theory.rose_tanaka_factor(cfg.hopper.half_angle_deg))
+        label = f"Beverloo x Rose-Tanaka {bev:.3g} kg/s (C = 0.58, k d = 0)"
+    else:
+        bev = float(theory.beverloo_slot_rate(rho, d0))
+        label = f"Beverloo, slot {bev:.3g} kg/s per m (C' = 1.03, k d = 0)"
+    ax_w.axhline(bev, color="k", ls="--", label=label)
     ax_w.set_xlabel("time since the outlet opened (s)")
-    ax_w.set_ylabel("discharge rate (kg/s)")
+    ax_w.set_ylabel(f"discharge rate (kg/s{per})")
     ax_w.set_ylim(bottom=0.0)
     ax_w.legend(loc="best", fontsize=8)
     mode = summary.get("flow_mode")
@@ -325,6 +332,15 @@ def theory_wall_pressure(cfg: HopperConfig, n: int = 120) -> dict:
     s_t = float(geometry.transition_arc_length(geom))
     s_fill = float(geometry.arc_length(geom.fill_level, geom))
     curves = {}
+    if not geom.axisymmetric:      # a wedge: the plane bin; no plane slice method offered
+        try:
+            s_bin = np.linspace(s_t, s_fill, n)
+            curves["Janssen, plane bin (K = 1 - sin phi)"] = (
+                s_bin, np.asarray(theory.janssen_plane_wall_pressure(s_fill - s_bin, rho, D,
+                                                                     K, mu)))
+        except ValueError:
+            pass
+        return curves
     try:
         s_bin = np.linspace(s_t, s_fill, n)
         curves["Janssen, bin (K = 1 - sin phi)"] = (

@@ -331,8 +331,8 @@ def _node_update(j0, j1, v, mass, contrib, gravity, dt, damping, light_mass, row
 
 
 @_jit
-def _strain_run(j, i0, i1, out, v, sigma, loose, r_c, r_nodes, h, dt, kappa, zface_aperture,
-                rface_aperture, scratch):
+def _strain_run(j, i0, i1, out, v, sigma, loose, r_c, r_nodes, strain_dims, h, dt, kappa,
+                zface_aperture, rface_aperture, scratch):
     """First pass over the run ``(j, i0, i1)`` into ``scratch[:, out:out + i1 - i0]``: the
     rotated stress (rows 0-3), the strain increment that loads the skeleton (rows 4-7) and the
     loose strain left (row 8), as ``momentum.strain_rate``, ``jaumann_rotate`` and
@@ -373,10 +373,11 @@ def _strain_run(j, i0, i1, out, v, sigma, loose, r_c, r_nodes, h, dt, kappa, zfa
         u_r = 0.5 * (vr_se + vr_ne) * rface_aperture[j, i + 1] * r_nodes[i + 1]
         r_mid = 0.5 * (r_nodes[i] + r_nodes[i + 1])
         div = ((w_t - w_b) / h + (u_r - u_l) / (r_mid * h)) / kap if kap > 0.0 else 0.0
-        corr = (div * dt - (d0 + d1 + d2)) / 3.0
+        corr = (div * dt - (d0 + d1 + d2)) / strain_dims
         d0 += corr
         d1 += corr
-        d2 += corr
+        if strain_dims == 3.0:      # plane strain (2): no strain out of the plane
+            d2 += corr
         # compression first closes loose volume
         compression = -(d0 + d1 + d2)
         old = loose[j, i]
@@ -390,8 +391,8 @@ def _strain_run(j, i0, i1, out, v, sigma, loose, r_c, r_nodes, h, dt, kappa, zfa
 
 
 @_jit
-def _stress_block(r0, r1, load_runs, v, sigma, loose, eps_p, r_c, r_nodes, h, dt, kappa,
-                  zface_aperture, rface_aperture, prm, cst):
+def _stress_block(r0, r1, load_runs, v, sigma, loose, eps_p, r_c, r_nodes, strain_dims, h, dt,
+                  kappa, zface_aperture, rface_aperture, prm, cst):
     """Stress update of the loaded cells of the runs ``r0 <= run < r1`` (one block), in place:
     :func:`_strain_run`, then the elastic predictor, the return and the plastic and loose
     strains as ``material._update_kernel``, ``separation_strain`` and
@@ -406,8 +407,8 @@ def _stress_block(r0, r1, load_runs, v, sigma, loose, eps_p, r_c, r_nodes, h, dt
     q = 0
     for run in range(r0, r1):
         j, i0, i1 = load_runs[run, 0], load_runs[run, 1], load_runs[run, 2]
-        _strain_run(j, i0, i1, q, v, sigma, loose, r_c, r_nodes, h, dt, kappa, zface_aperture,
-                    rface_aperture, scratch)
+        _strain_run(j, i0, i1, q, v, sigma, loose, r_c, r_nodes, strain_dims, h, dt, kappa,
+                    zface_aperture, rface_aperture, scratch)
         for i in range(i0, i1):
             cell_j[q] = j
             cell_i[q] = i
@@ -479,12 +480,13 @@ def _stress_block(r0, r1, load_runs, v, sigma, loose, eps_p, r_c, r_nodes, h, dt
 
 
 @_jit_parallel
-def _stress_update(block_ptr, n_blocks, load_runs, v, sigma, loose, eps_p, r_c, r_nodes, h,
-                   dt, kappa, zface_aperture, rface_aperture, prm, cst):
+def _stress_update(block_ptr, n_blocks, load_runs, v, sigma, loose, eps_p, r_c, r_nodes,
+                   strain_dims, h, dt, kappa, zface_aperture, rface_aperture, prm, cst):
     """:func:`_stress_block` for every block (threads share out the blocks)."""
     for b in prange(n_blocks):
         _stress_block(block_ptr[b], block_ptr[b + 1], load_runs, v, sigma, loose, eps_p, r_c,
-                      r_nodes, h, dt, kappa, zface_aperture, rface_aperture, prm, cst)
+                      r_nodes, strain_dims, h, dt, kappa, zface_aperture, rface_aperture, prm,
+                      cst)
 
 
 @_jit_parallel
@@ -519,13 +521,18 @@ def _faces(j0, j1, v, dt, face_sign, open_face, face_flux_sum, displacement, wit
 
 @_jit
 def material_steps(max_steps, clock, v, mass, alpha, sigma, loose, eps_p, face_flux_sum,
-                   displacement, with_markers, open_volume, r_c, r_nodes, h, hg_base, kappa,
-                   zface_aperture, rface_aperture, face_sign, open_face, prm, dt, g_full,
+                   displacement, with_markers, open_volume, r_c, r_nodes, strain_dims, h,
+                   hg_base, kappa, zface_aperture, rface_aperture, face_sign, open_face, prm,
+                   dt, g_full,
                    ramp_time, damping, light_mass, alpha_min, transport_cfl,
                    max_transport_interval, row_nodes, node_i, node_ptr, normal, mu, kind,
                    entry, plate_closed, contact_impulse, plate_impulse, budget, work):
     """Up to ``max_steps`` material steps, in place.
 
+    The symmetry is data: ``r_c`` is the radius of the hoop terms (the cell-centre radius;
+    infinite in plane strain, where they vanish), ``r_nodes`` the radial weights of the face
+    fluxes (the node radius; 1 in plane strain) and ``strain_dims`` the normal strains that
+    share the open-divergence correction (3; 2 in plane strain).
     ``clock = [t, step, flux_time]`` (s, -, s) is advanced; gravity is ``g_full`` ramped over
     ``ramp_time`` s (0: none).  The measurements of :func:`_node_update` accumulate in
     ``contact_impulse``, ``plate_impulse`` and ``budget[0:3]`` (vertical impulses of gravity,
@@ -553,7 +560,7 @@ def material_steps(max_steps, clock, v, mass, alpha, sigma, loose, eps_p, face_f
             budget[1] += row_budget[j, 1]
             budget[2] += row_budget[j, 2]
         _stress_update(block_ptr, n_blocks, load_runs, v, sigma, loose, eps_p, r_c, r_nodes,
-                       h, dt, kappa, zface_aperture, rface_aperture, prm, cst)
+                       strain_dims, h, dt, kappa, zface_aperture, rface_aperture, prm, cst)
         _faces(jf, j1, v, dt, face_sign, open_face, face_flux_sum, displacement, with_markers,
                row_speed)
         clock[2] += dt

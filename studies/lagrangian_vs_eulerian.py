@@ -481,7 +481,8 @@ def write_study_json(data, out, argv=None):
     wall_rows = [[s_, pe, pl, pl / pe - 1.0 if pe else math.nan, c] for s_, pe, pl, c in zip(
         agr["wall_s_m"], agr["wall_p_eulerian_Pa"], agr["wall_p_lagrangian_Pa"],
         agr["wall_compared"])]
-    settings = {"hopper": ", ".join(f"{k} = {v:g}" for k, v in cfg.to_dict()["hopper"].items()),
+    settings = {"hopper": ", ".join(f"{k} = {v:g}" if isinstance(v, float) else f"{k} = {v}"
+                                    for k, v in cfg.to_dict()["hopper"].items()),
                 "cell_size_m": cfg.numerics.cell_size,
                 "youngs_modulus_Pa": cfg.material.youngs_modulus,
                 "hourglass_coefficient": cfg.numerics.hourglass_coefficient,

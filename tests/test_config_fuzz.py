@@ -73,7 +73,10 @@ def near(low, high, integer=False):
 PLAUSIBLE = {
     "hopper": {"bin_diameter": near(0.2, 3.0), "half_angle_deg": near(5.0, 90.0),
                "outlet_diameter": near(0.02, 0.15), "bin_height": near(0.5, 5.0),
-               "fill_height": near(0.02, 1.0)},
+               "fill_height": near(0.02, 1.0),
+               "shape": (st.sampled_from(["conical", "wedge"]),
+                         st.sampled_from(["", "Wedge", "cylinder"]) | any_value),
+               "bin_width": near(0.2, 3.0), "outlet_width": near(0.02, 0.15)},
     "material": {"density": near(100.0, 5000.0), "youngs_modulus": near(1e4, 1e9),
                  "poisson_ratio": near(-0.5, 0.49), "friction_angle_deg": near(5.0, 60.0),
                  "dilation_angle_deg": near(0.0, 30.0), "cohesion": near(0.0, 1e4)},

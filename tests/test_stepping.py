@@ -200,7 +200,8 @@ def test_stress_rotates_with_the_material_jaumann(small_cfg):
                                           carry_runs, load_runs, block_ptr)
     before = sigma.copy()
     stepping._stress_update(block_ptr, n_blocks, load_runs, v, sigma, loose, eps_p, model.r_c,
-                            g.r_nodes, g.h, model.dt, g.kappa, model._zface_aperture,
+                            model.flux_radius, model.strain_dims, g.h, model.dt, g.kappa,
+                            model._zface_aperture,
                             model._rface_aperture, model._prm,
                             stepping.mc._fast_constants(model._prm))
     cells = np.flatnonzero(g.kappa[j] == 1.0)

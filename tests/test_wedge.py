@@ -1,0 +1,150 @@
+"""Wedge (plane-flow) hoppers: the plane-strain model at rest and in discharge (coarse grids).
+
+A wedge is the half-section of a hopper long in the third direction, on a plane grid, in
+plane strain: no hoop terms, no strain out of the plane, results per metre of length.
+"""
+
+import math
+import warnings
+
+import numpy as np
+import pytest
+
+from fipy_hopper import api, theory
+from fipy_hopper.cli import main
+from fipy_hopper.config import ConfigError, HopperConfig
+from fipy_hopper.model import HopperModel
+from fipy_hopper.simulation import Simulation
+
+RHO, G = 1500.0, 9.81
+
+
+def wedge(cell=0.01, wall_deg=15.0, run=None, **hopper):
+    base = {"shape": "wedge", "bin_width": 0.2, "outlet_width": 0.06, "half_angle_deg": 20.0,
+            "bin_height": 0.17, "fill_height": 0.15}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")        # coarse outlets: the resolution warning
+        return HopperConfig.from_dict({"hopper": {**base, **hopper},
+                                       "wall": {"friction_angle_deg": wall_deg},
+                                       "numerics": {"cell_size": cell},
+                                       "run": {"output_interval": 0.02, **(run or {})}})
+
+
+def filled(cfg):
+    sim = Simulation(HopperModel(cfg), progress=False)
+    assert sim.fill(), "the fill did not come to rest"
+    return sim
+
+
+def row_mean(model, state, k):
+    """alpha-weighted mean of stress component k over the full cells of each row."""
+    w = state.alpha * model.open_volume * (state.alpha > 0.99)
+    return (state.sigma[..., k] * w).sum(1) / np.maximum(w.sum(1), 1e-300)
+
+
+def test_plane_column_at_rest_is_hydrostatic_in_plane_strain():
+    """A frictionless plane bin at rest: sigma_zz = -rho g depth within 2 % (as the
+    axisymmetric column), the lateral ratio nu / (1 - nu) and, in plane strain, the stress
+    out of the plane nu (sigma_xx + sigma_zz) (zero strain along the wedge), each within 2 %;
+    the floor and the outlet plate carry the weight per metre of length."""
+    H = 0.3
+    sim = filled(wedge(wall_deg=0.0, half_angle_deg=90.0, bin_height=H + 0.02, fill_height=H))
+    model, st = sim.model, sim.state
+    z = model.grid.z_cells
+    rows = (z > 0) & (z < H - 2 * model.grid.h)
+    szz = row_mean(model, st, 1)[rows]
+    assert np.max(np.abs(szz / (-RHO * G * (H - z[rows])) - 1)) < 0.02
+    sxx, syy = row_mean(model, st, 0)[rows], row_mean(model, st, 2)[rows]
+    assert np.allclose(sxx / szz, 0.3 / 0.7, rtol=0.02)
+    assert np.allclose(syy, 0.3 * (sxx + szz), rtol=0.02)
+    weight = RHO * G * 0.2 * H                    # N per metre of length
+    balance = sim.record.rest_balance
+    assert balance["weight"] == pytest.approx(weight, rel=0.01)
+    assert balance["wall"] + balance["outlet"] == pytest.approx(weight, rel=0.005)
+
+
+def test_tall_plane_bin_reaches_janssens_plane_asymptote():
+    """A flat-bottomed plane bin filled to nine times its width: near the bottom the wall
+    pressure reaches the plane asymptote rho g B / (2 tan(phi_w)) (K-free) within 10 % (the
+    fill is over 2.5 z0 = B / (2 K mu) deep: within 8 % of the asymptote by Janssen)."""
+    B, depth = 0.12, 1.08
+    sim = Simulation(HopperModel(wedge(wall_deg=20.0, half_angle_deg=90.0, bin_width=B,
+                                       bin_height=depth + 0.03, fill_height=depth,
+                                       run={"end_time": 0.0})), progress=False)
+    sim.run()
+    _, s, _, z, p_n, _ = sim.record.wall["filling"]
+    mu = math.tan(math.radians(20.0))
+    asymptote = float(theory.janssen_plane_asymptotic_wall_pressure(RHO, B, mu))
+    z0 = B / (2 * sim.record.wall_k * mu)
+    near_bottom = (z > 0.1) & (z < 0.2)
+    assert depth / z0 > 2.5
+    assert np.mean(p_n[near_bottom]) == pytest.approx(asymptote, rel=0.1)
+    assert sim.summary()["fill_equilibrium_residual"] < 0.005
+
+
+@pytest.fixture(scope="module")
+def discharges():
+    """The 20 deg wedge discharged for 0.6 s at two fill heights."""
+    out = {}
+    for fill in (0.1, 0.25):
+        sim = Simulation(HopperModel(wedge(fill_height=fill, bin_height=fill + 0.02,
+                                           run={"end_time": 0.6})), progress=False)
+        sim.run()
+        out[fill] = sim
+    return out
+
+
+def test_wedge_discharge_conserves_mass(discharges):
+    for sim in discharges.values():
+        s = sim.summary()
+        assert s["discharged_kg"] > 0.2 * s["initial_mass_kg"]
+        assert s["mass_balance_error"] < 1e-9
+        assert sim.state.alpha.min() >= -1e-9 and sim.state.alpha.max() <= 1 + 1e-3
+
+
+def test_wedge_rate_does_not_depend_on_the_fill_height(discharges):
+    """The hourglass property in plane flow: 0.1 and 0.25 m of fill discharge at the same
+    rate within 10 % (a liquid's rate would grow as the square root of the head, by 25 %)."""
+    low, high = (discharges[f].summary()["steady_discharge_rate_kg_s"] for f in (0.1, 0.25))
+    assert abs(high / low - 1) < 0.10, (low, high)
+
+
+def test_wedge_results_are_per_metre_and_say_so(tmp_path, capsys):
+    """A fill-only wedge run writes masses and forces per metre (``_kg_m``, ``_N_m``); the
+    resolved configuration reads back as the same wedge; ``validate`` prints the plane-flow
+    Beverloo rate and Jenike's plane-flow angle."""
+    cfg = wedge(run={"end_time": 0.0})
+    summary = api.run(cfg, tmp_path / "run", plots=False)
+    assert "fill_weight_N_m" in summary and "initial_mass_kg_m" in summary
+    assert "fill_weight_N" not in summary and "initial_mass_kg" not in summary
+    assert summary["initial_mass_kg_m"] == pytest.approx(RHO * cfg.hopper.fill_volume(),
+                                                         rel=0.01)
+    assert HopperConfig.from_toml(tmp_path / "run" / "config.toml") == cfg
+    (tmp_path / "w.toml").write_text(
+        '[hopper]\nshape = "wedge"\nbin_width = 0.4\noutlet_width = 0.08\n')
+    assert main(["validate", str(tmp_path / "w.toml")]) == 0
+    out = capsys.readouterr().out
+    slot = float(theory.beverloo_slot_rate(RHO, 0.08))
+    plane = float(theory.jenike_critical_half_angle_plane(30.0, 15.0))
+    assert f"{slot:.4g} kg/s per m of slot" in out
+    assert f"{plane:.1f} deg" in out and "plane flow" in out
+
+
+@pytest.mark.parametrize("hopper, message", [
+    ({"shape": "wedge", "bin_width": 0.3}, "hopper.outlet_width is required"),
+    ({"shape": "wedge", "bin_width": 0.3, "outlet_width": 0.06, "bin_diameter": 0.3},
+     "hopper.bin_diameter is for a conical hopper"),
+    ({"bin_width": 0.3}, "hopper.bin_width is for shape"),
+    ({"shape": "cylinder"}, "hopper.shape = 'cylinder'"),
+    ({"shape": "wedge", "bin_width": 0.06, "outlet_width": 0.06},
+     "hopper.outlet_width = 0.06 m is not narrower than the bin, hopper.bin_width"),
+])
+def test_bad_wedge_input_gets_one_line_errors(hopper, message):
+    with pytest.raises(ConfigError, match=message.replace("(", r"\(")):
+        HopperConfig.from_dict({"hopper": hopper})
+
+
+def test_the_lagrangian_mode_refuses_a_wedge():
+    from fipy_hopper.lagrangian import LagrangianModel
+    with pytest.raises(ConfigError, match="conical hoppers only"):
+        LagrangianModel(wedge())
