@@ -294,5 +294,6 @@ def test_report_is_generated_from_the_outputs(root, flow_map, discharge, wall, c
     result = make_report.build(partial, tmp_path / "partial.md", copy=False)
     assert result["present"] == ["flow_mode_map"]
     assert set(result["missing"]) == {"discharge_rate", "wall_pressure", "convergence",
-                                      "robustness", "element_tests", "lagrangian_vs_eulerian"}
+                                      "robustness", "element_tests", "lagrangian_vs_eulerian",
+                                      "arching"}
     assert "python studies/robustness.py" in (tmp_path / "partial.md").read_text()
