@@ -419,8 +419,11 @@ def _git_commit() -> str:
     try:
         head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=here,
                               capture_output=True, text=True, timeout=10)
+        # the code: the package, the studies' scripts and configurations (not their outputs,
+        # REPORT.md and its figures, which the report itself rewrites)
         dirty = subprocess.run(["git", "status", "--porcelain", "--", "../fipy_hopper",
-                                "."], cwd=here, capture_output=True, text=True, timeout=10)
+                                "*.py", "configs"], cwd=here, capture_output=True, text=True,
+                               timeout=10)
     except (OSError, subprocess.SubprocessError):
         return ""
     if head.returncode != 0:

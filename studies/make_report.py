@@ -26,7 +26,6 @@ import json
 import math
 import os
 import shutil
-import subprocess
 import sys
 from pathlib import Path
 
@@ -88,17 +87,12 @@ class Figures:
 
 
 def _git_commit() -> str:
-    try:
-        out = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=HERE,
-                             capture_output=True, text=True, timeout=10)
-        dirty = subprocess.run(["git", "status", "--porcelain"], cwd=HERE, capture_output=True,
-                               text=True, timeout=10)
-        if out.returncode == 0:
-            return out.stdout.strip() + (" (with uncommitted changes)" if dirty.stdout.strip()
-                                         else "")
-    except (OSError, subprocess.SubprocessError):
-        pass
-    return "unknown"
+    """The commit of the code (``_sweep._git_commit``: the package and the studies' scripts)."""
+    if str(HERE) not in sys.path:
+        sys.path.insert(0, str(HERE))
+    import _sweep
+
+    return _sweep._git_commit() or "unknown"
 
 
 def study_section(name: str, data: dict, folder: Path, figures: Figures) -> list:
