@@ -150,9 +150,12 @@ def segment_contacts(r, z, geom: HopperGeometry, reach: float, r_far: float = 1e
     """Contact sets of the wall segments: ``[(index, mask, n_r, n_z), ...]``.
 
     A point is in contact with segment ``k`` when its projection falls on the segment
-    (``0 <= t <= 1``) and it lies less than ``reach`` in front of the segment or anywhere behind
-    it (inside the wall).  A point near a concave corner (the floor and the bin wall, the cone
-    and the bin) is in contact with both segments, so both normals constrain it; points near
+    (``0 <= t <= 1``, extended by ``reach`` past a concave corner) and it lies less than
+    ``reach`` in front of the segment or anywhere behind it (inside the wall).  A point near a
+    concave corner (the floor and the bin wall, the cone and the bin) is in contact with both
+    segments, so both normals constrain it, also a node just beyond the corner (behind one wall,
+    on the line of the other: the corner of a cut cell, which one normal alone let slide along
+    the wall); points near
     the convex lip that project beyond both segments belong to none (see
     :func:`wall_normal` for their nearest-point normal).  ``n`` points into the wall.
     """
@@ -160,6 +163,7 @@ def segment_contacts(r, z, geom: HopperGeometry, reach: float, r_far: float = 1e
     r = np.asarray(r, dtype=float)
     z = np.asarray(z, dtype=float)
     out = []
+    last = len(vertices) - 2
     for k in range(len(vertices) - 1):
         a, b = vertices[k], vertices[k + 1]
         ab = b - a
@@ -173,6 +177,13 @@ def segment_contacts(r, z, geom: HopperGeometry, reach: float, r_far: float = 1e
             normal = -normal
         # signed distance in front of the segment (positive on the material side)
         front = -((r - a[0]) * normal[0] + (z - a[1]) * normal[1])
-        mask = (t >= -1e-12) & (t <= 1 + 1e-12) & (front < reach)
+        # at a concave corner the segment's line continues into the solid: the nodes within
+        # reach beyond the corner (behind the other wall, corners of cut cells on this one)
+        # are held by this segment too; at the convex lip it continues into the material
+        ext = reach / length
+        step = 1e-6 * ab / length
+        lo = -ext if k > 0 and in_solid(*(a - step), geom) else 0.0
+        hi = 1.0 + ext if k < last and in_solid(*(b + step), geom) else 1.0
+        mask = (t >= lo - 1e-12) & (t <= hi + 1e-12) & (front < reach)
         out.append((k, mask, float(normal[0]), float(normal[1])))
     return out
