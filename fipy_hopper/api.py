@@ -66,7 +66,7 @@ def expected_quantities(cfg: HopperConfig) -> dict:
     slot rate (C' = 1.03, no hopper factor: ``rose_tanaka_factor`` is 1) and Jenike's
     plane-flow angle (the conical one plus 10 deg, :func:`theory.jenike_critical_half_angle_plane`).
 
-    With a cohesion ``c > 0`` also Jenike's design numbers (``docs/theory.md`` section g):
+    With a cohesion ``c > 0`` also Jenike's design numbers (``docs/correlations.md`` section g):
     ``unconfined_yield_strength_Pa`` ``sigma_c = 2 c cos(phi)/(1 - sin(phi))``;
     ``jenike_critical_outlet_m`` ``H(theta) sigma_c/(rho g)`` (NaN for a flat bottom, outside
     the fit of H); ``critical_outlet_simplified_m`` ``2 sigma_c/(rho g)``; and

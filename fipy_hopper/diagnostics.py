@@ -1,4 +1,5 @@
-"""What is measured from a run (docs/method.md, section 8).  Diagnostics read the state, never change it.
+"""What is measured from a run (docs/numerical_method.md, section 8).  Diagnostics read the
+state, never change it.
 
 - discharge rate ``W`` from the mass booked through the outlet faces (the same face values the
   transport uses, so ``M(t) + discharged(t) = M(0)`` to round-off), and its steady value;

@@ -10,7 +10,7 @@ from the vertical.  Pressures are positive in compression.
 
 What is verified
 ----------------
-Each docstring carries a tag; ``docs/theory.md`` lists every formula with its tag, source
+Each docstring carries a tag; ``docs/correlations.md`` lists every formula with its tag, source
 and a worked value:
 
 * **[V]** checked against the source that is named (``[V: X]`` names where it was read
@@ -151,7 +151,7 @@ _JENIKE_DELTA_MIN_DEG = float(np.degrees(np.arcsin(1.0 / 3.0)))
 
 
 # ---------------------------------------------------------------------------------------
-# helpers: conversion and validation
+# conversion and validation of the arguments
 # ---------------------------------------------------------------------------------------
 
 

@@ -1,7 +1,7 @@
 """Conservative, bounded transport of cell fields on the fixed cylindrical grid.
 
-The Eulerian step (docs/method.md, section 5) carries every cell field ``phi`` (a density per
-*open* volume: the material fraction ``alpha`` and alpha-weighted quantities such as
+The Eulerian step (docs/numerical_method.md, section 5) carries every cell field ``phi`` (a
+density per *open* volume: the material fraction ``alpha`` and alpha-weighted quantities such as
 ``alpha*sigma_rr`` or ``alpha*tracer``) with the face normal velocity of the material step:
 
     d/dt (kappa V phi) + sum_faces (u_n a A) phi_f = 0                                  (1)
@@ -1039,7 +1039,7 @@ def _capacity(upper, content, full):
 def _replay_kernel(fields, kappa_volume, donor, offsets, receiver, fraction):
     """Move the rows of ``fields`` (nF, nCells, per open volume) as the log says, in place.
 
-    (Helpers taking arrays are written out inline in the compiled loops of this section:
+    (Functions taking arrays are written out inline in the compiled loops of this section:
     numba's reference counting of array arguments costs more than the transfers themselves.)
     """
     n_fields, n = fields.shape
@@ -1330,7 +1330,7 @@ def _redistribute_kernel(alpha, fields, kappa_volume, alpha_max, tol, room_min, 
     start of its group) is the same pass.  Hop levels come from one breadth-first search per
     pass, stopped once the farthest boxed cell has its level; the queue (sorted by level) is
     walked backwards for the level-by-level hop transfers.  Adds the alpha moved across each
-    pair to ``pair_flux`` (along the pair's normal).  (Helpers taking arrays are written out
+    pair to ``pair_flux`` (along the pair's normal).  (Functions taking arrays are written out
     inline in these loops: numba's reference counting of array arguments costs more than the
     transfers themselves.)
 

@@ -1,6 +1,6 @@
 """Tests of fipy_hopper.theory.
 
-Part 1 reproduces every worked value of the project's theory reference (docs/theory.md)
+Part 1 reproduces every worked value of the project's theory reference (docs/correlations.md)
 to the precision it is printed with: a value printed with k decimals must lie within half a
 unit of its last printed digit.  The expected numbers are literals copied from the named
 section of that document; where a value comes from an outside source (the Rhodes
@@ -15,7 +15,7 @@ import pytest
 
 from fipy_hopper import theory as th
 
-RHO_B = 1500.0  # kg/m^3, docs/theory.md §b worked values
+RHO_B = 1500.0  # kg/m^3, docs/correlations.md §b worked values
 D0 = 0.05  # m
 
 
@@ -27,7 +27,7 @@ def assert_printed(value, printed, decimals):
 
 
 # =======================================================================================
-# Part 1: worked values of docs/theory.md
+# Part 1: worked values of docs/correlations.md
 # =======================================================================================
 
 # --- §b, table "Worked values (rho_b = 1500 kg/m^3, D0 = 0.05 m), in kg/s" --------------
