@@ -273,6 +273,12 @@ def _summary(sim, cfg, reason: str) -> dict:
 PER_METRE = (("_kg_s", "_kg_s_m"), ("_kg", "_kg_m"), ("_N", "_N_m"), ("_J", "_J_m"))
 
 
+def result_key(key: str, axisymmetric: bool = True) -> str:
+    """The name of a ``summary.json`` quantity: as given for a cone, per metre of length for a
+    wedge (:func:`per_metre`)."""
+    return key if axisymmetric else next(iter(per_metre({key: None})))
+
+
 def per_metre(values: dict) -> dict:
     """The same values with the names of masses, rates, forces and energies per metre of
     length (``steady_discharge_rate_kg_s`` -> ``steady_discharge_rate_kg_s_m``, ``_kg`` ->

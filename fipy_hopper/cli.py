@@ -290,10 +290,12 @@ def _cohesion_lines(cfg, e: dict) -> list:
 
 
 def _print_summary(s: dict, out) -> None:
+    from .api import result_key
+
     wedge = "steady_discharge_rate_kg_s_m" in s       # per metre of length
 
     def num(key, fmt):
-        value = s.get(key + ("_m" if wedge and key.endswith(("_kg", "_kg_s")) else ""))
+        value = s.get(result_key(key, axisymmetric=not wedge))
         return "n/a" if value is None else format(value, fmt)
 
     per = "/m" if wedge else ""

@@ -291,7 +291,9 @@ def discharge_curves(run):
     ax_m.set_ylabel(f"mass (kg{per})")
     ax_m.legend(loc="best", fontsize=8)
     ax_w.step(t, ts["discharge_rate_kg_s"], where="pre", color="C0", label="W(t), simulated")
-    steady = summary.get("steady_discharge_rate_kg_s" + ("" if axisymmetric else "_m"))
+    from .api import result_key
+
+    steady = summary.get(result_key("steady_discharge_rate_kg_s", axisymmetric))
     if steady is not None:
         ax_w.axhline(steady, color="C0", ls=":", label=f"steady rate {steady:.3g} kg/s{per}")
     rho, d0 = cfg.material.density, cfg.hopper.outlet_diameter
