@@ -261,6 +261,49 @@ def test_local_dask_cluster_runs_two_tiny_cases(tmp_path):
         assert r["run_dir"] == os.fspath(tmp_path.resolve() / "cases" / r["case"])
 
 
+# ---------------------------------------------------------------- discharge dynamics
+def test_discharge_dynamics_reads_the_bin_plug_without_changing_the_run(root):
+    """The study's sampler reads the state after every transport and never changes the run:
+    a discharge with it attached ends in exactly the state of one without.  Its quick outputs
+    hold one row per modulus, a plug stress of the order of the filled column's weight, and
+    an even, sub-millisecond sampling."""
+    dynamics = load("discharge_dynamics")
+    out = run_quick(root, "discharge_dynamics")
+    rows = rows_of(out / "results.csv")
+    assert [float(r["youngs_modulus_MPa"]) for r in rows] == [2.0, 5.0, 20.0]
+    # the plug sits 0.13-0.26 m below the surface of a 0.3 m bin: between the Janssen
+    # asymptote's share and the full hydrostatic head (rho g z = 1.9-3.8 kPa)
+    for r in rows:
+        assert 300.0 < float(r["plug_stress_mean_Pa"]) < 3800.0, r
+    data = study_json(out)
+    assert data["setting"] == "quick" and data["tables"][0]["rows"]
+    assert_png(out / "discharge_dynamics.png")
+
+    import numpy as np
+    from fipy_hopper.config import HopperConfig
+    from fipy_hopper.model import HopperModel
+    from fipy_hopper.simulation import Simulation
+
+    def final_state(with_sampler):
+        cfg = HopperConfig.from_dict({"numerics": {"cell_size": 0.01},
+                                      "run": {"end_time": 0.1, "markers_per_side": 0}})
+        model = HopperModel(cfg, threads=1)
+        plug = dynamics.plug_cells(model)
+        seen = []
+        if with_sampler:
+            model.after_transport.append(
+                lambda st: seen.append(float(np.mean(st.sigma[..., 1][plug]))))
+        sim = Simulation(model, progress=False)
+        sim.run()
+        return sim.state, seen
+
+    plain, _ = final_state(False)
+    sampled, seen = final_state(True)
+    assert len(seen) > 50
+    for name in ("v", "alpha", "sigma", "eps_p", "loose"):
+        assert np.array_equal(getattr(plain, name), getattr(sampled, name)), name
+
+
 # ---------------------------------------------------------------- the report
 def test_report_is_generated_from_the_outputs(root, flow_map, discharge, wall, convergence,
                                               robustness, tmp_path):
@@ -294,6 +337,7 @@ def test_report_is_generated_from_the_outputs(root, flow_map, discharge, wall, c
     result = make_report.build(partial, tmp_path / "partial.md", copy=False)
     assert result["present"] == ["flow_mode_map"]
     assert set(result["missing"]) == {"discharge_rate", "wall_pressure", "convergence",
+                                      "discharge_dynamics",
                                       "robustness", "element_tests", "lagrangian_vs_eulerian",
                                       "arching"}
     assert "python studies/robustness.py" in (tmp_path / "partial.md").read_text()
