@@ -177,7 +177,7 @@ def run(config_or_path, out, force: bool = False, resume: bool = False, quiet: b
 
     def snapshot(sim_, state):
         fields(sim_, state)
-        _write_tables(rundir, sim_.record)
+        _write_tables(rundir, sim_.record, cfg.hopper.axisymmetric)
 
     interval = cfg.run.field_interval
     sim.add_callback(snapshot, interval, stages=("filling",))
@@ -220,7 +220,7 @@ def run(config_or_path, out, force: bool = False, resume: bool = False, quiet: b
             fields.write(sim.state, sim.t_open)
         except Exception:  # pragma: no cover - never hide the run's own error
             pass
-    _write_tables(rundir, sim.record)
+    _write_tables(rundir, sim.record, cfg.hopper.axisymmetric)
     summary = _summary(sim, cfg, reason)
     manifest.end_session(status, reason, wall)
     summary["wall_time_s"] = manifest.total_wall_time()
@@ -239,10 +239,10 @@ def run(config_or_path, out, force: bool = False, resume: bool = False, quiet: b
     return fio._jsonable(summary)
 
 
-def _write_tables(rundir, record) -> None:
-    fio.write_timeseries(rundir / rundir.TIMESERIES, record)
+def _write_tables(rundir, record, axisymmetric: bool = True) -> None:
+    fio.write_timeseries(rundir / rundir.TIMESERIES, record, axisymmetric)
     fio.write_wall_pressure(rundir / rundir.WALL_PRESSURE, record)
-    fio.write_loads(rundir / rundir.LOADS, record)
+    fio.write_loads(rundir / rundir.LOADS, record, axisymmetric)
 
 
 def _summary(sim, cfg, reason: str) -> dict:
@@ -269,28 +269,8 @@ def _summary(sim, cfg, reason: str) -> dict:
     return summary if cfg.hopper.axisymmetric else per_metre(summary)
 
 
-#: unit suffixes of extensive quantities and their per-metre forms (wedge hoppers)
-PER_METRE = (("_kg_s", "_kg_s_m"), ("_kg", "_kg_m"), ("_N", "_N_m"), ("_J", "_J_m"))
-
-
-def result_key(key: str, axisymmetric: bool = True) -> str:
-    """The name of a ``summary.json`` quantity: as given for a cone, per metre of length for a
-    wedge (:func:`per_metre`)."""
-    return key if axisymmetric else next(iter(per_metre({key: None})))
-
-
-def per_metre(values: dict) -> dict:
-    """The same values with the names of masses, rates, forces and energies per metre of
-    length (``steady_discharge_rate_kg_s`` -> ``steady_discharge_rate_kg_s_m``, ``_kg`` ->
-    ``_kg_m``, ``_N`` -> ``_N_m``): what a wedge's results are."""
-    out = {}
-    for key, value in values.items():
-        for suffix, metre in PER_METRE:
-            if key.endswith(suffix):
-                key = key[: -len(suffix)] + metre
-                break
-        out[key] = value
-    return out
+#: the per-metre names of a wedge's results (defined with the output files)
+PER_METRE, per_metre, result_key = fio.PER_METRE, fio.per_metre, fio.result_key
 
 
 # ---------------------------------------------------------------- reading results

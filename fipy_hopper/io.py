@@ -73,6 +73,34 @@ LOADS_COLUMNS = ("stage", "t_s", "weight_N", "wall_vertical_N", "outlet_N", "dam
 #: Columns of ``fields/snapshots.csv``.
 SNAPSHOT_COLUMNS = ("index", "file", "step", "t_s", "discharge_time_s", "stage")
 
+#: unit suffixes of extensive quantities and their per-metre forms (wedge hoppers)
+PER_METRE = (("_kg_s", "_kg_s_m"), ("_kg", "_kg_m"), ("_N", "_N_m"), ("_J", "_J_m"))
+
+
+def per_metre(values: dict) -> dict:
+    """The same values with the names of masses, rates, forces and energies per metre of
+    length (``steady_discharge_rate_kg_s`` -> ``steady_discharge_rate_kg_s_m``, ``_kg`` ->
+    ``_kg_m``, ``_N`` -> ``_N_m``): what a wedge's results are."""
+    out = {}
+    for key, value in values.items():
+        for suffix, metre in PER_METRE:
+            if key.endswith(suffix):
+                key = key[: -len(suffix)] + metre
+                break
+        out[key] = value
+    return out
+
+
+def result_key(key: str, axisymmetric: bool = True) -> str:
+    """The name of a result (a ``summary.json`` key or a CSV column): as given for a cone, per
+    metre of length for a wedge (:func:`per_metre`)."""
+    return key if axisymmetric else next(iter(per_metre({key: None})))
+
+
+def result_columns(columns, axisymmetric: bool = True) -> tuple:
+    """The CSV header of ``columns`` for a cone, or per metre of length for a wedge."""
+    return tuple(result_key(c, axisymmetric) for c in columns)
+
 #: The dependencies whose versions the manifest records.
 DEPENDENCIES = ("fipy", "numpy", "scipy", "numba", "matplotlib", "meshio", "pillow", "tomli")
 
@@ -192,17 +220,19 @@ def read_csv(path: PathLike) -> dict:
 
 
 # ---------------------------------------------------------------- tables
-def write_timeseries(path: PathLike, record) -> None:
+def write_timeseries(path: PathLike, record, axisymmetric: bool = True) -> None:
     """``timeseries.csv`` from a :class:`~fipy_hopper.simulation.RunRecord`.
 
     ``t_s`` is the time since the outlet opened (s); masses are for the full 3D hopper (kg);
     ``discharge_rate_kg_s`` is the mass through the outlet over the preceding sample interval.
+    A wedge's masses and rates are per metre of length and named so (``mass_in_hopper_kg_m``,
+    ``discharge_rate_kg_s_m``, :func:`result_columns`).
     """
     n = len(record.t)
     rows = ([_num(record.t[i]), _num(record.mass_in_hopper[i]), _num(record.discharged[i]),
              _num(record.rate[i]), _num(record.mass_flow_index[i]),
              _num(record.stagnant_fraction[i])] for i in range(n))
-    _write_csv(path, TIMESERIES_COLUMNS, rows)
+    _write_csv(path, result_columns(TIMESERIES_COLUMNS, axisymmetric), rows)
 
 
 def write_wall_pressure(path: PathLike, record) -> None:
@@ -230,15 +260,16 @@ def write_wall_pressure(path: PathLike, record) -> None:
     _write_csv(path, WALL_PRESSURE_COLUMNS, rows)
 
 
-def write_loads(path: PathLike, record) -> None:
+def write_loads(path: PathLike, record, axisymmetric: bool = True) -> None:
     """``loads.csv``: the vertical momentum balance of the grid over each output interval
     (:meth:`fipy_hopper.diagnostics.WallLoads.balance`), filling and discharge; ``t_s`` the
-    time since filling began at the end of the interval (s)."""
+    time since filling began at the end of the interval (s).  A wedge's forces are per metre
+    of length (``weight_N_m``, ...)."""
     keys = ("weight", "wall", "outlet", "damping", "stopped", "outflow", "momentum_rate",
             "residual", "relative_residual")
     rows = [[row["stage"], _num(row["t_s"])] + [_num(row[k]) for k in keys]
             for row in getattr(record, "loads", [])]
-    _write_csv(path, LOADS_COLUMNS, rows)
+    _write_csv(path, result_columns(LOADS_COLUMNS, axisymmetric), rows)
 
 
 # ---------------------------------------------------------------- run directory
@@ -727,7 +758,7 @@ def check_run_files(path: PathLike) -> None:
     """Check that ``path`` holds the readable files of a run before anything is drawn from it.
 
     ``config.toml`` must be a valid configuration and ``timeseries.csv`` a table with the
-    columns of :data:`TIMESERIES_COLUMNS` (numbers); ``wall_pressure.csv``, ``summary.json``
+    columns of :data:`TIMESERIES_COLUMNS` (numbers, per metre for a wedge); ``wall_pressure.csv``, ``summary.json``
     and ``fields/snapshots.csv``, when present, must read back as written.  Raises
     :class:`RunDirectoryError` with one line naming the file.
     """
@@ -746,11 +777,13 @@ def check_run_files(path: PathLike) -> None:
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                HopperConfig.from_toml(folder / RunDirectory.CONFIG)
+                config = HopperConfig.from_toml(folder / RunDirectory.CONFIG)
         except ConfigError as exc:
             raise RunDirectoryError(f"{where} is not a run directory of fipy-hopper: {exc}") \
                 from None
-        _check_table(folder / RunDirectory.TIMESERIES, TIMESERIES_COLUMNS[:4], ())
+        axisymmetric = config.hopper.axisymmetric
+        _check_table(folder / RunDirectory.TIMESERIES,
+                     result_columns(TIMESERIES_COLUMNS[:4], axisymmetric), ())
         if (folder / RunDirectory.WALL_PRESSURE).is_file():
             _check_table(folder / RunDirectory.WALL_PRESSURE, WALL_PRESSURE_COLUMNS[:7],
                          ("stage",))         # the public columns (older runs have no more)

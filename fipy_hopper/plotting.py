@@ -286,13 +286,16 @@ def discharge_curves(run):
     ax_m, ax_w = fig.subplots(2, 1, sharex=True)
     axisymmetric = cfg.hopper.axisymmetric
     per = "" if axisymmetric else " per m"            # a wedge: per metre of length
-    ax_m.plot(t, ts["mass_in_hopper_kg"], "-", color="C0", label="M(t), in the hopper")
-    ax_m.plot(t, ts["discharged_kg"], "--", color="C1", label="discharged")
+    from .io import result_key
+
+    column = {c: result_key(c, axisymmetric) for c in ("mass_in_hopper_kg", "discharged_kg",
+                                                       "discharge_rate_kg_s")}
+    ax_m.plot(t, ts[column["mass_in_hopper_kg"]], "-", color="C0", label="M(t), in the hopper")
+    ax_m.plot(t, ts[column["discharged_kg"]], "--", color="C1", label="discharged")
     ax_m.set_ylabel(f"mass (kg{per})")
     ax_m.legend(loc="best", fontsize=8)
-    ax_w.step(t, ts["discharge_rate_kg_s"], where="pre", color="C0", label="W(t), simulated")
-    from .api import result_key
-
+    ax_w.step(t, ts[column["discharge_rate_kg_s"]], where="pre", color="C0",
+              label="W(t), simulated")
     steady = summary.get(result_key("steady_discharge_rate_kg_s", axisymmetric))
     if steady is not None:
         ax_w.axhline(steady, color="C0", ls=":", label=f"steady rate {steady:.3g} kg/s{per}")

@@ -13,6 +13,7 @@ import pytest
 from fipy_hopper import api, theory
 from fipy_hopper.cli import main
 from fipy_hopper.config import ConfigError, HopperConfig
+from fipy_hopper.io import check_run_files
 from fipy_hopper.model import HopperModel
 from fipy_hopper.simulation import Simulation
 
@@ -110,7 +111,8 @@ def test_wedge_rate_does_not_depend_on_the_fill_height(discharges):
 
 
 def test_wedge_results_are_per_metre_and_say_so(tmp_path, capsys):
-    """A fill-only wedge run writes masses and forces per metre (``_kg_m``, ``_N_m``); the
+    """A fill-only wedge run writes masses and forces per metre (``_kg_m``, ``_N_m``) in
+    ``summary.json`` and in the CSV headers; the
     resolved configuration reads back as the same wedge; ``validate`` prints the plane-flow
     Beverloo rate and Jenike's plane-flow angle."""
     cfg = wedge(run={"end_time": 0.0})
@@ -120,6 +122,15 @@ def test_wedge_results_are_per_metre_and_say_so(tmp_path, capsys):
     assert summary["initial_mass_kg_m"] == pytest.approx(RHO * cfg.hopper.fill_volume(),
                                                          rel=0.01)
     assert HopperConfig.from_toml(tmp_path / "run" / "config.toml") == cfg
+    # the tables say it too, and read back as a run directory
+    header = {name: (tmp_path / "run" / name).read_text().splitlines()[0].split(",")
+              for name in ("timeseries.csv", "loads.csv")}
+    assert {"mass_in_hopper_kg_m", "discharged_kg_m", "discharge_rate_kg_s_m"} <= \
+        set(header["timeseries.csv"])
+    assert {"weight_N_m", "wall_vertical_N_m", "outlet_N_m"} <= set(header["loads.csv"])
+    assert not {"mass_in_hopper_kg", "weight_N"} & (set(header["timeseries.csv"])
+                                                    | set(header["loads.csv"]))
+    check_run_files(tmp_path / "run")
     (tmp_path / "w.toml").write_text(
         '[hopper]\nshape = "wedge"\nbin_width = 0.4\noutlet_width = 0.08\n')
     assert main(["validate", str(tmp_path / "w.toml")]) == 0
