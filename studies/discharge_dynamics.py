@@ -187,6 +187,13 @@ def main(argv=None) -> int:
         findings.append("Wall pressure beside the plug, 90 % left / filled: " + ", ".join(
             f"{r['p_early_beside_plug_Pa']:.0f} / {r['p_filled_beside_plug_Pa']:.0f} Pa"
             for r in rows) + " at E = " + ", ".join(f"{e:g}" for e in E) + " MPa.")
+    headline = ("The bin's plug swings by " + " / ".join(
+        f"{100 * r['fluctuation']:.0f}" for r in rows) + " % (std / mean after "
+        f"{opts['windows'][1][0]:g} s) at E = " + " / ".join(f"{e:g}" for e in E)
+        + " MPa, and its plastic strain reaches " + " / ".join(
+            f"{r['plug_plastic_strain_end']:.2f}" for r in rows)
+        + "; its mean stress (" + " / ".join(f"{r['plug_stress_mean_Pa']:.0f}" for r in rows)
+        + " Pa) and the rate do not depend on E.")
     table = {"title": "The bin plug's vertical stress in discharge",
              "columns": ["E (MPa)", "window (s)", "mean -sigma_zz (Pa)", "std (Pa)",
                          "std / mean"],
@@ -201,7 +208,7 @@ def main(argv=None) -> int:
         [{"file": f"{NAME}.png", "caption": "Left: the mean vertical stress of the bin's upper "
           "plug against time in discharge, per E. Right: its relative fluctuation, the plug's "
           "plastic strain, and the wall pressure beside it relative to the filled value."}],
-        tables=[table], rows=[{"wall_time_s": r["wall_time_s"]} for r in rows], argv=argv)
+        tables=[table], headline=headline, rows=[{"wall_time_s": r["wall_time_s"]} for r in rows], argv=argv)
     return 0
 
 
