@@ -165,7 +165,7 @@ class HopperModel:
         self.open_volume = g.kappa * g.cell_volume          # (nz, nr) m^3/rad (m^2 for a wedge)
         # "axisymmetric": FiPy's van Leer update with the reconstruction distances of the
         # cylindrical cells corrected; FiPy's own geometry over/undershoots on cylindrical
-        # grids (see fipy_hopper.transport), this one stays within [0, 1]
+        # grids (see fipy_hopper.transport.vanleer), this one stays within [0, 1]
         self.transport_open = Transport(g.mesh, g.kappa.ravel(), g.face_aperture,
                                         g.outflow_faces, TRANSPORTED, backend=backend,
                                         scheme="axisymmetric")

@@ -15,7 +15,7 @@ compiled kernels it replaces:
 2. per *loaded* cell (``alpha >= alpha_min``): the Q1 strain increment and spin, the Jaumann
    rotation, the open-volume divergence as volumetric strain, the closing of loose volume
    (first pass, over runs of cells along a row), then the elastic predictor, the Mohr-Coulomb
-   return (the fast lockstep solve of :mod:`fipy_hopper.material` for a block of up to
+   return (the fast lockstep solve of :mod:`fipy_hopper.material.return_fast` for a block of up to
    ``BLOCK`` cells, the robust return for the points it does not accept) and the plastic and
    loose strains (second pass);
 3. face velocities, the face-flux integral of the transport, the nodal displacement of the
@@ -43,10 +43,12 @@ import numba
 import numpy as np
 from numba import prange
 
-from . import material as mc
+from .material import mohr_coulomb as mc
+from .material import return_fast as fast
+from .material import return_robust as robust
 
 #: largest number of loaded cells in a block of the Mohr-Coulomb solve
-BLOCK = mc._BLOCK
+BLOCK = fast._BLOCK
 
 _PLASTIC, _APEX = mc.PLASTIC, mc.APEX
 
@@ -395,7 +397,7 @@ def _stress_block(r0, r1, load_runs, v, sigma, loose, eps_p, r_c, r_nodes, strai
                   kappa, zface_aperture, rface_aperture, prm, cst):
     """Stress update of the loaded cells of the runs ``r0 <= run < r1`` (one block), in place:
     :func:`_strain_run`, then the elastic predictor, the return and the plastic and loose
-    strains as ``material._update_kernel``, ``separation_strain`` and
+    strains as ``material.return_fast._update_kernel``, ``separation_strain`` and
     ``equivalent_plastic_strain``."""
     lam, mu, K, E, nu, sp, cp, tp, tpsi, c, a, e, rc3 = mc._unpack(prm)
     n = 0
@@ -451,16 +453,16 @@ def _stress_block(r0, r1, load_runs, v, sigma, loose, eps_p, r_c, r_nodes, strai
         trial[4, m], trial[5, m] = cw, sw
         S[0, m], S[1, m], S[2, m], S[3, m] = s1, s2, s3, f
         m += 1
-    W = np.empty((mc._W_ROWS, m))
+    W = np.empty((fast._W_ROWS, m))
     flags = np.empty((3, m), dtype=np.bool_)
-    mc._fast_block(m, S, W, flags, cst)
+    fast._fast_block(m, S, W, flags, cst)
     for k in range(m):
         q = plastic[k]
         j, i = cell_j[q], cell_i[q]
-        if flags[mc._F_OK, k]:
-            n1, n2, n3, status = W[mc._W_N1, k], W[mc._W_N2, k], W[mc._W_N3, k], _PLASTIC
+        if flags[fast._F_OK, k]:
+            n1, n2, n3, status = W[fast._W_N1, k], W[fast._W_N2, k], W[fast._W_N3, k], _PLASTIC
         else:
-            n1, n2, n3, status = mc._return_sorted(S[0, k], S[1, k], S[2, k], prm)
+            n1, n2, n3, status = robust._return_sorted(S[0, k], S[1, k], S[2, k], prm)
         if pos[k] == 0:
             na, nb_, ntt = n2, n3, n1
         elif pos[k] == 1:
@@ -543,7 +545,7 @@ def material_steps(max_steps, clock, v, mass, alpha, sigma, loose, eps_p, face_f
     constant until then).
     """
     carry_runs, load_runs, block_ptr, contrib, row_speed, row_budget = work
-    cst = mc._fast_constants(prm)
+    cst = fast._fast_constants(prm)
     n_carry, n_load, n_blocks, j0, j1 = _runs(alpha, alpha_min, sigma, loose, v, contrib,
                                               carry_runs, load_runs, block_ptr)
     jf = max(j0 - 1, 0)         # the r-faces below the lowest node row with material move too

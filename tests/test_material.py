@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from fipy_hopper import material as mm
+from fipy_hopper.material import mohr_coulomb, return_fast, return_robust
 from fipy_hopper.material import (
     APEX,
     ELASTIC,
@@ -187,11 +188,13 @@ def test_radii_end_values():
 @pytest.mark.parametrize("e", [0.5001, 0.6, 0.75, 0.95, 1.0])
 def test_menetrey_willam_derivatives_and_convexity(e):
     th = np.linspace(0.0, np.pi / 3, 41)
-    r, r1, r2 = mm._mw_radius(th, e)
+    r, r1, r2 = mohr_coulomb._mw_radius(th, e)
     h = 1e-6
     inner = slice(1, -1)  # the central differences at the ends leave [0, pi/3]
-    fd1 = (mm._mw_radius(th + h, e)[0] - mm._mw_radius(th - h, e)[0]) / (2 * h)
-    fd2 = (mm._mw_radius(th + h, e)[1] - mm._mw_radius(th - h, e)[1]) / (2 * h)
+    fd1 = (mohr_coulomb._mw_radius(th + h, e)[0]
+           - mohr_coulomb._mw_radius(th - h, e)[0]) / (2 * h)
+    fd2 = (mohr_coulomb._mw_radius(th + h, e)[1]
+           - mohr_coulomb._mw_radius(th - h, e)[1]) / (2 * h)
     np.testing.assert_allclose(r1[inner], fd1[inner], atol=1e-6 * np.abs(r1).max() + 1e-9)
     np.testing.assert_allclose(r2[inner], fd2[inner], rtol=1e-5, atol=1e-6 * np.abs(r2).max() + 1e-9)
     # smooth on both meridians (to round-off, which grows like 1/(2e - 1) towards the triangle)
@@ -333,7 +336,7 @@ def test_update_on_flowing_states_guarantees_and_reference(name):
 
 
 def _fast_path(mat, sig, de):
-    """The compiled fast return (mm._fast_block) of the plastic trial states: sorted trial
+    """The compiled fast return (return_fast._fast_block) of the plastic trial states: sorted trial
     principal stresses, whether the fast path accepted each, and its returned sorted stresses."""
     s = principal_stresses(elastic_trial(sig, de, mat))
     sp, cp = math.sin(mat.phi_rad), math.cos(mat.phi_rad)
@@ -341,9 +344,11 @@ def _fast_path(mat, sig, de):
     s, f = s[f > 0], f[f > 0]
     m = len(f)
     S = np.ascontiguousarray(np.vstack([s.T, f]))
-    W, flags = np.empty((mm._W_ROWS, m)), np.empty((3, m), dtype=bool)
-    mm._fast_block(m, S, W, flags, mm._fast_constants(mat.kernel_parameters()))
-    return s, flags[mm._F_OK], W[[mm._W_N1, mm._W_N2, mm._W_N3]].T
+    W, flags = np.empty((return_fast._W_ROWS, m)), np.empty((3, m), dtype=bool)
+    return_fast._fast_block(m, S, W, flags,
+                            return_fast._fast_constants(mat.kernel_parameters()))
+    rows = [return_fast._W_N1, return_fast._W_N2, return_fast._W_N3]
+    return s, flags[return_fast._F_OK], W[rows].T
 
 
 @pytest.mark.parametrize("name", sorted(FLOWING))
@@ -355,7 +360,7 @@ def test_fast_return_equals_robust_return_and_takes_the_flowing_states(name):
     sig, de = flowing_states(mat, 1500, seed=22)
     s, ok, fast = _fast_path(mat, sig, de)
     prm = mat.kernel_parameters()
-    robust = np.array([mm._return_sorted(*row, prm) for row in s])
+    robust = np.array([return_robust._return_sorted(*row, prm) for row in s])
     regular = robust[:, 3] == PLASTIC
     # (for e -> 1/2 the sharp corner of G sends a few to the robust return)
     assert ok[regular].mean() >= (0.999 if mat.e > 0.55 else 0.9)

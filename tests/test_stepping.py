@@ -9,6 +9,7 @@ import pytest
 
 from fipy_hopper import geometry, markers, momentum, stepping
 from fipy_hopper.config import HopperConfig
+from fipy_hopper.material import return_fast
 from fipy_hopper.model import TRANSPORTED, HopperModel
 from fipy_hopper.transport import material_rows
 
@@ -203,7 +204,7 @@ def test_stress_rotates_with_the_material_jaumann(small_cfg):
                             model.flux_radius, model.strain_dims, g.h, model.dt, g.kappa,
                             model._zface_aperture,
                             model._rface_aperture, model._prm,
-                            stepping.mc._fast_constants(model._prm))
+                            return_fast._fast_constants(model._prm))
     cells = np.flatnonzero(g.kappa[j] == 1.0)
     assert cells.size >= 3
     w = omega * model.dt

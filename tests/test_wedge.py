@@ -14,6 +14,7 @@ from fipy_hopper import api, theory
 from fipy_hopper.cli import main
 from fipy_hopper.config import ConfigError, HopperConfig
 from fipy_hopper.io import check_run_files
+from fipy_hopper.material import return_fast
 from fipy_hopper.model import HopperModel
 from fipy_hopper.simulation import Simulation
 
@@ -207,7 +208,7 @@ def test_no_strain_along_the_wedge_in_cut_cells():
                                     state.loose, state.eps_p, model.r_c, model.flux_radius,
                                     model.strain_dims, g.h, model.dt, g.kappa,
                                     model._zface_aperture, model._rface_aperture, model._prm,
-                                    stepping.mc._fast_constants(model._prm))
+                                    return_fast._fast_constants(model._prm))
         else:
             model.material = cfg.material.mohr_coulomb().__class__(
                 E=5e6, nu=0.3, rho=RHO, phi=30.0, psi=0.0, c=1e30)

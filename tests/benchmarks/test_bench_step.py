@@ -29,6 +29,7 @@ import pytest
 
 from fipy_hopper import diagnostics, io, markers, stepping
 from fipy_hopper.config import HopperConfig
+from fipy_hopper.material import return_fast
 from fipy_hopper.model import GRAVITY, HopperModel
 from fipy_hopper.simulation import Simulation
 
@@ -67,7 +68,7 @@ def material_call(model, state, prm=None, part="all"):
         state.alpha, num.alpha_min, state.sigma, state.loose, state.v, contrib, carry_runs,
         load_runs, block_ptr)
     prm = model._prm if prm is None else prm
-    cst = stepping.mc._fast_constants(prm)
+    cst = return_fast._fast_constants(prm)
     mass = model.node_mass(state)
     sigma, loose, eps_p = state.sigma.copy(), state.loose.copy(), state.eps_p.copy()
     v, flux, disp = state.v.copy(), state.face_flux_sum.copy(), state.displacement.copy()

@@ -1,0 +1,134 @@
+"""Element tests: one material point under mixed stress/strain control.
+
+:func:`drive` takes a point through prescribed strain increments while holding stress
+combinations ``c_j . sigma`` (Newton on the compiled :func:`fipy_hopper.material.update`);
+:func:`element_test` runs the classical laboratory paths of :data:`PATHS` (triaxial
+compression and extension, simple shear, oedometric).  Stresses in Pa, tension positive.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .mohr_coulomb import MohrCoulomb, elastic_stiffness, invariants
+from .return_fast import update
+
+__all__ = ["ElementTestResult", "PATHS", "drive", "element_test"]
+
+#: Laboratory paths of :func:`element_test`: the strain increment per unit of ``strain`` and the
+#: stress-controlled strain modes (rows; see :func:`drive`).  Homogeneous axisymmetric
+#: deformation u_r = eps_rr r has eps_tt = eps_rr, so the lateral mode of the triaxial test moves
+#: both together and holds their mean stress.
+PATHS = {
+    "triaxial_compression": ((0.0, -1.0, 0.0, 0.0), ((1.0, 0.0, 1.0, 0.0),)),
+    "triaxial_extension": ((0.0, 1.0, 0.0, 0.0), ((1.0, 0.0, 1.0, 0.0),)),
+    "simple_shear": ((0.0, 0.0, 0.0, 0.5), ((0.0, 1.0, 0.0, 0.0),)),
+    "oedometric": ((0.0, -1.0, 0.0, 0.0), ()),
+}
+
+
+@dataclass(frozen=True)
+class ElementTestResult:
+    """History of a material-point test; arrays have n_steps + 1 rows (row 0 = initial state).
+
+    strain, plastic_strain: accumulated total and plastic strain (tensor shear layout);
+    stress (Pa); status (n_steps,) of each update; residual (n_steps,) the largest violation (Pa)
+    of the stress conditions after each step.
+    """
+
+    path: str
+    strain: np.ndarray
+    stress: np.ndarray
+    plastic_strain: np.ndarray
+    status: np.ndarray
+    residual: np.ndarray
+
+    @property
+    def invariants(self):
+        """(p, q, r, Theta) of every recorded stress."""
+        return invariants(self.stress)
+
+    @staticmethod
+    def volumetric(eps):
+        """tr(eps): positive for a volume increase (dilation)."""
+        return eps[..., 0] + eps[..., 1] + eps[..., 2]
+
+    @staticmethod
+    def deviatoric(eps):
+        """eps_q = sqrt(2/3 e:e), e = dev(eps) (the rz entry counted twice)."""
+        e = eps[..., :3] - ElementTestResult.volumetric(eps)[..., None] / 3.0
+        return np.sqrt(2.0 / 3.0 * ((e * e).sum(-1) + 2.0 * eps[..., 3] ** 2))
+
+
+def drive(mat: MohrCoulomb, sigma0, d_eps, control=(), d_sigma=None, path="custom", max_iter=30,
+          rtol=1e-13):
+    """Drive one material point through strain increments with mixed stress/strain control.
+
+    d_eps (n, 4): prescribed strain increments (tensor shear; normally orthogonal to the modes).
+    control (m, 4): stress-controlled strain modes c_j; each step adds sum_j x_j c_j to d_eps and
+    solves for x so that
+    c_j . sigma = c_j . (sigma0 + accumulated d_sigma) (default d_sigma = 0: held).  E.g.
+    c = (0, 1, 0, 0) holds sigma_zz; c = (1, 0, 1, 0) moves eps_rr = eps_tt together and holds
+    sigma_rr + sigma_tt.  Newton's method with a forward-difference tangent of :func:`update`
+    along the modes (elastic guess first), to |residual| <= rtol * max(|sigma|, 1 Pa).
+    One point, not vectorised.
+    """
+    d_eps = np.atleast_2d(np.asarray(d_eps, dtype=float))
+    n = d_eps.shape[0]
+    c = np.asarray(control, dtype=float).reshape(-1, 4)
+    m = c.shape[0]
+    d_sigma = np.zeros((n, 4)) if d_sigma is None else np.broadcast_to(d_sigma, (n, 4))
+    C = elastic_stiffness(mat)
+    Ce = c @ C @ c.T  # elastic tangent of the conditions with respect to x
+    sig = np.broadcast_to(np.asarray(sigma0, dtype=float), (4,)).copy()
+    target = c @ sig
+    eps, eps_p = np.zeros(4), np.zeros(4)
+    hist = {"stress": [sig.copy()], "strain": [eps.copy()], "plastic": [eps_p.copy()]}
+    status, residual = np.zeros(n, dtype=np.int8), np.zeros(n)
+    for k in range(n):
+        target = target + c @ d_sigma[k]
+        x = np.linalg.solve(Ce, target - c @ (sig + C @ d_eps[k])) if m else np.zeros(0)
+        for _ in range(max_iter):
+            de = d_eps[k] + x @ c
+            h = 1e-7 * max(np.abs(de).max(), 1e-12)
+            s_new, dp_new, st = update(np.tile(sig, (m + 1, 1)), de + np.vstack([0.0 * de, h * c]),
+                                       mat, return_status=True)
+            r = c @ s_new[0] - target
+            if m == 0 or np.abs(r).max() <= rtol * max(np.abs(s_new[0]).max(), 1.0):
+                break
+            J = (s_new[1:] @ c.T - (c @ s_new[0])[None, :]).T / h
+            try:
+                x = x - np.linalg.solve(J, r)
+            except np.linalg.LinAlgError:
+                x = x - np.linalg.solve(Ce, r)
+        sig, eps, eps_p = s_new[0], eps + de, eps_p + dp_new[0]
+        status[k] = st[0]
+        residual[k] = np.abs(r).max() if m else 0.0
+        hist["stress"].append(sig.copy())
+        hist["strain"].append(eps.copy())
+        hist["plastic"].append(eps_p.copy())
+    return ElementTestResult(path, np.array(hist["strain"]), np.array(hist["stress"]),
+                             np.array(hist["plastic"]), status, residual)
+
+
+def element_test(mat: MohrCoulomb, path: str, sigma0, strain: float, n_steps: int = 100):
+    """Classical laboratory path from the initial stress sigma0 (float: isotropic sigma0 I, Pa).
+
+    ``strain`` (> 0) is the magnitude of the controlled strain, applied in n_steps equal steps:
+    * triaxial_compression / triaxial_extension: axial strain eps_zz = -strain / +strain, lateral
+      stress held (drained, constant confinement; eps_rr = eps_tt), eps_rz = 0;
+    * simple_shear: engineering shear strain gamma_rz = 2 eps_rz = strain, sigma_zz held (constant
+      normal stress), eps_rr = eps_tt = 0 (no lateral strain; the hoop direction plays the
+      out-of-plane direction of plane-strain simple shear);
+    * oedometric: eps_zz = -strain, eps_rr = eps_tt = eps_rz = 0 (pure strain control).
+    """
+    if path not in PATHS:
+        raise ValueError(f"unknown element-test path {path!r}; choose one of {sorted(PATHS)}")
+    unit, control = PATHS[path]
+    sigma0 = np.asarray(sigma0, dtype=float)
+    if sigma0.ndim == 0:
+        sigma0 = sigma0 * np.array([1.0, 1.0, 1.0, 0.0])
+    d_eps = np.tile(np.asarray(unit) * (strain / n_steps), (n_steps, 1))
+    return drive(mat, sigma0, d_eps, control, path=path)
