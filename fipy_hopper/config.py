@@ -278,8 +278,9 @@ class MaterialConfig:
                      self.friction_angle_deg, unit=" deg")
         _check_range("material.cohesion", self.cohesion, 0, COHESION_MAX, unit=" Pa")
 
-    def mohr_coulomb(self):
-        """The :class:`fipy_hopper.material.MohrCoulomb` of this material."""
+    def law(self):
+        """The constitutive law of this material (:mod:`fipy_hopper.material.law`): a
+        :class:`fipy_hopper.material.MohrCoulomb` in the Abaqus form."""
         from .material import MohrCoulomb
         return MohrCoulomb(E=self.youngs_modulus, nu=self.poisson_ratio, rho=self.density,
                            phi=self.friction_angle_deg, psi=self.dilation_angle_deg,
@@ -287,9 +288,8 @@ class MaterialConfig:
 
     @property
     def p_wave_speed(self) -> float:
-        """``c_p = sqrt(E (1 - nu) / ((1 + nu)(1 - 2 nu) rho))`` in m/s."""
-        E, nu = self.youngs_modulus, self.poisson_ratio
-        return math.sqrt(E * (1 - nu) / ((1 + nu) * (1 - 2 * nu) * self.density))
+        """``c_p = sqrt(E (1 - nu) / ((1 + nu)(1 - 2 nu) rho))`` in m/s, the law's."""
+        return self.law().p_wave_speed
 
 
 @dataclass(frozen=True)
@@ -547,8 +547,10 @@ class HopperConfig:
 
     @property
     def time_step(self) -> float:
-        """The explicit time step ``dt_safety * cell_size / c_p`` (s), as the model takes it."""
-        return self.numerics.dt_safety * self.numerics.cell_size / self.material.p_wave_speed
+        """The explicit time step ``dt_safety * cell_size / c_p`` (s), as the model takes it
+        (the law's :meth:`~fipy_hopper.material.MohrCoulomb.stable_time_step`)."""
+        return self.material.law().stable_time_step(self.numerics.cell_size,
+                                                    self.numerics.dt_safety)
 
     def step_estimate(self) -> float:
         """Most time steps a run can take: filling up to ``max_fill_time`` plus the discharge."""

@@ -586,7 +586,7 @@ def cell_fields(state, grid, cohesion: float = 0.0, friction_angle_deg: float = 
     ``stress_rr/zz/tt/rz`` the material stress (Pa, tension positive), ``pressure``
     ``p = -(s_rr + s_zz + s_tt) / 3`` (Pa, compression positive), ``plastic_strain`` the
     accumulated equivalent plastic strain, ``loose_strain`` the loose volumetric strain of
-    the dense/loose rule (0 = dense, see :func:`fipy_hopper.material.close_loose_volume`);
+    the dense/loose rule (0 = dense, see :func:`fipy_hopper.dense_loose.close_loose_volume`);
     the stress pattern (:func:`fipy_hopper.diagnostics.stress_pattern`, compression
     positive): ``sigma1``, ``sigma3`` the major and minor principal stresses (Pa),
     ``sigma1_angle_deg`` the angle of the major principal direction from the vertical

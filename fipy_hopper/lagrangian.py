@@ -93,7 +93,8 @@ from numba import njit
 
 from . import geometry
 from .config import HopperConfig
-from .material import close_loose_volume, equivalent_plastic_strain, separation_strain
+from .dense_loose import close_loose_volume, separation_strain
+from .material import equivalent_plastic_strain
 from .model import GRAVITY
 
 __all__ = ["DistortionLimits", "LagrangianMesh", "LagrangianState", "LagrangianRecord",
@@ -536,7 +537,7 @@ class LagrangianState:
     active: np.ndarray             # (n_el,) bool: not eroded
     dt: float
     plate_closed: bool = True
-    loose: np.ndarray = None       # (n_el,) loose volumetric strain (material.close_loose_volume)
+    loose: np.ndarray = None       # (n_el,) loose strain (dense_loose.close_loose_volume)
 
     def copy(self) -> "LagrangianState":
         return LagrangianState(**{k: (v.copy() if isinstance(v, np.ndarray) else v)
@@ -576,7 +577,6 @@ class LagrangianModel:
                  erode_discharged: bool = True, erode_depth: float = 0.0,
                  n_layers: int = 8):
         from .config import ConfigError
-        from .material import update as material_update
 
         if not cfg.hopper.axisymmetric:
             raise ConfigError("the Lagrangian mode models conical hoppers only "
@@ -589,10 +589,9 @@ class LagrangianModel:
         self.erode_depth = float(erode_depth)
         self.h = cfg.numerics.cell_size
         self.mesh = build_mesh(geom, self.h)
-        self.material = cfg.material.mohr_coulomb()
-        self._material_update = material_update
+        self.material = cfg.material.law()
         self.rho = cfg.material.density
-        self.c_p = cfg.material.p_wave_speed
+        self.c_p = self.material.p_wave_speed
         self.mu_wall = cfg.wall.friction_coefficient
         m = self.mesh
         _, _, A, r_c = element_gradients(m.x, m.conn)
@@ -609,7 +608,7 @@ class LagrangianModel:
         self.hg_scale = cfg.numerics.hourglass_coefficient * self.rho * math.sqrt(GRAVITY)
         q = element_quality(m.x, m.conn)
         self.initial_quality = {"max_aspect": float(q[1].max()), "min_angle_deg": float(q[2].min())}
-        self.dt0 = cfg.numerics.dt_safety * float(q[3].min()) / self.c_p
+        self.dt0 = self.material.stable_time_step(float(q[3].min()), cfg.numerics.dt_safety)
         column = max(geom.fill_level, self.h)
         self.fill_damping = math.pi * self.c_p / (2.0 * column)
         # wall segments (tube: frictionless; cone or floor; bin) and the outlet plate
@@ -713,10 +712,10 @@ class LagrangianModel:
         v[self.axis_nodes, 0] = 0.0
         x_mid = x + 0.5 * dt * v
         _strain_kernel(x_mid, v, dt, conn, state.sigma, state.active, self._d_eps, self._sig_rot)
-        # the same dense/loose rule as the Eulerian model (material.close_loose_volume)
+        # the same dense/loose rule as the Eulerian model (dense_loose.close_loose_volume)
         d_skeleton, loose = close_loose_volume(self._d_eps, state.loose)
-        sig_new, deps_p, status = self._material_update(self._sig_rot, d_skeleton,
-                                                        self.material, return_status=True)
+        sig_new, deps_p, status = self.material.update(self._sig_rot, d_skeleton,
+                                                       return_status=True)
         sig_new[~state.active] = 0.0
         state.sigma = sig_new
         state.loose = np.where(state.active, loose + separation_strain(deps_p, status), 0.0)
@@ -736,7 +735,8 @@ class LagrangianModel:
         self.last_quality = q
         lengths = q[state.active, 3]
         if len(lengths):
-            state.dt = min(self.dt0, self.cfg.numerics.dt_safety * float(lengths.min()) / self.c_p)
+            state.dt = min(self.dt0, self.material.stable_time_step(float(lengths.min()),
+                                                                    self.cfg.numerics.dt_safety))
         if not (np.all(np.isfinite(v)) and np.all(np.isfinite(state.sigma))):
             raise FloatingPointError(f"non-finite Lagrangian state at step {state.step}, "
                                      f"t = {state.t:.6g} s")

@@ -18,9 +18,9 @@ Dunatunga & Kamrin 2015).  ``alpha = 1`` is the dense (filled) state.  Each cell
 strain ``e_l >= 0`` of its material, transported with it like ``eps_p``:
 
 * a return to the stress-free apex (the grains separate) adds its plastic dilation,
-  ``e_l += tr d_eps_p`` (:func:`fipy_hopper.material.separation_strain`);
+  ``e_l += tr d_eps_p`` (:func:`fipy_hopper.dense_loose.separation_strain`);
 * a compressive increment first closes loose volume, ``e_l -= min(e_l, -tr d_eps)``, and only
-  the rest of the increment loads the grains (:func:`fipy_hopper.material.close_loose_volume`),
+  the rest of the increment loads the grains (:func:`fipy_hopper.dense_loose.close_loose_volume`),
   so loose material carries no stress until it is dense again.
 
 The volumetric strain of the stress update is the transport's divergence: the net flux of
@@ -51,9 +51,10 @@ import numpy as np
 
 import numba
 
-from . import geometry, markers, material, momentum, stepping
+from . import dense_loose, geometry, markers, material, momentum, stepping
 from .config import HopperConfig
 from .mesh import HopperGrid, build_grid
+from .material.law import transported_fields
 from .transport import material_rows
 
 GRAVITY = 9.81  # m/s^2
@@ -125,12 +126,14 @@ class HopperModel:
     of every part of a step (:func:`fipy_hopper.material.update_reference`, the numpy
     transport and redistribution, :func:`fipy_hopper.markers.advance_reference`), which a
     test holds the compiled path to over a short run.  ``threads``: numba threads of the
-    compiled steps (default: one per core).
+    compiled steps (default: one per core).  ``law``: the constitutive law
+    (:mod:`fipy_hopper.material.law`; default the configuration's Mohr–Coulomb material), from
+    which the model takes its time step, its transported internal variables and its stress
+    update; its density must be the configuration's.
     """
 
     def __init__(self, cfg: HopperConfig, grid: HopperGrid | None = None,
-                 backend: str = "numba", threads: int | None = None):
-        from .material import update, update_reference
+                 backend: str = "numba", threads: int | None = None, law=None):
         from .transport import Transport
 
         if backend not in ("numba", "numpy"):
@@ -142,14 +145,23 @@ class HopperModel:
         #: never change it, e.g. the bounds of alpha over a run
         self.after_transport: list = []
         self.grid = grid if grid is not None else build_grid(cfg)
-        self.material = cfg.material.mohr_coulomb()
-        self._material_update = update if backend == "numba" else update_reference
+        #: the constitutive law (fipy_hopper.material.law): its time step, its internal
+        #: variables (transported) and its stress update
+        self.material = law if law is not None else cfg.material.law()
+        if self.material.rho != cfg.material.density:
+            raise ValueError(f"the law's density {self.material.rho} kg/m3 is not "
+                             f"material.density = {cfg.material.density} kg/m3")
+        self.transported = transported_fields(self.material)
+        if self.transported != TRANSPORTED:
+            raise NotImplementedError(
+                f"the compiled step carries the fields {TRANSPORTED}; a law with the internal "
+                f"variables {self.material.internal_variables} needs them in the kernels")
         self._advance_markers = (markers.advance if backend == "numba"
                                  else markers.advance_reference)
         g = self.grid
-        self.rho = cfg.material.density
-        self.c_p = cfg.material.p_wave_speed
-        self.dt = cfg.numerics.dt_safety * g.h / self.c_p
+        self.rho = self.material.rho
+        self.c_p = self.material.p_wave_speed
+        self.dt = self.material.stable_time_step(g.h, cfg.numerics.dt_safety)
         self.mu_wall = cfg.wall.friction_coefficient
         # the symmetry as data: an axisymmetric cone, or a wedge in plane strain (per metre)
         axisymmetric = cfg.hopper.axisymmetric
@@ -368,18 +380,17 @@ class HopperModel:
         # cells the Q1 mean tr D, in cut cells what alpha sees through the face apertures).
         # Dense and loose material: compression first closes the loose volume, only the rest
         # loads the grains; returns to the stress-free apex record the volume the material
-        # separates by (material.close_loose_volume / separation_strain).
+        # separates by (dense_loose.close_loose_volume / separation_strain).
         loaded = (state.alpha >= alpha_min).ravel()
         div = momentum.open_divergence(v, self._zface_aperture, self._rface_aperture,
                                        g.kappa, self.flux_radius, g.h) * dt
         dims = int(self.strain_dims)
         d_eps[..., :dims] += ((div - (d_eps[..., 0] + d_eps[..., 1] + d_eps[..., 2]))
                               / self.strain_dims)[..., None]
-        d_skeleton, loose = material.close_loose_volume(d_eps.reshape(-1, 4),
+        d_skeleton, loose = dense_loose.close_loose_volume(d_eps.reshape(-1, 4),
                                                         state.loose.ravel())
-        sig_new, deps_p, status = self._material_update(
-            sigma.reshape(-1, 4), d_skeleton, self.material, return_status=True)
-        loose = np.where(loaded, loose + material.separation_strain(deps_p, status), 0.0)
+        sig_new, deps_p, status = self._material_update(sigma.reshape(-1, 4), d_skeleton)
+        loose = np.where(loaded, loose + dense_loose.separation_strain(deps_p, status), 0.0)
         sig_new[~loaded] = 0.0
         state.eps_p += np.where(loaded, material.equivalent_plastic_strain(deps_p),
                                 0.0).reshape(state.eps_p.shape)
@@ -394,6 +405,12 @@ class HopperModel:
         state.t += dt
         state.step += 1
         return self._transport_due(state, u_n)
+
+    def _material_update(self, sigma: np.ndarray, d_eps: np.ndarray):
+        """The law's stress update of the backend: ``(sigma_new, d_eps_p, status)``."""
+        law = self.material
+        update = law.update if self.backend == "numba" else law.update_reference
+        return update(sigma, d_eps, return_status=True)
 
     def _nodal_update_numpy(self, state: State, m: np.ndarray, damping: float) -> np.ndarray:
         """Reference (numpy) nodal update: forces, velocity, damping, contact, axis."""

@@ -338,7 +338,7 @@ def _strain_run(j, i0, i1, out, v, sigma, loose, r_c, r_nodes, strain_dims, h, d
     """First pass over the run ``(j, i0, i1)`` into ``scratch[:, out:out + i1 - i0]``: the
     rotated stress (rows 0-3), the strain increment that loads the skeleton (rows 4-7) and the
     loose strain left (row 8), as ``momentum.strain_rate``, ``jaumann_rotate`` and
-    ``open_divergence`` and ``material.close_loose_volume``."""
+    ``open_divergence`` and ``dense_loose.close_loose_volume``."""
     g = 1.0 / (2.0 * h)
     for i in range(i0, i1):
         q = out + i - i0

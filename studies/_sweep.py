@@ -97,7 +97,7 @@ def estimated_cost(config: dict) -> float:
     geom, num, mat = cfg.hopper, cfg.numerics, cfg.material
     h = num.cell_size
     cells = (geom.bin_radius / h) * (geom.top + num.free_fall_depth * geom.outlet_diameter) / h
-    dt = num.dt_safety * h / mat.p_wave_speed
+    dt = cfg.time_step
     if cfg.run.end_time == "empty":
         rate = float(theory.beverloo_rate(mat.density, geom.outlet_diameter)
                      * theory.rose_tanaka_factor(geom.half_angle_deg))

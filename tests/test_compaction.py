@@ -1,4 +1,4 @@
-"""Dense and loose material: the rule of material.close_loose_volume in the model.
+"""Dense and loose material: the rule of dense_loose.close_loose_volume in the model.
 
 A material fraction ``alpha`` below its dense value 1 inside the material is loose volume
 ``loose`` (``alpha (1 + loose) = 1``); such material carries no stress until compression has
@@ -13,7 +13,7 @@ import warnings
 import numpy as np
 import pytest
 
-from fipy_hopper import material, momentum
+from fipy_hopper import dense_loose, material, momentum
 from fipy_hopper.config import HopperConfig
 from fipy_hopper.model import GRAVITY, HopperModel
 
@@ -27,7 +27,7 @@ def test_compression_first_closes_the_loose_volume():
                       [1e-3, 0.0, 0.0, 0.0],           # dilation: untouched
                       [-1e-3, 0.0, 0.0, 2e-4]])        # dense: untouched
     loose = np.array([1e-3, 1e-2, 5e-3, 0.0])
-    skeleton, left = material.close_loose_volume(d_eps, loose)
+    skeleton, left = dense_loose.close_loose_volume(d_eps, loose)
     # a quarter of the compression closed the loose volume; 3/4 of the increment loads
     assert np.allclose(skeleton[0], 0.75 * d_eps[0]) and left[0] == pytest.approx(0.0)
     # all of it closes loose volume: nothing loads the grains
@@ -42,7 +42,7 @@ def test_separation_happens_only_at_the_apex():
                       [0.0, 0.0, 0.0, 2e-4],            # shear: regular return
                       [-1e-5, -1e-5, -1e-5, 0.0]])      # compression: elastic
     new, d_p, status = material.update(sigma, d_eps, mat, return_status=True)
-    gained = material.separation_strain(d_p, status)
+    gained = dense_loose.separation_strain(d_p, status)
     assert list(status) == [material.APEX, material.PLASTIC, material.ELASTIC]
     K = mat.E / (3 * (1 - 2 * mat.nu))
     p_old = 4000.0 / 3.0

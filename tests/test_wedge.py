@@ -210,7 +210,7 @@ def test_no_strain_along_the_wedge_in_cut_cells():
                                     model._zface_aperture, model._rface_aperture, model._prm,
                                     return_fast._fast_constants(model._prm))
         else:
-            model.material = cfg.material.mohr_coulomb().__class__(
+            model.material = cfg.material.law().__class__(
                 E=5e6, nu=0.3, rho=RHO, phi=30.0, psi=0.0, c=1e30)
             model._step_numpy(state)
         s = state.sigma[(g.kappa > 0) & (g.kappa < 1)]

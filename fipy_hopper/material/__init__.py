@@ -16,13 +16,13 @@ Modules:
 * ``return_robust``: the robust compiled return of one point (``_return_sorted``);
 * ``return_fast``: :func:`update`, the compiled blocked return;
 * ``return_reference``: :func:`update_reference`, the numpy reference of the return;
-* ``dense_loose``: the dense/loose phase rule (:func:`close_loose_volume`,
-  :func:`separation_strain`);
+* ``law``: what the model asks of a constitutive law (:class:`ConstitutiveLaw`), which
+  :class:`MohrCoulomb` implements;
 * ``element_tests``: the laboratory driver (:func:`drive`, :func:`element_test`).
 """
 
-from .dense_loose import close_loose_volume, separation_strain
 from .element_tests import PATHS, ElementTestResult, drive, element_test
+from .law import ConstitutiveLaw, transported_fields
 from .mohr_coulomb import (APEX, ELASTIC, PLASTIC, MohrCoulomb, R_mc, R_mw, elastic_stiffness,
                            elastic_trial, equivalent_plastic_strain, flow_direction,
                            flow_potential, invariants, plastic_strain_from_stress,
@@ -32,6 +32,8 @@ from .return_reference import update_reference
 
 __all__ = [
     "MohrCoulomb",
+    "ConstitutiveLaw",
+    "transported_fields",
     "invariants",
     "principal_stresses",
     "R_mc",
@@ -44,8 +46,6 @@ __all__ = [
     "plastic_strain_from_stress",
     "update",
     "update_reference",
-    "close_loose_volume",
-    "separation_strain",
     "equivalent_plastic_strain",
     "ELASTIC",
     "PLASTIC",

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numba
 import numpy as np
@@ -86,6 +87,13 @@ class MohrCoulomb:
     eps: float = 0.1
     e: float | None = None
 
+    #: per-point state carried besides the stress (transported with the material):
+    #: the equivalent plastic strain
+    internal_variables: ClassVar[tuple] = ("eps_p",)
+    #: unit of each parameter
+    UNITS: ClassVar[dict] = {"E": "Pa", "nu": "-", "rho": "kg/m3", "phi": "deg", "psi": "deg",
+                             "c": "Pa", "eps": "-", "e": "-"}
+
     def __post_init__(self):
         def check(name, ok, allowed, unit=""):
             value = getattr(self, name)
@@ -143,8 +151,28 @@ class MohrCoulomb:
 
     @property
     def p_wave_speed(self) -> float:
-        """c_p = sqrt(M / rho) (m/s)."""
-        return math.sqrt(self.p_wave_modulus / self.rho)
+        """c_p = sqrt(M / rho) = sqrt(E (1 - nu) / ((1 + nu)(1 - 2 nu) rho)) (m/s)."""
+        E, nu = self.E, self.nu
+        return math.sqrt(E * (1 - nu) / ((1 + nu) * (1 - 2 * nu) * self.rho))
+
+    # the law's side of the material seam (fipy_hopper.material.law) ----------------------------
+    def parameters(self) -> dict:
+        """``{name: (value, unit)}`` of every parameter (SI; angles in degrees)."""
+        return {name: (getattr(self, name), unit) for name, unit in self.UNITS.items()}
+
+    def stable_time_step(self, h: float, safety: float) -> float:
+        """The explicit step ``safety * h / c_p`` (s) on cells of size ``h`` (m)."""
+        return safety * h / self.p_wave_speed
+
+    def update(self, sigma, d_eps, return_status: bool = False):
+        """The compiled stress update (:func:`fipy_hopper.material.update`)."""
+        from .return_fast import update
+        return update(sigma, d_eps, self, return_status=return_status)
+
+    def update_reference(self, sigma, d_eps, return_status: bool = False):
+        """The numpy reference of the update (:func:`fipy_hopper.material.update_reference`)."""
+        from .return_reference import update_reference
+        return update_reference(sigma, d_eps, self, return_status=return_status)
 
     # angles and derived strength quantities ------------------------------------------------------
     @property

@@ -1,5 +1,9 @@
 """Dense and loose material: the "disconnected" phase (Dunatunga & Kamrin 2015).
 
+A closure of the mixture model around the constitutive law's update (the law itself knows
+nothing of it, :mod:`fipy_hopper.material.law`): the models call :func:`close_loose_volume`
+before the law's stress update and :func:`separation_strain` after it.
+
 Material returned to the stress-free apex that keeps dilating has separated: the volumetric
 plastic strain of apex returns, ``tr d_eps_p`` (:func:`separation_strain`), is loose volume
 ``e_l >= 0``, and a later compressive increment first closes it (:func:`close_loose_volume`)
@@ -10,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .mohr_coulomb import APEX
+from .material.mohr_coulomb import APEX
 
 __all__ = ["close_loose_volume", "separation_strain"]
 

@@ -1,0 +1,60 @@
+"""What the model asks of a constitutive law (the material seam).
+
+A law is an object that declares
+
+* ``parameters()``: its parameters, ``{name: (value, unit)}`` in SI units (angles in degrees);
+* ``internal_variables``: the names of the per-point state it carries besides the stress, which
+  the transport must carry with the material (for Mohr–Coulomb ``("eps_p",)``, the equivalent
+  plastic strain);
+* ``rho`` (kg/m^3) and ``p_wave_speed`` (m/s), and ``stable_time_step(h, safety)``: the explicit
+  step ``safety * h / c_p`` (s) on cells of size ``h`` (m);
+* ``update(sigma, d_eps, return_status=False)``: the stress update of a strain increment on
+  arrays of points ``(n, 4)`` (``rr, zz, tt, rz``, tension positive, Pa) returning the new
+  stress and the plastic strain increment (and, with ``return_status``, ``ELASTIC``/``PLASTIC``/
+  ``APEX`` per point), with ``update_reference`` its plain-numpy twin;
+* ``kernel_parameters()``: the float array its compiled kernels read inside the fused step.
+
+The model (:class:`fipy_hopper.model.HopperModel`) takes its time step, the fields it transports
+and its stress update from the law, and keeps what is not a property of the material to
+itself: the dense/loose rule (:mod:`fipy_hopper.dense_loose`) is a closure of the Eulerian
+mixture, applied around the law's update.  :class:`~fipy_hopper.material.MohrCoulomb` (the
+Abaqus form) is the law implemented; the compiled step is written for its internal variables.
+"""
+
+from __future__ import annotations
+
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+#: the stress components every law updates, in the order of the state's ``sigma[..., k]``
+STRESS_COMPONENTS = ("s_rr", "s_zz", "s_tt", "s_rz")
+
+
+@runtime_checkable
+class ConstitutiveLaw(Protocol):
+    """The protocol of a constitutive law (see the module docstring)."""
+
+    internal_variables: tuple
+    rho: float
+
+    def parameters(self) -> dict: ...
+
+    @property
+    def p_wave_speed(self) -> float: ...
+
+    def stable_time_step(self, h: float, safety: float) -> float: ...
+
+    def update(self, sigma: np.ndarray, d_eps: np.ndarray, return_status: bool = False): ...
+
+    def update_reference(self, sigma: np.ndarray, d_eps: np.ndarray,
+                         return_status: bool = False): ...
+
+    def kernel_parameters(self) -> np.ndarray: ...
+
+
+def transported_fields(law: ConstitutiveLaw, model_fields=("layer", "loose")) -> tuple:
+    """The cell fields the Eulerian transport carries for ``law``: the material fraction
+    ``alpha``, the stress components, the law's internal variables, then the model's own
+    (the layer tracer and the loose strain of the dense/loose rule)."""
+    return ("alpha",) + STRESS_COMPONENTS + tuple(law.internal_variables) + tuple(model_fields)

@@ -1,0 +1,79 @@
+"""The material seam: the model takes its time step, its transported internal variables and
+its stress update from the constitutive law it is given (fipy_hopper.material.law)."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from fipy_hopper.config import HopperConfig
+from fipy_hopper.material import ConstitutiveLaw, MohrCoulomb, transported_fields
+from fipy_hopper.model import TRANSPORTED, HopperModel
+
+CFG = HopperConfig.from_dict({"hopper": {"bin_diameter": 0.16, "fill_height": 0.06,
+                                         "bin_height": 0.08, "half_angle_deg": 45.0},
+                              "numerics": {"cell_size": 0.01}})
+
+
+def test_mohr_coulomb_declares_what_the_model_asks():
+    """The configuration's law is a ConstitutiveLaw that names its parameters with units, its
+    internal variable (the equivalent plastic strain) and the explicit step safety h / c_p
+    with c_p = sqrt(E (1 - nu) / ((1 + nu)(1 - 2 nu) rho))."""
+    law = CFG.material.law()
+    assert isinstance(law, ConstitutiveLaw)
+    params = law.parameters()
+    mat = CFG.material
+    assert params["E"] == (mat.youngs_modulus, "Pa")
+    assert params["phi"] == (mat.friction_angle_deg, "deg")
+    assert params["c"] == (mat.cohesion, "Pa") and params["rho"] == (mat.density, "kg/m3")
+    assert law.internal_variables == ("eps_p",)
+    E, nu, rho = mat.youngs_modulus, mat.poisson_ratio, mat.density
+    c_p = np.sqrt(E * (1 - nu) / ((1 + nu) * (1 - 2 * nu) * rho))
+    assert law.stable_time_step(0.01, 0.4) == pytest.approx(0.4 * 0.01 / c_p, rel=1e-15)
+    assert CFG.time_step == law.stable_time_step(0.01, 0.4)
+    assert transported_fields(law) == TRANSPORTED
+
+
+@dataclasses.dataclass(frozen=True)
+class HalfStepLaw(MohrCoulomb):
+    """Mohr–Coulomb with half the stable step, counting its numpy updates."""
+
+    calls: list = dataclasses.field(default_factory=list)
+
+    def stable_time_step(self, h, safety):
+        return 0.5 * super().stable_time_step(h, safety)
+
+    def update_reference(self, sigma, d_eps, return_status=False):
+        self.calls.append(len(sigma))
+        return super().update_reference(sigma, d_eps, return_status=return_status)
+
+
+def law_of(cls, **extra):
+    return cls(**{k: v for k, (v, _) in CFG.material.law().parameters().items()}, **extra)
+
+
+def test_the_model_takes_its_step_and_its_update_from_the_law():
+    """A law with half the stable step halves the model's step; the numpy step calls the
+    law's own update once per step, on every cell."""
+    plain = HopperModel(CFG, backend="numpy")
+    law = law_of(HalfStepLaw)
+    model = HopperModel(CFG, backend="numpy", law=law)
+    assert model.dt == 0.5 * plain.dt
+    state = model.initial_state()
+    model.step(state)
+    model.step(state)
+    assert law.calls == [model.grid.nz * model.grid.nr] * 2
+
+
+@dataclasses.dataclass(frozen=True)
+class DamageLaw(MohrCoulomb):
+    internal_variables = ("eps_p", "damage")
+
+
+def test_a_law_with_other_internal_variables_is_refused_clearly():
+    """The compiled step carries Mohr-Coulomb's internal variables only: a law that declares
+    another is refused by name, not run with it dropped."""
+    with pytest.raises(NotImplementedError, match="damage"):
+        HopperModel(CFG, law=law_of(DamageLaw))
+    with pytest.raises(ValueError, match="material.density"):
+        HopperModel(CFG, law=dataclasses.replace(CFG.material.law(), rho=1000.0))
