@@ -20,6 +20,8 @@ Stages:
   the flow has stopped (``"at_rest"``, :data:`AT_REST_AFTER`: a heel on a shallow cone, an
   arch, a rathole; the summary names which, :class:`~fipy_hopper.diagnostics.OutcomeRule`, and
   when it stopped), or at ``max_time`` (``"max_time"``); any run stops at ``wall_time_limit``.
+  These are :class:`StopRule` objects in ``Simulation.stop_rules`` (checked in order every
+  check interval, the first that applies names the reason); a study adds its own there.
 
 What is measured, and when:
 
@@ -71,6 +73,49 @@ class Schedule:
     interval: float
     stages: tuple = ("filling", "discharge")
     next_time: float = 0.0
+
+
+@dataclass
+class StopRule:
+    """A rule that ends the discharge: ``applies(sim, t_discharge, mass)`` (the simulation, the
+    time since the outlet opened in s, the mass left in the hopper in kg) is checked every
+    check interval, after the measurements of that check; the first rule of
+    ``Simulation.stop_rules`` that applies names the stop reason ``name``.  Rules read the
+    state; they never change it."""
+
+    name: str
+    applies: Callable
+
+
+def _end_time_rule(sim, t_dis, mass):
+    return sim.end_time != "empty" and t_dis >= float(sim.end_time) - 1e-12
+
+
+def _empty_rule(sim, t_dis, mass):
+    return sim.end_time == "empty" and mass < sim.model.cfg.run.empty_fraction * \
+        sim.record.initial_mass
+
+
+def _at_rest_rule(sim, t_dis, mass):
+    return sim.end_time == "empty" and sim._rest_samples > 0
+
+
+def _max_time_rule(sim, t_dis, mass):
+    return t_dis >= sim.model.cfg.run.max_time
+
+
+def _wall_time_rule(sim, t_dis, mass):
+    return sim._out_of_wall_time()
+
+
+def default_stop_rules() -> list:
+    """The discharge's stop rules, in order: ``end_time`` (a discharge of ``end_time`` s),
+    ``empty`` and ``at_rest`` (for ``end_time = "empty"``: less than ``empty_fraction`` of the
+    initial mass left; the flow has stopped, :data:`AT_REST_AFTER`), ``max_time`` and
+    ``wall_time_limit``."""
+    return [StopRule("end_time", _end_time_rule), StopRule("empty", _empty_rule),
+            StopRule("at_rest", _at_rest_rule), StopRule("max_time", _max_time_rule),
+            StopRule("wall_time_limit", _wall_time_rule)]
 
 
 @dataclass
@@ -132,6 +177,9 @@ class Simulation:
         self._stress_sums: dict = {}     # stage -> [sum p_n, sum tau, count] of the window
         self.envelope = None             # largest windowed p_n per bin in discharge
         self.wall_schedules: list = []   # [fn, wall-time interval, last call]
+        #: the discharge's stop rules, in order (:class:`StopRule`; a custom rule, e.g. a
+        #: discharged mass, is inserted or appended here)
+        self.stop_rules: list[StopRule] = default_stop_rules()
 
     def add_wall_time_callback(self, fn: Callable, interval: float):
         """Call ``fn(sim, state)`` every ``interval`` seconds of wall time (e.g. checkpoints).
@@ -290,16 +338,8 @@ class Simulation:
             self._discharge_windows(mass, m0)
             resting = t_dis > AT_REST_AFTER and self._at_rest()
             self._rest_samples = len(rec.rate) if resting else 0
-            if self.end_time != "empty" and t_dis >= float(self.end_time) - 1e-12:
-                reason = "end_time"
-            elif self.end_time == "empty" and mass < run.empty_fraction * m0:
-                reason = "empty"
-            elif self.end_time == "empty" and resting:
-                reason = "at_rest"
-            elif t_dis >= run.max_time:
-                reason = "max_time"
-            elif self._out_of_wall_time():
-                reason = "wall_time_limit"
+            reason = next((rule.name for rule in self.stop_rules
+                           if rule.applies(self, t_dis, mass)), "")
             # last: a checkpoint here resumes exactly (see add_wall_time_callback)
             if not reason:
                 self._call_wall_schedules()
