@@ -9,8 +9,10 @@ no more than 1.10).  Cases: three cohesions, given as the length ``sigma_c / (rh
 (default 55, 80, 110 mm), times two cones (20 and 30 deg) and a flat-bottomed bin
 (90 deg);
 default hopper a 0.48 m bin filled 0.2 m above the transition, phi = 30 deg, phi_w = 15 deg,
-rho = 1500 kg/m3, E = 5 MPa, 7.5 mm cells (at least 3 across the outlet radius at the
-smallest D0 tried, 45 mm; the bin is 2.5 x the largest D0 allowed, 192 mm).
+rho = 1500 kg/m3, E = 5 MPa, 5 mm cells (4.5 across the outlet radius at the smallest D0
+tried, 45 mm; the bin is 2.5 x the largest D0 allowed, 192 mm).  At 7.5 mm the smallest
+outlets were under-resolved: the 30 deg cone's critical outlets were 10-18 % smaller than at
+5 mm and its exponent 1.20, and E = 2 MPa moved one bracket.
 
 Outcome of a run (``summary.json``; the discharge runs with ``end_time = "empty"`` and is
 capped at ``max_discharge_time``, default 1.2 s):
@@ -55,14 +57,13 @@ Written to ``--out`` (default ``studies/output/arching``): ``results.csv`` (ever
 ``outcomes.png`` (the final states of an arching and a flowing run and of the rathole case)
 and ``cases/``.
 
-Default cost (measured on this machine, 2026-12-01, a 2-worker local cluster): 59 runs of
-3-40 s (11 min summed), 5 min 44 s in all; a restart that finds every run finished takes
-seconds.
+Default cost: see ``study.json`` (``study_wall_time_s``; a 2-worker local cluster); a
+restart that finds every run finished takes seconds.
 
 Usage::
 
     python studies/arching.py [--out DIR] [--quick] [--serial | --scheduler ADDRESS]
-                              [--cell-size 0.0075] [--heads 0.055 0.08 0.11]
+                              [--cell-size 0.005] [--heads 0.055 0.08 0.11]
                               [--half-angles 20 30 90] [--tolerance 1.05]
 """
 
@@ -96,9 +97,9 @@ DEFAULTS = {
     "wall_friction": 15.0,          # phi_w (deg)
     "density": 1500.0,              # kg/m3
     "youngs_modulus": 5.0e6,        # Pa
-    "bin_diameter": 0.48,           # m (2.5 x the largest D0 tried; 64 cells of 7.5 mm)
+    "bin_diameter": 0.48,           # m (2.5 x the largest D0 tried; 96 cells of 5 mm)
     "fill_height": 0.2,             # m above the transition
-    "cell_size": 0.0075,            # m (3 cells across the radius of a 45 mm outlet)
+    "cell_size": 0.005,             # m (4.5 cells across the radius of a 45 mm outlet)
     "max_discharge_time": 1.2,      # s: the cap of a discharge (a flow still running = flows)
     "tolerance": 1.05,              # bracket D_flow / D_arch at the end of a bisection
     "guess_ratio": 0.5,             # first D0 of a bisection, times the theory's D_crit
@@ -795,7 +796,7 @@ def write_outputs(out, results, numbers, fits, options, setting, argv=None):
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     _sweep.add_arguments(parser, NAME)
-    parser.add_argument("--cell-size", type=float, help="m (default 0.0075)")
+    parser.add_argument("--cell-size", type=float, help="m (default 0.005)")
     parser.add_argument("--heads", type=float, nargs="+",
                         help="sigma_c / (rho g) of the cohesions (m)")
     parser.add_argument("--half-angles", type=float, nargs="+", help="deg (90: flat bottom)")
