@@ -736,9 +736,9 @@ def write_outputs(out, results, numbers, fits, options, setting, argv=None):
         findings.append(
             f"Fills that reached max_fill_time without passing the at-rest test: "
             f"{len(unsettled)} of {len(runs)} runs (cohesive cones); their walls and plate "
-            f"carry the weight to within {worst:.1e} of it. A wall node whose only open cell is "
-            f"a small cut cell at the cohesive apex is pulled off the wall and kept at a "
-            f"terminal velocity by the fill's damping, moving no material "
+            f"carry the weight to within {worst:.1e} of it. In the case traced, a wall node "
+            f"whose only open cell is a small cut cell at the cohesive apex is pulled off the "
+            f"wall and kept at a terminal velocity by the fill's damping, moving no material "
             f"(docs/numerical_method.md, section 6); the discharge starts from that state.")
     findings.append(
         f"Outcome rule: arches = the flow stopped (at-rest rule, from 0.5 s after the opening) "
