@@ -326,7 +326,8 @@ def theory_wall_pressure(cfg: HopperConfig, n: int = 120) -> dict:
     Bin (``s`` above the transition): Janssen with ``K = 1 - sin(phi)`` (Jaky, taken as the
     wall value) and ``mu = tan(phi_w)``, depth from the levelled fill surface.  Cone: Walker's
     slice method (D = 1) with the EN 1991-4 filling ratio and Walker's discharge ratio, the
-    Janssen vertical stress at the transition as its top load.  Returns ``{name: (s, p_n)}``;
+    Janssen vertical stress at the transition as its top load.  A wedge gets the plane forms:
+    Janssen for a long bin of width B and Walker's plane slice (``S = 1``).  Returns ``{name: (s, p_n)}``;
     a curve the theory cannot give (e.g. a frictionless wall) is left out.
     """
     geom, mat, wall = cfg.hopper, cfg.material, cfg.wall
@@ -337,20 +338,16 @@ def theory_wall_pressure(cfg: HopperConfig, n: int = 120) -> dict:
     s_t = float(geometry.transition_arc_length(geom))
     s_fill = float(geometry.arc_length(geom.fill_level, geom))
     curves = {}
-    if not geom.axisymmetric:      # a wedge: the plane bin; no plane slice method offered
-        try:
-            s_bin = np.linspace(s_t, s_fill, n)
-            curves["Janssen, plane bin (K = 1 - sin phi)"] = (
-                s_bin, np.asarray(theory.janssen_plane_wall_pressure(s_fill - s_bin, rho, D,
-                                                                     K, mu)))
-        except ValueError:
-            pass
-        return curves
+    # a wedge: the plane forms (Janssen for a long bin of width B, Walker's plane slice, S = 1)
+    plane = not geom.axisymmetric
+    bin_name, hopper_name, slices = (("plane bin", "wedge", 1) if plane else ("bin", "cone", 2))
+    wall_pressure = theory.janssen_plane_wall_pressure if plane else theory.janssen_wall_pressure
+    vertical = theory.janssen_plane_vertical_stress if plane else theory.janssen_vertical_stress
     try:
         s_bin = np.linspace(s_t, s_fill, n)
-        curves["Janssen, bin (K = 1 - sin phi)"] = (
-            s_bin, np.asarray(theory.janssen_wall_pressure(s_fill - s_bin, rho, D, K, mu)))
-        sigma_vt = float(theory.janssen_vertical_stress(geom.fill_height, rho, D, K, mu))
+        curves[f"Janssen, {bin_name} (K = 1 - sin phi)"] = (
+            s_bin, np.asarray(wall_pressure(s_fill - s_bin, rho, D, K, mu)))
+        sigma_vt = float(vertical(geom.fill_height, rho, D, K, mu))
     except ValueError:
         sigma_vt = rho * theory.G * geom.fill_height
     s_cone = np.linspace(0.0, s_t, n)
@@ -360,8 +357,9 @@ def theory_wall_pressure(cfg: HopperConfig, n: int = 120) -> dict:
     for mode in ("filling", "discharge"):
         try:
             p = theory.walker_hopper_wall_pressure(np.clip(x, 0.0, h), h, geom.half_angle_deg,
-                                                   rho, phi, phi_w, sigma_vt, mode=mode)
-            curves[f"Walker, cone, {mode}"] = (s_cone, np.asarray(p))
+                                                   rho, phi, phi_w, sigma_vt, mode=mode,
+                                                   S=slices)
+            curves[f"Walker, {hopper_name}, {mode}"] = (s_cone, np.asarray(p))
         except ValueError:
             continue
     return curves
@@ -399,7 +397,8 @@ def wall_pressure(run):
                     mfc="none", color=colour, ms=5, lw=0,
                     label="stress-sampled estimate, at rest")
     styles = {"Janssen": ("k", "-"), "Walker, cone, filling": ("C0", "-"),
-              "Walker, cone, discharge": ("C3", "--")}
+              "Walker, cone, discharge": ("C3", "--"), "Walker, wedge, filling": ("C0", "-"),
+              "Walker, wedge, discharge": ("C3", "--")}
     curves = theory_wall_pressure(cfg)
     for name, (s, p) in curves.items():
         colour, ls = next((v for k, v in styles.items() if name.startswith(k)), ("0.4", "-"))

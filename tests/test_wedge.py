@@ -218,3 +218,33 @@ def test_no_strain_along_the_wedge_in_cut_cells():
         scale = np.max(np.abs(s))
         assert scale > 0
         assert np.max(np.abs(s[:, 2] - 0.3 * (s[:, 0] + s[:, 1]))) < 1e-9 * scale, backend
+
+
+def test_wedge_pictures_compare_with_the_plane_theories():
+    """The wall-pressure picture of a wedge draws the plane forms: Janssen for a long bin of
+    width B, whose asymptote is rho g B / (2 tan phi_w), and Walker's plane slice (S = 1),
+    whose pressure at the transition is F sigma_vt with the plane Janssen sigma_vt as its top
+    load (a cone's slice, S = 2, gives another curve below it)."""
+    from fipy_hopper.plotting import theory_wall_pressure
+
+    cfg = wedge()
+    geom, mat = cfg.hopper, cfg.material
+    curves = theory_wall_pressure(cfg)
+    assert set(curves) == {"Janssen, plane bin (K = 1 - sin phi)", "Walker, wedge, filling",
+                           "Walker, wedge, discharge"}
+    mu = math.tan(math.radians(cfg.wall.friction_angle_deg))
+    K = float(theory.k_jaky(mat.friction_angle_deg))
+    s_bin, p_bin = curves["Janssen, plane bin (K = 1 - sin phi)"]
+    assert p_bin[0] < RHO * theory.G * geom.bin_diameter / (2 * mu)
+    sigma_vt = float(theory.janssen_plane_vertical_stress(geom.fill_height, RHO,
+                                                           geom.bin_diameter, K, mu))
+    s_cone, p_fill = curves["Walker, wedge, filling"]
+    F_f = float(theory.en1991_steep_filling_F(geom.half_angle_deg, mu))
+    assert p_fill[-1] == pytest.approx(F_f * sigma_vt, rel=1e-9)
+    h = geom.bin_radius / math.tan(geom.half_angle)
+    x = s_cone * math.cos(geom.half_angle) + geom.outlet_radius / math.tan(geom.half_angle)
+    cone = theory.walker_hopper_wall_pressure(np.clip(x, 0.0, h), h, geom.half_angle_deg, RHO,
+                                              mat.friction_angle_deg,
+                                              cfg.wall.friction_angle_deg, sigma_vt, S=2)
+    assert np.all(p_fill[:-1] > np.asarray(cone)[:-1])
+
