@@ -1,4 +1,4 @@
-"""What is measured from a run (docs/numerical_method.md, section 8).  Diagnostics read the
+"""What is measured from a run (docs/physics_and_numerics.md, section 8).  Diagnostics read the
 state, never change it.
 
 - discharge rate ``W`` from the mass booked through the outlet faces (the same face values the

@@ -1,6 +1,6 @@
 """HopperModel: the state of the Eulerian hopper and one explicit time step.
 
-The method: docs/numerical_method.md, sections 3-5.
+The method: docs/physics_and_numerics.md, sections 3-5.
 
 A step is an operator split:
 
@@ -13,7 +13,7 @@ A step is an operator split:
    conservatively (van Leer); nodal momentum is carried on the dual grid with the same mass
    fluxes.  Transport runs when the material has moved ``transport_cfl`` of a cell.
 
-Dense and loose material (docs/numerical_method.md, section 6; the "disconnected" phase of
+Dense and loose material (docs/physics_and_numerics.md, section 6; the "disconnected" phase of
 Dunatunga & Kamrin 2015).  ``alpha = 1`` is the dense (filled) state.  Each cell carries the loose volumetric
 strain ``e_l >= 0`` of its material, transported with it like ``eps_p``:
 

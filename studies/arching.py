@@ -4,8 +4,8 @@ For a cohesive Mohr-Coulomb powder (unconfined yield strength
 ``sigma_c = 2 c cos(phi) / (1 - sin(phi))``, :func:`fipy_hopper.theory.unconfined_yield_strength`)
 the critical outlet ``D_crit`` is found by bisection on the outlet diameter ``D0`` at fixed
 cohesion: the bracket ``[D_arch, D_flow]`` is the largest ``D0`` that arched and the smallest
-that flowed, narrowed until ``D_flow / D_arch <= tolerance`` (default 1.05, the issue asks for
-no more than 1.10).  Cases: three cohesions, given as the length ``sigma_c / (rho g)``
+that flowed, narrowed until ``D_flow / D_arch <= tolerance`` (default 1.05; at most
+1.10, a 10 % bracket).  Cases: three cohesions, given as the length ``sigma_c / (rho g)``
 (default 55, 80, 110 mm), times two cones (20 and 30 deg) and a flat-bottomed bin
 (90 deg);
 default hopper a 0.48 m bin filled 0.2 m above the transition, phi = 30 deg, phi_w = 15 deg,
@@ -18,8 +18,8 @@ Outcome of a run (``summary.json``; the discharge runs with ``end_time = "empty"
 capped at ``max_discharge_time``, default 1.2 s):
 
 * ``arches``: the flow stopped (``flow_stopped_time_s`` finite: the package's at-rest rule,
-  checked from 0.5 s after the opening) with more than 90 % of the mass left (the issue's bar
-  for ``no_flow``; every ``no_flow`` of a cone here has more than 99.9 % left);
+  checked from 0.5 s after the opening) with more than 90 % of the mass left (the bar of
+  ``flow_mode = "no_flow"``; every ``no_flow`` of a cone here has more than 99.9 % left);
 * ``flows``: otherwise: still flowing at the cap (a flowing run need not empty), or the flow
   stopped after more than 10 % of the mass had left (funnel flow that drained its channel and
   stopped: not an arch over the outlet; the table names these ``stopped late``).
@@ -739,7 +739,7 @@ def write_outputs(out, results, numbers, fits, options, setting, argv=None):
             f"carry the weight to within {worst:.1e} of it. In the case traced, a wall node "
             f"whose only open cell is a small cut cell at the cohesive apex is pulled off the "
             f"wall and kept at a terminal velocity by the fill's damping, moving no material "
-            f"(docs/numerical_method.md, section 6); the discharge starts from that state.")
+            f"(docs/physics_and_numerics.md, section 6); the discharge starts from that state.")
     findings.append(
         f"Outcome rule: arches = the flow stopped (at-rest rule, from 0.5 s after the opening) "
         f"with more than {100 * ARCH_LEFT:g} % of the mass left; every other run flows. The "

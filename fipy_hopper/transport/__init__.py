@@ -1,6 +1,6 @@
 """Conservative, bounded transport of cell fields on the fixed cylindrical grid.
 
-The Eulerian step (docs/numerical_method.md, section 5) carries every cell field ``phi`` (a
+The Eulerian step (docs/physics_and_numerics.md, section 5) carries every cell field ``phi`` (a
 density per *open* volume: the material fraction ``alpha`` and alpha-weighted quantities such as
 ``alpha*sigma_rr`` or ``alpha*tracer``) with the face normal velocity of the material step:
 
