@@ -151,8 +151,7 @@ class HopperModel:
         if self.material.rho != cfg.material.density:
             raise ValueError(f"the law's density {self.material.rho} kg/m3 is not "
                              f"material.density = {cfg.material.density} kg/m3")
-        self.transported = transported_fields(self.material)
-        if self.transported != TRANSPORTED:
+        if transported_fields(self.material) != TRANSPORTED:
             raise NotImplementedError(
                 f"the compiled step carries the fields {TRANSPORTED}; a law with the internal "
                 f"variables {self.material.internal_variables} needs them in the kernels")

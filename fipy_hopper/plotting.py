@@ -33,7 +33,7 @@ import numpy as np
 from . import geometry, theory
 from .config import HopperConfig
 from .io import (FieldWriter, RunDirectory, atomic_path, marker_file, read_csv, read_markers,
-                 read_snapshot_index)
+                 read_snapshot_index, result_key)
 
 __all__ = ["plot_run", "flow_pattern", "discharge_curves", "wall_pressure", "stress_pattern",
            "animate", "load_snapshot", "draw_layers", "theory_wall_pressure"]
@@ -286,8 +286,6 @@ def discharge_curves(run):
     ax_m, ax_w = fig.subplots(2, 1, sharex=True)
     axisymmetric = cfg.hopper.axisymmetric
     per = "" if axisymmetric else " per m"            # a wedge: per metre of length
-    from .io import result_key
-
     column = {c: result_key(c, axisymmetric) for c in ("mass_in_hopper_kg", "discharged_kg",
                                                        "discharge_rate_kg_s")}
     ax_m.plot(t, ts[column["mass_in_hopper_kg"]], "-", color="C0", label="M(t), in the hopper")

@@ -55,9 +55,8 @@ def plug_cells(model: HopperModel):
     g, hop = model.grid, model.cfg.hopper
     z_lo = hop.cone_height + 0.4 * (hop.fill_level - hop.cone_height)
     z_hi = hop.cone_height + 0.8 * (hop.fill_level - hop.cone_height)
-    r = 0.5 * (g.r_nodes[1:] + g.r_nodes[:-1])
     return (((g.z_cells >= z_lo) & (g.z_cells <= z_hi))[:, None]
-            & (r < 0.8 * hop.bin_radius)[None, :])
+            & (g.r_cells < 0.8 * hop.bin_radius)[None, :])
 
 
 def run_one(opts: dict, modulus: float) -> dict:

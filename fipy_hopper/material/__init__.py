@@ -21,6 +21,7 @@ Modules:
 * ``element_tests``: the laboratory driver (:func:`drive`, :func:`element_test`).
 """
 
+from . import mohr_coulomb
 from .element_tests import PATHS, ElementTestResult, drive, element_test
 from .law import ConstitutiveLaw, transported_fields
 from .mohr_coulomb import (APEX, ELASTIC, PLASTIC, MohrCoulomb, R_mc, R_mw, elastic_stiffness,
@@ -30,28 +31,5 @@ from .mohr_coulomb import (APEX, ELASTIC, PLASTIC, MohrCoulomb, R_mc, R_mw, elas
 from .return_fast import update
 from .return_reference import update_reference
 
-__all__ = [
-    "MohrCoulomb",
-    "ConstitutiveLaw",
-    "transported_fields",
-    "invariants",
-    "principal_stresses",
-    "R_mc",
-    "R_mw",
-    "yield_function",
-    "flow_potential",
-    "flow_direction",
-    "elastic_stiffness",
-    "elastic_trial",
-    "plastic_strain_from_stress",
-    "update",
-    "update_reference",
-    "equivalent_plastic_strain",
-    "ELASTIC",
-    "PLASTIC",
-    "APEX",
-    "ElementTestResult",
-    "PATHS",
-    "drive",
-    "element_test",
-]
+__all__ = [*mohr_coulomb.__all__, "ConstitutiveLaw", "transported_fields", "update",
+           "update_reference", "ElementTestResult", "PATHS", "drive", "element_test"]
