@@ -30,7 +30,8 @@ import numpy as np
 from .config import ConfigError, HopperConfig
 from . import io as fio
 
-__all__ = ["load_config", "run", "read_results", "Results", "expected_quantities"]
+__all__ = ["load_config", "run", "read_results", "Results", "expected_quantities",
+           "make_model"]
 
 
 def load_config(path: Union[str, os.PathLike]) -> HopperConfig:
@@ -150,6 +151,13 @@ def run(config_or_path, out, force: bool = False, resume: bool = False, quiet: b
     cfg, source = _resolve(config_or_path)
     source = config_source or source
     command = command or "fipy_hopper.run (Python API)"
+    lagrangian = cfg.numerics.formulation == "lagrangian"
+    if lagrangian and resume:
+        raise ConfigError('resume: a numerics.formulation = "lagrangian" run is not '
+                          'checkpointed (it stops when its mesh distorts, within seconds of '
+                          'discharge); run it again')
+    if lagrangian:
+        checkpoint_interval = 0
     rundir = fio.RunDirectory(out, force=force, resume=resume)
     if resume:
         with warnings.catch_warnings():
@@ -166,14 +174,15 @@ def run(config_or_path, out, force: bool = False, resume: bool = False, quiet: b
         fio.atomic_write_text(rundir / rundir.CONFIG, cfg.to_toml())
         manifest = fio.Manifest.new(rundir / rundir.MANIFEST, source, command)
 
-    from .model import HopperModel, InstabilityError
+    from .model import InstabilityError
     from .simulation import Simulation
 
-    model = HopperModel(cfg, threads=threads)
+    model = make_model(cfg, threads=threads)
     progress = (not quiet) and sys.stderr.isatty()
     sim = Simulation(model, progress=progress)
-    fields = fio.FieldWriter(rundir.fields, model.grid, cfg.material.cohesion,
-                             cfg.material.friction_angle_deg)
+    strength = (cfg.material.cohesion, cfg.material.friction_angle_deg)
+    fields = (fio.FieldWriter(rundir.fields, model.grid, *strength) if not lagrangian
+              else fio.MeshFieldWriter(rundir.fields, model, *strength))
 
     def snapshot(sim_, state):
         fields(sim_, state)
@@ -239,6 +248,17 @@ def run(config_or_path, out, force: bool = False, resume: bool = False, quiet: b
     return fio._jsonable(summary)
 
 
+def make_model(cfg: HopperConfig, threads: Optional[int] = None):
+    """The model of ``cfg.numerics.formulation``: the Eulerian
+    :class:`~fipy_hopper.model.HopperModel` (``threads``: numba threads of its compiled steps)
+    or the updated-Lagrangian :class:`~fipy_hopper.lagrangian.LagrangianModel`."""
+    if cfg.numerics.formulation == "lagrangian":
+        from .lagrangian import LagrangianModel
+        return LagrangianModel(cfg)
+    from .model import HopperModel
+    return HopperModel(cfg, threads=threads)
+
+
 def _write_tables(rundir, record, axisymmetric: bool = True) -> None:
     fio.write_timeseries(rundir / rundir.TIMESERIES, record, axisymmetric)
     fio.write_wall_pressure(rundir / rundir.WALL_PRESSURE, record)
@@ -254,7 +274,7 @@ def _summary(sim, cfg, reason: str) -> dict:
                    "mass_flow_index": math.nan, "initial_mass_kg": rec.initial_mass,
                    "remaining_mass_kg": math.nan, "mass_balance_error": math.nan,
                    "discharge_time_s": rec.t[-1] if rec.t else 0.0,
-                   "cells": sim.model.grid.n_cells, "steps": sim.state.step,
+                   "cells": sim.model.n_cells, "steps": sim.state.step,
                    "wall_time_s": math.nan,
                    "youngs_modulus_used": cfg.material.youngs_modulus}
     summary["stop_reason"] = reason

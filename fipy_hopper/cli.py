@@ -310,6 +310,8 @@ def _print_summary(s: dict, out) -> None:
           f"{num('remaining_mass_kg', '.4g')} kg{per} left "
           f"(mass balance error {num('mass_balance_error', '.1e')})\n"
           f"  results in             {out}/")
+    if s.get("distortion"):
+        print(f"  Lagrangian mesh        stopped by distortion: {s['distortion']}")
     stopped = s.get("flow_stopped_time_s")
     if stopped is not None and stopped == stopped:
         left = s.get("remaining_mass_fraction")

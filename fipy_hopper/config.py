@@ -106,6 +106,8 @@ def _check_int(key: str, value: Any, low: int, high: int) -> int:
 LENGTH_RANGE = (1e-3, 100.0)
 #: Hopper shapes: a cone (axisymmetric) or a wedge with a slot outlet (plane strain).
 SHAPES = ("conical", "wedge")
+#: the models a run can use (numerics.formulation)
+FORMULATIONS = ("eulerian", "lagrangian")
 #: Bulk density (kg/m3): the lightest powders (aerogel, ~10) to beyond tungsten (~19,300).
 DENSITY_RANGE = (1.0, 2.0e4)
 #: Young's modulus (Pa): 1 kPa (loose, cohesive powder) to 1 TPa (stiffer than diamond).
@@ -336,6 +338,10 @@ class NumericsConfig:
       weight (the wall and the plate hold the rest).
     - ``max_fill_time`` (s): filling stops (and says so) if not at rest by then.
     - ``min_open_fraction``: cut cells with a smaller open fraction are closed.
+    - ``formulation``: ``"eulerian"`` (the default: a fixed grid the material flows through,
+      :class:`fipy_hopper.model.HopperModel`) or ``"lagrangian"`` (a mesh that moves with the
+      material, :class:`fipy_hopper.lagrangian.LagrangianModel`, conical hoppers only: it
+      stops when the mesh distorts, long before the hopper is empty).
 
     ``cell_size`` is in ``[0.1 mm, 10 m]``, times in ``[0, 1e6 s]``; the gravity ramp may not
     exceed ``max_fill_time`` (filling would stop before gravity is complete; for ``"auto"``
@@ -355,8 +361,12 @@ class NumericsConfig:
     settle_damping_fraction: float = 1.0e-4
     max_fill_time: float = 2.0
     min_open_fraction: float = 0.05
+    formulation: str = "eulerian"
 
     def __post_init__(self):
+        if not isinstance(self.formulation, str) or self.formulation not in FORMULATIONS:
+            raise ConfigError(f"numerics.formulation = {_show(self.formulation)}: expected one "
+                              f"of {', '.join(repr(f) for f in FORMULATIONS)}")
         _check_range("numerics.cell_size", self.cell_size, *CELL_SIZE_RANGE, unit=" m")
         _check_range("numerics.dt_safety", self.dt_safety, 0, 1, low_open=True)
         _check_range("numerics.transport_cfl", self.transport_cfl, 0, 0.5, low_open=True)
@@ -505,6 +515,9 @@ class HopperConfig:
                 f"{cells_across_outlet:.2f} cells across the outlet {across} "
                 f"({self.hopper.outlet_radius:g} m); at least 3 are needed "
                 f"(cell_size <= {self.hopper.outlet_radius / 3:.4g} m)")
+        if self.numerics.formulation == "lagrangian" and not self.hopper.axisymmetric:
+            raise ConfigError('numerics.formulation = "lagrangian" models conical hoppers only; '
+                              'a wedge (hopper.shape = "wedge") runs with "eulerian"')
         self._check_grid_size()
         self._check_step_count()
         if self.ramp_time > self.numerics.max_fill_time:

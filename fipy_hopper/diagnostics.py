@@ -180,30 +180,22 @@ def classify_outcome(mode: str, stopped: bool, left_fraction: float, channel_dia
 class WallSampler:
     """Normal pressure and shear on the wall, binned along the arc length ``s``.
 
-    The cells whose centres lie between ``0.5`` and ``2.5`` cells from the wall (inside the
-    material, off the cut cells) are assigned to the wall point nearest to them; each bin of
-    ``bin_cells`` cells of arc length averages their stress weighted by ``alpha kappa V``, and
-    ``p_n = -n.sigma.n``, ``tau = t.sigma.n`` with the wall normal ``n`` (into the wall) and
-    the tangent ``t`` pointing up the wall.  Pressures are positive in compression (Pa).
+    The material next to the wall (:meth:`HopperModelProtocol.wall_stress_points
+    <fipy_hopper.protocol.HopperModelProtocol.wall_stress_points>`: on the Eulerian grid the
+    cells whose centres lie between ``0.5`` and ``2.5`` cells from the wall, inside the
+    material, off the cut cells) is assigned to the wall point nearest to it; each bin of
+    ``bin_cells`` cells of arc length averages its stress weighted by volume (``alpha kappa V``),
+    and ``p_n = -n.sigma.n``, ``tau = t.sigma.n`` with the wall normal ``n`` (into the wall)
+    and the tangent ``t`` pointing up the wall.  Pressures are positive in compression (Pa).
     """
 
     def __init__(self, model, bin_cells: float = 3.0):
-        g, geom = model.grid, model.cfg.hopper
+        geom = model.cfg.hopper
         self.model = model
-        R, Z = np.meshgrid(g.r_cells, g.z_cells)
-        d = geometry.signed_distance(R, Z, geom)
-        vertices = geometry.wall_polyline(geom, 1e3, 1e3)
-        pr, pz, seg = geometry._nearest_on_polyline(R, Z, vertices)
-        band = (d >= 0.5 * g.h) & (d <= 2.5 * g.h) & (seg >= 1) & (pz >= 0) & (
-            pz < geom.fill_level)
-        s = geometry.arc_length_of_point(pr, pz, geom)
-        width = bin_cells * g.h
+        width = bin_cells * model.cell_size
         s_max = geometry.arc_length(geom.fill_level, geom)
         self.edges = np.arange(0.0, s_max + width, width)
         self.centres = 0.5 * (self.edges[1:] + self.edges[:-1])
-        self.cells = np.flatnonzero(band.ravel())
-        self.bins = np.clip(np.digitize(s.ravel()[self.cells], self.edges) - 1, 0,
-                            len(self.centres) - 1)
         r_w, z_w, nr, nz = geometry.wall_point(self.centres, geom)
         self.r, self.z, self.nr, self.nz = r_w, z_w, nr, nz
 
@@ -216,13 +208,11 @@ class WallSampler:
     def mean_stress(self, state):
         """The weighted mean stress ``(rr, zz, tt, rz)`` (Pa) of each bin's cells, (nb, 4);
         NaN where a bin holds no material."""
-        m = self.model
-        w = (state.alpha * m.open_volume).ravel()[self.cells]
-        w = np.where(state.alpha.ravel()[self.cells] > 0.5, w, 0.0)
-        sig = state.sigma.reshape(-1, 4)[self.cells]
+        s, w, sig = self.model.wall_stress_points(state)
         nb = len(self.centres)
-        wsum = np.bincount(self.bins, w, nb)
-        mean = np.stack([np.bincount(self.bins, w * sig[:, k], nb) for k in range(4)], axis=1)
+        bins = np.clip(np.digitize(s, self.edges) - 1, 0, nb - 1)
+        wsum = np.bincount(bins, w, nb)
+        mean = np.stack([np.bincount(bins, w * sig[:, k], nb) for k in range(4)], axis=1)
         ok = wsum > 0
         mean[ok] /= wsum[ok, None]
         mean[~ok] = np.nan
@@ -265,20 +255,12 @@ class WallLoads:
     """
 
     def __init__(self, model, sampler: "WallSampler | None" = None):
-        geom, g = model.cfg.hopper, model.grid
+        geom = model.cfg.hopper
         self.model = model
         self.sampler = sampler if sampler is not None else WallSampler(model)
-        j, i, normals, _ = model.contact_list
-        seg = model.contact_segment
-        r, z = g.r_nodes[i], g.z_nodes[j]
-        theta = geom.half_angle
+        s, normals, seg = model.wall_entries()
         s_t = float(geometry.transition_arc_length(geom))
         on_cone = (seg == 1) | (seg == -1)
-        s = np.where(seg == 2, s_t + (z - geom.cone_height),
-                     np.where(seg == -1, 0.0,
-                              (r - geom.outlet_radius) * np.sin(theta)
-                              + (z * np.cos(theta) if geom.cone_height > 0 else 0.0)))
-        s = np.where(on_cone, np.clip(s, 0.0, s_t), np.maximum(s, s_t))
         self.entries = np.flatnonzero(seg != 0)          # not the free-fall tube
         self.s = s[self.entries]
         self.normal = normals[self.entries]
@@ -289,7 +271,8 @@ class WallLoads:
         self.bin_area = self._area(edges[:-1], edges[1:], geom)
         weights = np.zeros((len(self.centres), len(self.entries)))
         groups = (on_cone[self.entries], ~on_cone[self.entries])
-        top = max(float(edges[-1]), float(np.max(self.s)) + g.h) if len(self.s) else edges[-1]
+        top = (max(float(edges[-1]), float(np.max(self.s)) + model.cell_size) if len(self.s)
+               else edges[-1])
         for group, (lo, hi) in zip(groups, ((0.0, s_t), (s_t, top))):
             members = np.flatnonzero(group)
             if members.size == 0:
@@ -328,11 +311,10 @@ class WallLoads:
     def reading(model, state) -> dict:
         """The cumulative measurements of ``state`` at this moment (copies): the impulses,
         the momentum budget, the vertical momentum ``sum m v_z`` (per radian) and the time."""
-        mass = model.node_mass(state)
         return {"t": state.t, "wall": state.wall_impulse.copy(),
                 "plate": state.plate_impulse.copy(),
                 "budget": state.momentum_budget.copy(),
-                "momentum": float(np.sum(mass * state.v[1]))}
+                "momentum": model.vertical_momentum(state)}
 
     def profile(self, start: dict, end: dict):
         """``(s, r, z, p_n, tau)`` of the window between two :meth:`reading` s (Pa)."""

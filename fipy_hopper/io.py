@@ -685,18 +685,24 @@ class FieldWriter:
     def last_step(self) -> Optional[int]:
         return self.entries[-1]["step"] if self.entries else None
 
-    def write(self, state, t_open: float = math.nan) -> Path:
+    def _mesh(self, state):
+        """The snapshot of ``state`` as a ``meshio.Mesh``."""
         import meshio
 
-        index = len(self.entries)
-        name = f"fields_{index:04d}.vtu"
-        mesh = meshio.Mesh(self.points, [("quad", self.quads)],
+        return meshio.Mesh(self.points, [("quad", self.quads)],
                            point_data={"node_velocity": np.column_stack([
                                np.asarray(state.v[0], float).ravel(),
                                np.asarray(state.v[1], float).ravel(),
                                np.zeros(state.v[0].size)])},
                            cell_data={k: [v] for k, v in cell_fields(state, self.grid,
                                                                   *self.strength).items()})
+
+    def write(self, state, t_open: float = math.nan) -> Path:
+        import meshio
+
+        index = len(self.entries)
+        name = f"fields_{index:04d}.vtu"
+        mesh = self._mesh(state)
         with atomic_path(self.folder / name) as tmp:
             meshio.write(tmp, mesh, file_format="vtu")
         markers = getattr(state, "markers", None)
@@ -742,6 +748,45 @@ class FieldWriter:
             if item.name not in keep:
                 item.unlink()
         self._write_index()
+
+
+class MeshFieldWriter(FieldWriter):
+    """:class:`FieldWriter` for a mesh that moves with the material (the Lagrangian model):
+    each snapshot holds the mesh where it is (x = r, y = z; quads of
+    :class:`~fipy_hopper.lagrangian.LagrangianMesh`), point data ``node_velocity`` and the cell
+    data of :func:`cell_fields` that apply to an element: ``alpha`` 1 for an element still in
+    the run and 0 for one eroded below the outlet, ``layer``, ``velocity`` (the mean of the
+    element's nodes), ``speed``, the stresses, ``pressure``, ``plastic_strain``,
+    ``loose_strain`` and the stress pattern."""
+
+    def __init__(self, folder: PathLike, model, cohesion: float = 0.0,
+                 friction_angle_deg: float = 30.0):
+        self.folder = Path(folder)
+        self.folder.mkdir(parents=True, exist_ok=True)
+        self.conn, self.layer = model.mesh.conn, model.layer
+        self.strength = (cohesion, friction_angle_deg)
+        self.entries: list = []
+
+    def _mesh(self, state):
+        import meshio
+
+        from .diagnostics import stress_pattern
+
+        v = np.asarray(state.v, float)
+        zeros = np.zeros((len(v), 1))
+        velocity = np.column_stack([v[self.conn].mean(axis=1), np.zeros(len(self.conn))])
+        sigma = np.asarray(state.sigma, float)
+        cells = {"alpha": np.asarray(state.active, float), "layer": self.layer,
+                 "velocity": velocity, "speed": np.hypot(velocity[:, 0], velocity[:, 1]),
+                 "stress_rr": sigma[:, 0].copy(), "stress_zz": sigma[:, 1].copy(),
+                 "stress_tt": sigma[:, 2].copy(), "stress_rz": sigma[:, 3].copy(),
+                 "pressure": -(sigma[:, 0] + sigma[:, 1] + sigma[:, 2]) / 3.0,
+                 "plastic_strain": np.asarray(state.eps_p, float),
+                 "loose_strain": np.asarray(state.loose, float),
+                 **stress_pattern(sigma, *self.strength)}
+        return meshio.Mesh(np.column_stack([state.x, zeros]), [("quad", self.conn)],
+                           point_data={"node_velocity": np.column_stack([v, zeros])},
+                           cell_data={k: [np.asarray(c)] for k, c in cells.items()})
 
 
 def read_snapshot_index(folder: PathLike) -> list:

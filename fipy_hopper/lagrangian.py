@@ -36,10 +36,11 @@ Element
     ``Gamma`` on a rectangle, orthogonal to linear velocity fields on any quad).
 
 Time step
-    Central difference: ``v += dt (-f_int + f_hg + m g) / m`` (damped during filling as in the
-    Eulerian model), contact, axis; the strain increment ``D dt`` and spin from the new velocity on
-    the mid-step configuration ``x + v dt/2``; Jaumann rotation and :func:`material.update`; then
-    ``x += v dt``.  ``dt = dt_safety L_min / c_p`` with ``L_min`` the smallest element length
+    Central difference: ``v += dt (-f_int + f_hg + m g) / m``, contact, then (during filling)
+    the Eulerian model's mass-proportional damping, applied after the contact as there, so
+    that the walls, not the damping, hold what rests on them; the axis; the strain increment
+    ``D dt`` and spin from the new velocity on the mid-step configuration ``x + v dt/2``;
+    Jaumann rotation and :func:`material.update`; then ``x += v dt``.  ``dt = dt_safety L_min / c_p`` with ``L_min`` the smallest element length
     ``A / (longest edge)`` (``h`` for a square, so the Eulerian step on the same cell size),
     recomputed every step and never above its initial value.
 
@@ -59,10 +60,21 @@ Stop rule (:class:`DistortionLimits`)
     ``(x_{a+1} - x_a) x (x_{a-1} - x_a)`` must be positive (else "inverted"), the interior angle
     at least ``min_angle_deg`` (10 deg, else "min_angle"), and the aspect ratio, longest over
     shortest edge, at most ``max_aspect`` (10, else "aspect_ratio").  The step that breaks a limit
-    is undone: the state kept is the last valid one, and the run records the reason, the element,
-    the time, the step and the fraction of the mass discharged.  The limits only bring the stop
-    forward a little: without them the coarse test hopper's mesh inverts 26 ms later (4.0% instead
-    of 3.2% discharged).
+    is undone: the state kept is the last valid one, with ``halt = "mesh_distorted"``, and the
+    simulation's ``halt`` stop rule ends the run there; the summary names the kind, the element
+    and the time.  The limits only bring the stop forward a little: without them the coarse
+    test hopper's mesh inverts 26 ms later (4.0% instead of 3.2% discharged).
+
+The run
+    :class:`~fipy_hopper.simulation.Simulation` drives it as it drives the Eulerian model (the
+    protocol of :mod:`fipy_hopper.protocol`): the same fill to rest, stop rules, time series,
+    summary and wall loads.  The wall's reaction is measured as in the Eulerian model: each
+    step's contact velocity change times the node mass, the outlet plate's apart, the wall's
+    collected at stations half a cell apart along the wall (the station of the node's nearest
+    wall point), and the vertical impulses of gravity and of the fill's damping.  The
+    stress-sampled estimate averages the elements whose centroids lie within 2.5 element sizes
+    of the wall.  ``[numerics] formulation = "lagrangian"`` runs it from the command line and
+    :func:`fipy_hopper.run`.
 
 Discharged elements
     By default (``erode_discharged=True``) an element whose four nodes have all fallen below
@@ -84,8 +96,7 @@ the per-radian values), in kg; masses per node are per radian (kg/rad).
 from __future__ import annotations
 
 import math
-import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Optional
 
 import numpy as np
@@ -95,9 +106,9 @@ from . import geometry
 from .config import HopperConfig
 from .dense_loose import close_loose_volume, separation_strain
 from .material import equivalent_plastic_strain
-from .model import GRAVITY
+from .model import GRAVITY, InstabilityError
 
-__all__ = ["DistortionLimits", "LagrangianMesh", "LagrangianState", "LagrangianRecord",
+__all__ = ["DistortionLimits", "LagrangianMesh", "LagrangianState",
            "LagrangianModel", "build_mesh", "element_gradients", "internal_force",
            "hourglass_force", "strain_rate", "element_quality", "contact_reference",
            "project_reference"]
@@ -257,14 +268,17 @@ def element_quality(x, conn):
         A / edges.max(axis=1)
 
 
-def contact_reference(x, v, dt, segments, passes=2):
-    """Numpy reference of :func:`_contact_kernel` (returns the new velocities).
+def contact_reference(x, v, dt, segments, passes=2, plate_segment=-1):
+    """Numpy reference of :func:`_contact_kernel`: returns the new velocities and the velocity
+    changes made by segment ``plate_segment``.
 
     Within one segment's pass every node is independent, so the node loop vectorises exactly.
     """
     v = v.copy()
+    dv_plate = np.zeros_like(v)
     for _ in range(passes):
-        for ar, az, br, bz, nr, nz, mu in segments:
+        for k, (ar, az, br, bz, nr, nz, mu) in enumerate(segments):
+            before = v
             ab = np.array([br - ar, bz - az])
             n = np.array([nr, nz])
             p = x + v * dt
@@ -280,7 +294,9 @@ def contact_reference(x, v, dt, segments, passes=2):
             scale = np.where(speed > 0.0, np.maximum(0.0, 1.0 - mu * np.where(hit, dvn, 0.0)
                                                      / np.where(speed > 0, speed, 1.0)), 0.0)
             v = np.where(hit[:, None], vn[:, None] * n + scale[:, None] * tang, v)
-    return v
+            if k == plate_segment:
+                dv_plate += v - before
+    return v, dv_plate
 
 
 def project_reference(x, geom, plate_closed):
@@ -437,13 +453,15 @@ def _quality_kernel(x, conn, active, out):
 
 
 @njit(cache=True, error_model="numpy")
-def _contact_kernel(x, v, dt, segments, n_segments, passes):
+def _contact_kernel(x, v, dt, segments, n_segments, passes, plate_segment, dv_plate):
     """Predictive impulse Coulomb contact of every node against the segments, in place.
 
     ``segments`` rows ``(a_r, a_z, b_r, b_z, n_r, n_z, mu)``, ``n`` into the wall.  A node whose
     predicted position ``x + v dt`` lies behind a segment (projecting onto it) gets its normal
     velocity reduced to ``gap / dt`` and its tangential speed reduced by ``mu`` times the normal
-    velocity removed (not below zero).
+    velocity removed (not below zero).  The velocity changes made by segment
+    ``plate_segment`` (the outlet plate; -1 for none) are added to ``dv_plate`` (n_nodes, 2),
+    so that the plate's reaction is told from the wall's.
     """
     for _ in range(passes):
         for k in range(n_segments):
@@ -475,8 +493,13 @@ def _contact_kernel(x, v, dt, segments, n_segments, passes):
                 scale = 0.0
                 if speed > 0.0:
                     scale = max(0.0, 1.0 - mu * dvn / speed)
-                v[i, 0] = vn2 * nr_ + scale * tr
-                v[i, 1] = vn2 * nz_ + scale * tz
+                new_r = vn2 * nr_ + scale * tr
+                new_z = vn2 * nz_ + scale * tz
+                if k == plate_segment:
+                    dv_plate[i, 0] += new_r - v[i, 0]
+                    dv_plate[i, 1] += new_z - v[i, 1]
+                v[i, 0] = new_r
+                v[i, 1] = new_z
 
 
 @njit(cache=True, error_model="numpy")
@@ -522,10 +545,11 @@ def _project_kernel(x, vertices, r0, tan_t, r_bin, plate_closed):
     return moved
 
 
-# ------------------------------------------------------------------------------ state/record
+# ------------------------------------------------------------------------------------ state
 @dataclass
 class LagrangianState:
-    """Everything that evolves in a Lagrangian run."""
+    """Everything that evolves in a Lagrangian run (the state of
+    :class:`~fipy_hopper.protocol.HopperModelProtocol`)."""
 
     t: float
     step: int
@@ -538,40 +562,34 @@ class LagrangianState:
     dt: float
     plate_closed: bool = True
     loose: np.ndarray = None       # (n_el,) loose strain (dense_loose.close_loose_volume)
+    discharged: float = 0.0        # kg (3D) of the nodes below the outlet plane
+    lost: float = 0.0              # nothing leaves a Lagrangian mesh
+    # measurements, cumulative per radian (kg m/s), as in fipy_hopper.model.State: the wall's
+    # impulse on the nodes per wall station (LagrangianModel.wall_entries), the plate's, and
+    # the vertical momentum budget (gravity, damping, stopped, outflow)
+    wall_impulse: np.ndarray = None
+    plate_impulse: np.ndarray = None
+    momentum_budget: np.ndarray = None
+    halt: str = ""                 # "mesh_distorted" once an element broke a limit
+    halt_detail: str = ""          # which element, how, when
+    halt_kind: str = ""            # inverted | aspect_ratio | min_angle
+    halt_element: int = -1
 
     def copy(self) -> "LagrangianState":
         return LagrangianState(**{k: (v.copy() if isinstance(v, np.ndarray) else v)
                                   for k, v in self.__dict__.items()})
 
 
-@dataclass
-class LagrangianRecord:
-    """What a Lagrangian run measured (SI; masses 3D, kg; times since the outlet opened)."""
-
-    t: list = field(default_factory=list)
-    discharged: list = field(default_factory=list)      # mass of nodes below z = 0
-    mass_in_hopper: list = field(default_factory=list)
-    rate: list = field(default_factory=list)            # kg/s over the last interval
-    max_aspect: list = field(default_factory=list)      # worst active element at each sample
-    min_angle: list = field(default_factory=list)
-    fill_time: float = math.nan
-    fill_at_rest: bool = False
-    total_mass: float = math.nan
-    initial_mass: float = math.nan                      # in the hopper when the outlet opened
-    wall_fill: tuple = ()                               # (s, r, z, p_n, tau) at the end of filling
-    stop_reason: str = ""
-    stop_kind: str = ""          # inverted | aspect_ratio | min_angle | empty | end_time | max_time
-    stop_time: float = math.nan  # s since the outlet opened (last valid step)
-    stop_step: int = 0
-    stop_element: int = -1
-    discharged_fraction: float = math.nan
-    snapshots: list = field(default_factory=list)       # [(t since opening, x copy)]
-    wall_time: float = 0.0
-
-
 # ------------------------------------------------------------------------------------ model
 class LagrangianModel:
-    """Updated-Lagrangian axisymmetric hopper of a :class:`HopperConfig` (module docstring)."""
+    """Updated-Lagrangian axisymmetric hopper of a :class:`HopperConfig` (module docstring).
+
+    It implements :class:`~fipy_hopper.protocol.HopperModelProtocol`, so
+    :class:`~fipy_hopper.simulation.Simulation` runs it exactly as the Eulerian model: the same
+    fill to rest, stop rules, time series, wall loads from the wall's reaction and summary.
+    """
+
+    formulation = "lagrangian"
 
     def __init__(self, cfg: HopperConfig, limits: DistortionLimits = DistortionLimits(),
                  erode_discharged: bool = True, erode_depth: float = 0.0,
@@ -587,12 +605,15 @@ class LagrangianModel:
         geom = cfg.hopper
         self.geom = geom
         self.erode_depth = float(erode_depth)
-        self.h = cfg.numerics.cell_size
+        self.h = self.cell_size = cfg.numerics.cell_size
         self.mesh = build_mesh(geom, self.h)
+        self.n_cells = self.mesh.n_elements
         self.material = cfg.material.law()
         self.rho = cfg.material.density
         self.c_p = self.material.p_wave_speed
         self.mu_wall = cfg.wall.friction_coefficient
+        self.section_factor = 2.0 * math.pi
+        self.ramp_time = cfg.ramp_time
         m = self.mesh
         _, _, A, r_c = element_gradients(m.x, m.conn)
         if np.any(A <= 0):
@@ -601,14 +622,15 @@ class LagrangianModel:
         mass = np.zeros(m.n_nodes)
         np.add.at(mass, m.conn, 0.25 * self.rho * self.volume0[:, None])
         self.node_mass = mass                                  # kg/rad, fixed
-        self.total_mass = 2.0 * math.pi * float(mass.sum())    # kg
+        self.total_mass_kg = 2.0 * math.pi * float(mass.sum())  # kg
         zc0 = m.x[m.conn, 1].mean(axis=1)
         self.layer = np.floor(np.clip(zc0 / geom.fill_level, 0, 0.999999) * n_layers)
         self.axis_nodes = np.flatnonzero(m.x[:, 0] == 0.0)
         self.hg_scale = cfg.numerics.hourglass_coefficient * self.rho * math.sqrt(GRAVITY)
         q = element_quality(m.x, m.conn)
         self.initial_quality = {"max_aspect": float(q[1].max()), "min_angle_deg": float(q[2].min())}
-        self.dt0 = self.material.stable_time_step(float(q[3].min()), cfg.numerics.dt_safety)
+        self.dt0 = self.dt = self.material.stable_time_step(float(q[3].min()),
+                                                            cfg.numerics.dt_safety)
         column = max(geom.fill_level, self.h)
         self.fill_damping = math.pi * self.c_p / (2.0 * column)
         # wall segments (tube: frictionless; cone or floor; bin) and the outlet plate
@@ -630,11 +652,33 @@ class LagrangianModel:
         plate = [0.0, 0.0, geom.outlet_radius, 0.0, 0.0, -1.0, self.mu_wall]
         self.segments_closed = np.array(segs + [plate])
         self._tan_t = 0.0 if geom.cone_height == 0.0 else math.tan(geom.half_angle)
+        self._stations()
         self._force = np.zeros((m.n_nodes, 2))
         self._d_eps = np.zeros((m.n_elements, 4))
         self._sig_rot = np.zeros((m.n_elements, 4))
         self._quality = np.zeros((m.n_elements, 4))
+        self._dv_plate = np.zeros((m.n_nodes, 2))
         self.last_quality = None
+
+    def _stations(self):
+        """The wall stations that collect the wall's impulse: the free-fall tube (one), and
+        the cone (or floor) and the bin wall divided into stretches of about half a cell;
+        each station stands for its stretch (arc length ``s`` at its middle, normal into the
+        wall there)."""
+        geom = self.geom
+        s_t = float(geometry.transition_arc_length(geom))
+        s_top = float(geometry.arc_length(geom.top, geom))
+        n_cone = max(1, int(math.ceil(s_t / (0.5 * self.h))))
+        n_bin = max(1, int(math.ceil((s_top - s_t) / (0.5 * self.h))))
+        self._s_t, self._ds_cone, self._ds_bin = s_t, s_t / n_cone, (s_top - s_t) / n_bin
+        s = np.concatenate([[0.0], (np.arange(n_cone) + 0.5) * self._ds_cone,
+                            s_t + (np.arange(n_bin) + 0.5) * self._ds_bin])
+        _, _, n_r, n_z = geometry.wall_point(s, geom)
+        normal = np.stack([n_r, n_z], axis=1)
+        normal[0] = (-1.0, 0.0) if geom.outlet_radius > 0 else (0.0, -1.0)   # the tube
+        segment = np.concatenate([[0], np.ones(n_cone, int), np.full(n_bin, 2)])
+        self._wall_stations = (s, normal, segment)
+        self._n_cone = n_cone
 
     # ------------------------------------------------------------------ state
     def initial_state(self) -> LagrangianState:
@@ -644,10 +688,12 @@ class LagrangianModel:
                                v=np.zeros((m.n_nodes, 2)), sigma=np.zeros((m.n_elements, 4)),
                                eps_p=np.zeros(m.n_elements),
                                active=np.ones(m.n_elements, dtype=bool), dt=self.dt0,
-                               loose=np.zeros(m.n_elements))
+                               loose=np.zeros(m.n_elements),
+                               wall_impulse=np.zeros((len(self._wall_stations[0]), 2)),
+                               plate_impulse=np.zeros((1, 2)), momentum_budget=np.zeros(4))
 
     def gravity(self, state: LagrangianState) -> float:
-        ramp = self.cfg.ramp_time
+        ramp = self.ramp_time
         if state.stage == "filling" and ramp > 0:
             return GRAVITY * min(1.0, state.t / ramp)
         return GRAVITY
@@ -657,6 +703,12 @@ class LagrangianModel:
         state.plate_closed = False
         state.stage = "discharge"
 
+    def transport_step(self, state: LagrangianState) -> None:
+        """Nothing to carry: the mesh moves with the material."""
+
+    def reset_caches(self) -> None:
+        """Nothing is cached from a state."""
+
     def discharged_mass(self, state: LagrangianState) -> float:
         """Mass (kg, 3D) of the nodes below the outlet plane."""
         return 2.0 * math.pi * float(self.node_mass[state.x[:, 1] < 0.0].sum())
@@ -665,9 +717,17 @@ class LagrangianModel:
         """Mass (kg, 3D) of the nodes at or above the outlet plane."""
         return 2.0 * math.pi * float(self.node_mass[state.x[:, 1] >= 0.0].sum())
 
+    def total_mass(self, state: LagrangianState) -> float:
+        """Mass (kg, 3D) of the mesh: fixed."""
+        return self.total_mass_kg
+
     def kinetic_energy(self, state: LagrangianState) -> float:
         """Kinetic energy of the nodal velocities (J, 3D)."""
         return math.pi * float(np.sum(self.node_mass * (state.v[:, 0] ** 2 + state.v[:, 1] ** 2)))
+
+    def vertical_momentum(self, state: LagrangianState) -> float:
+        """``sum m v_z`` over the nodes (kg m/s per radian)."""
+        return float(np.sum(self.node_mass * state.v[:, 1]))
 
     def quality(self, state: LagrangianState) -> np.ndarray:
         """(n_el, 4): min corner Jacobian, aspect, min angle (deg), length ``A / l_max``."""
@@ -695,20 +755,74 @@ class LagrangianModel:
                                  + text.format(q[e, col]))
         return None
 
+    def check_stable(self, state: LagrangianState) -> None:
+        """Raise :class:`~fipy_hopper.model.InstabilityError` on a non-finite velocity or
+        stress, or a runaway velocity (the Eulerian model's limit)."""
+        speed = np.hypot(state.v[:, 0], state.v[:, 1])
+        limit = 50.0 * math.sqrt(GRAVITY * max(self.geom.top, 0.1))
+        bad = ~np.isfinite(speed) | (speed > limit)
+        if bad.any():
+            k = int(np.flatnonzero(bad)[0])
+            raise InstabilityError(
+                f"runaway velocity at step {state.step}, t = {state.t:.6g} s, node {k} at r = "
+                f"{state.x[k, 0]:.4g} m, z = {state.x[k, 1]:.4g} m (|v| = {speed[k]:.3g} m/s)")
+        if not np.all(np.isfinite(state.sigma)):
+            e = int(np.flatnonzero(~np.isfinite(state.sigma).all(axis=1))[0])
+            raise InstabilityError(f"non-finite stress in element {e} at step {state.step}, "
+                                   f"t = {state.t:.6g} s")
+
     # ------------------------------------------------------------------ step
+    def advance(self, state: LagrangianState, max_steps: int) -> int:
+        """Up to ``max_steps`` steps (:meth:`step`).  A step after which an active element
+        breaks a distortion limit is undone: the state stays the last valid one, with
+        ``halt = "mesh_distorted"`` and the element, the kind (``halt_kind``: inverted,
+        min_angle, aspect_ratio) and the time in ``halt_detail``.  Returns the steps kept."""
+        taken = 0
+        if state.halt:
+            return 0
+        for _ in range(int(max_steps)):
+            previous = state.copy()
+            self.step(state)
+            bad = self.check_distortion(state, self.last_quality)
+            if bad is not None:
+                kind, element, text = bad
+                step_broken, t_broken = state.step, state.t
+                state.__dict__.update(previous.__dict__)
+                state.halt, state.halt_kind, state.halt_element = "mesh_distorted", kind, element
+                state.halt_detail = (f"{kind}: at step {step_broken} (t = {t_broken:.6g} s, "
+                                     f"{state.stage}) {text}; the state kept is the last valid "
+                                     f"step {state.step}")
+                break
+            taken += 1
+        state.discharged = self.discharged_mass(state)
+        return taken
+
     def step(self, state: LagrangianState) -> LagrangianState:
-        """Advance by one explicit step ``state.dt`` (in place); see the module docstring."""
+        """Advance by one explicit step ``state.dt`` (in place); see the module docstring.
+
+        The loads are measured as in the Eulerian model: the vertical impulses of gravity and
+        of the fill's damping, and the contact's velocity change times the node mass, the
+        plate's apart, the wall's added to the station nearest to the node's wall point."""
         dt = state.dt
         x, v, conn = state.x, state.v, self.mesh.conn
         _force_kernel(x, v, conn, state.sigma, state.active, self.hg_scale, self._force)
         damping = self.fill_damping if state.stage == "filling" else 0.0
         m = self.node_mass[:, None]
         v += dt * self._force / m
-        v[:, 1] -= dt * self.gravity(state)
-        if damping:
-            v *= 1.0 / (1.0 + damping * dt)
+        g = self.gravity(state)
+        v[:, 1] -= dt * g
+        budget = state.momentum_budget
+        budget[0] -= dt * g * float(self.node_mass.sum())
         segments = self.segments_closed if state.plate_closed else self.wall_segments
-        _contact_kernel(x, v, dt, segments, len(segments), 2)
+        v_free = v.copy()
+        self._dv_plate[:] = 0.0
+        _contact_kernel(x, v, dt, segments, len(segments), 2,
+                        len(segments) - 1 if state.plate_closed else -1, self._dv_plate)
+        self._add_contact_impulse(state, v - v_free)
+        if damping:           # after the contact, as in the Eulerian model: a wall, not the
+            factor = 1.0 / (1.0 + damping * dt)      # damping, holds what rests on it
+            budget[1] += (factor - 1.0) * self.vertical_momentum(state)
+            v *= factor
         v[self.axis_nodes, 0] = 0.0
         x_mid = x + 0.5 * dt * v
         _strain_kernel(x_mid, v, dt, conn, state.sigma, state.active, self._d_eps, self._sig_rot)
@@ -738,174 +852,92 @@ class LagrangianModel:
             state.dt = min(self.dt0, self.material.stable_time_step(float(lengths.min()),
                                                                     self.cfg.numerics.dt_safety))
         if not (np.all(np.isfinite(v)) and np.all(np.isfinite(state.sigma))):
-            raise FloatingPointError(f"non-finite Lagrangian state at step {state.step}, "
-                                     f"t = {state.t:.6g} s")
+            raise InstabilityError(f"non-finite Lagrangian state at step {state.step}, "
+                                   f"t = {state.t:.6g} s")
         return state
 
-    # ------------------------------------------------------------------ wall pressure
-    def wall_pressure(self, state: LagrangianState, bin_cells: float = 3.0,
-                      band_cells: float = 2.0):
-        """``(s, r, z, p_n, tau)`` along the wall from the elements next to it (Pa).
+    def _add_contact_impulse(self, state: LagrangianState, dv: np.ndarray) -> None:
+        """Add ``m dv`` of this step's contact to the plate's and the wall stations' impulse
+        (per radian): the plate's from its own velocity changes, the rest to the station of
+        the node's nearest wall point."""
+        mass = self.node_mass[:, None]
+        state.plate_impulse[0] += (mass * self._dv_plate).sum(axis=0)
+        wall = mass * (dv - self._dv_plate)
+        nodes = np.flatnonzero(np.any(wall != 0.0, axis=1))
+        if not len(nodes):
+            return
+        pr, pz, seg = geometry._nearest_on_polyline(state.x[nodes, 0], state.x[nodes, 1],
+                                                    self.vertices)
+        s = geometry.arc_length_of_point(pr, pz, self.geom)
+        cone = np.clip(np.floor(s / self._ds_cone), 0, self._n_cone - 1) + 1
+        n_bin = len(self._wall_stations[0]) - 1 - self._n_cone
+        above = np.clip(np.floor((s - self._s_t) / self._ds_bin), 0, n_bin - 1) \
+            + 1 + self._n_cone
+        station = np.where(seg == 0, 0, np.where(s < self._s_t, cone, above)).astype(int)
+        np.add.at(state.wall_impulse, station, wall[nodes])
 
-        The elements whose centroids lie within ``band_cells`` cell sizes of the cone or bin wall
-        (the outer two columns in the bin) are assigned to the wall point nearest to their
-        centroid and binned by arc length in bins of ``bin_cells`` cell sizes, exactly the bins
-        of :class:`fipy_hopper.diagnostics.WallSampler`; each bin averages the stress weighted by
-        the element volume, and ``p_n = -n.sigma.n``, ``tau = t.sigma.n`` with the wall normal
-        ``n`` at the bin centre (into the wall) and ``t`` up the wall.
-        """
-        geom, h = self.geom, self.h
-        conn = self.mesh.conn
+    # ------------------------------------------------------------------ measuring
+    def wall_entries(self) -> tuple:
+        """``(s, normal, segment)`` of the wall stations (rows of ``wall_impulse``)."""
+        return self._wall_stations
+
+    def wall_stress_points(self, state: LagrangianState) -> tuple:
+        """``(s, weight, sigma)`` of the active elements whose centroids lie within 2.5
+        element sizes of the cone or bin wall, below the fill level (the outer column's
+        centroids are half an element off the wall, so no inner bound): the arc length of
+        the nearest wall point, the element volume ``r_c A`` and its stress."""
+        geom, h, conn = self.geom, self.h, self.mesh.conn
         rc, zc = state.x[conn, 0].mean(axis=1), state.x[conn, 1].mean(axis=1)
         d = geometry.signed_distance(rc, zc, geom)
         pr, pz, seg = geometry._nearest_on_polyline(rc, zc, self.vertices)
-        band = (d <= band_cells * h) & (seg >= 1) & (pz >= 0) & (pz < geom.fill_level) \
-            & state.active
-        s = geometry.arc_length_of_point(pr, pz, geom)
-        width = bin_cells * h
-        s_max = geometry.arc_length(geom.fill_level, geom)
-        edges = np.arange(0.0, s_max + width, width)
-        centres = 0.5 * (edges[1:] + edges[:-1])
-        nb = len(centres)
+        band = (d <= 2.5 * h) & (seg >= 1) & (pz >= 0) & (pz < geom.fill_level) & state.active
         idx = np.flatnonzero(band)
-        bins = np.clip(np.digitize(s[idx], edges) - 1, 0, nb - 1)
         _, _, A, r_el = element_gradients(state.x, conn)
-        w = (A * r_el)[idx]
-        wsum = np.bincount(bins, w, nb)
-        mean = np.stack([np.bincount(bins, w * state.sigma[idx, k], nb) for k in range(4)],
-                        axis=1)
-        ok = wsum > 0
-        mean[ok] /= wsum[ok, None]
-        r_w, z_w, n_r, n_z = geometry.wall_point(centres, geom)
-        t_r, t_z = -n_z, n_r
-        trac_r = mean[:, 0] * n_r + mean[:, 3] * n_z
-        trac_z = mean[:, 3] * n_r + mean[:, 1] * n_z
-        p_n = -(trac_r * n_r + trac_z * n_z)
-        tau = trac_r * t_r + trac_z * t_z
-        return centres[ok], r_w[ok], z_w[ok], p_n[ok], tau[ok]
+        s = geometry.arc_length_of_point(pr[idx], pz[idx], geom)
+        return s, (A * r_el)[idx], state.sigma[idx]
 
-    # ------------------------------------------------------------------ run
-    def fill(self, state: LagrangianState, record: Optional[LagrangianRecord] = None) -> bool:
-        """Bring the fill to rest with the plate closed (same rule as ``Simulation.fill``):
-        gravity ramped over ``HopperConfig.ramp_time``, mass-proportional damping, at rest when after
-        the ramp the kinetic energy is below ``settle_kinetic_energy M g L``.  True when at rest;
-        a distortion during filling stops it (recorded)."""
-        num = self.cfg.numerics
-        rec = record if record is not None else LagrangianRecord()
-        rec.total_mass = self.total_mass
-        threshold = num.settle_kinetic_energy * self.total_mass * GRAVITY * self.geom.fill_level
-        next_check = 0.005
-        at_rest = False
-        while state.stage == "filling":
-            previous = state.copy()
-            self.step(state)
-            bad = self.check_distortion(state, self.last_quality)
-            if bad is not None:
-                self._stop(state, previous, rec, bad, t_open=math.nan)
-                break
-            if state.t >= next_check:
-                next_check += 0.005
-                if state.t >= self.cfg.ramp_time and self.kinetic_energy(state) < threshold:
-                    at_rest = True
-                    break
-                if state.t >= num.max_fill_time:
-                    break
-        rec.fill_time = state.t
-        rec.fill_at_rest = at_rest
-        if state.stage == "filling":
-            rec.wall_fill = self.wall_pressure(state)
-        return at_rest
+    def flow_mode_measures(self, state: LagrangianState, rule) -> tuple:
+        """The mass-flow index and the stagnant fraction of
+        :class:`~fipy_hopper.diagnostics.FlowModeRule` on the elements (centroid velocity:
+        the mean of its nodes'): at each height of the rule, the elements of the row within
+        half a cell, 1 to 2.5 cells from the wall against those within 2 cells of the axis;
+        the stagnant share by element volume in the cone."""
+        geom, h, conn = self.geom, self.h, self.mesh.conn
+        act = state.active
+        rc, zc = state.x[conn, 0].mean(axis=1), state.x[conn, 1].mean(axis=1)
+        down = -state.v[conn, 1].mean(axis=1)
+        d = geometry.signed_distance(rc, zc, geom)
+        ratios = []
+        for frac in rule.heights:
+            row = act & (np.abs(zc - frac * geom.cone_height) <= 0.5 * h)
+            near_wall = row & (d >= h) & (d <= 2.5 * h)
+            axis = row & (rc < 2.0 * h)
+            if near_wall.any() and axis.any():
+                v_axis = float(np.mean(down[axis]))
+                if v_axis > 1e-9:
+                    ratios.append(float(np.mean(down[near_wall])) / v_axis)
+        index = float(np.mean(ratios)) if ratios else math.nan
+        cone = act & (zc > 0) & (zc < geom.cone_height)
+        if not cone.any():
+            return index, math.nan
+        _, _, A, r_el = element_gradients(state.x, conn)
+        w = (A * r_el)[cone]
+        mean_down = float(np.sum(down[cone] * w) / np.sum(w))
+        slow = down[cone] < rule.stagnant_speed * max(mean_down, 1e-12)
+        return index, float(np.sum(w[slow]) / np.sum(w))
 
-    def discharge(self, state: LagrangianState, record: LagrangianRecord,
-                  end_time=None, sample_interval: float = 0.005,
-                  snapshot_interval: float = 0.02) -> str:
-        """Open the outlet and run until an element passes a distortion limit (or the hopper is
-        empty, or ``end_time``/``run.max_time``); returns the stop kind."""
-        run = self.cfg.run
-        end_time = run.end_time if end_time is None else end_time
-        if state.stage == "filling":
-            self.open_outlet(state)
-        t_open = state.t
-        rec = record
-        rec.initial_mass = self.mass_in_hopper(state)
-        self._sample(state, rec, t_open)
-        rec.snapshots.append((0.0, state.x.copy()))
-        next_sample = sample_interval
-        next_snapshot = snapshot_interval
-        while not rec.stop_kind:
-            previous = state.copy()
-            self.step(state)
-            t_dis = state.t - t_open
-            bad = self.check_distortion(state, self.last_quality)
-            if bad is not None:
-                self._stop(state, previous, rec, bad, t_open)
-                break
-            if t_dis >= next_sample - 1e-12:
-                self._sample(state, rec, t_open)
-                next_sample += sample_interval
-            if t_dis >= next_snapshot - 1e-12:
-                rec.snapshots.append((t_dis, state.x.copy()))
-                next_snapshot += snapshot_interval
-            mass = self.mass_in_hopper(state)
-            kind = ""
-            if end_time != "empty" and t_dis >= float(end_time):
-                kind = "end_time"
-            elif end_time == "empty" and mass < run.empty_fraction * rec.initial_mass:
-                kind = "empty"
-            elif t_dis >= run.max_time:
-                kind = "max_time"
-            if kind:
-                rec.stop_kind = kind
-                rec.stop_reason = kind
-                rec.stop_time = t_dis
-                rec.stop_step = state.step
-                rec.discharged_fraction = self.discharged_mass(state) / rec.initial_mass
-                self._sample(state, rec, t_open)
-        if rec.snapshots[-1][0] < rec.stop_time:
-            rec.snapshots.append((rec.stop_time, state.x.copy()))
-        return rec.stop_kind
+    def empty_channel(self, state: LagrangianState, rule) -> tuple:
+        """Not measured: the mesh stops by distortion long before a channel could form."""
+        return math.nan, math.nan
 
-    def run(self, end_time=None, **options) -> tuple:
-        """Fill then discharge from :meth:`initial_state`; returns ``(record, state)`` where the
-        state is the last valid one."""
-        started = time.perf_counter()
-        state = self.initial_state()
-        rec = LagrangianRecord()
-        self.fill(state, rec)
-        if not rec.stop_kind:
-            self.discharge(state, rec, end_time=end_time, **options)
-        rec.wall_time = time.perf_counter() - started
-        return rec, state
-
-    def _sample(self, state, rec, t_open):
-        t = state.t - t_open
-        if rec.t and t <= rec.t[-1] + 1e-12:
-            return
-        dis = self.discharged_mass(state)
-        rate = (dis - rec.discharged[-1]) / (t - rec.t[-1]) if rec.t else 0.0
+    def summary_extras(self, state: LagrangianState) -> dict:
+        """``formulation``, the stop by distortion (``distortion_kind``, ``distortion``,
+        ``distortion_element``; empty when the mesh stayed valid) and the worst element at
+        the end (``max_aspect_ratio``, ``min_angle_deg``)."""
         q = self.quality(state)
         act = state.active
-        rec.t.append(t)
-        rec.discharged.append(dis)
-        rec.mass_in_hopper.append(self.mass_in_hopper(state))
-        rec.rate.append(rate)
-        rec.max_aspect.append(float(q[act, 1].max()) if act.any() else math.nan)
-        rec.min_angle.append(float(q[act, 2].min()) if act.any() else math.nan)
-
-    def _stop(self, state, previous, rec, bad, t_open):
-        """Undo the step that broke a limit and record why the run stopped."""
-        kind, element, text = bad
-        step_broken, t_broken = state.step, state.t
-        state.__dict__.update(previous.__dict__)
-        rec.stop_kind = kind
-        rec.stop_element = element
-        when = (f"{t_broken - t_open:.6g} s after the outlet opened" if math.isfinite(t_open)
-                else f"t = {t_broken:.6g} s, while filling")
-        rec.stop_reason = (f"{kind}: at step {step_broken} ({when}) {text}; "
-                           f"the state kept is the last valid step {state.step}")
-        rec.stop_step = state.step
-        rec.stop_time = state.t - t_open if math.isfinite(t_open) else math.nan
-        mass0 = rec.initial_mass if math.isfinite(rec.initial_mass) else self.total_mass
-        rec.discharged_fraction = self.discharged_mass(state) / mass0
-        if math.isfinite(t_open):
-            self._sample(state, rec, t_open)
+        return {"formulation": self.formulation, "distortion_kind": state.halt_kind,
+                "distortion": state.halt_detail, "distortion_element": state.halt_element,
+                "elements": self.mesh.n_elements,
+                "max_aspect_ratio": float(q[act, 1].max()) if act.any() else math.nan,
+                "min_angle_deg": float(q[act, 2].min()) if act.any() else math.nan}

@@ -311,6 +311,99 @@ class HopperModel:
         state.plate_closed = False
         state.stage = "discharge"
 
+    # ------------------------------------------------------------------ the run's protocol
+    #: the formulation (fipy_hopper.protocol): a fixed grid the material moves through
+    formulation = "eulerian"
+
+    @property
+    def n_cells(self) -> int:
+        return self.grid.n_cells
+
+    @property
+    def cell_size(self) -> float:
+        return self.grid.h
+
+    def vertical_momentum(self, state: State) -> float:
+        """``sum m v_z`` over the grid's nodes (kg m/s per radian)."""
+        return float(np.sum(self.node_mass(state) * state.v[1]))
+
+    def check_stable(self, state: State) -> None:
+        """Raise :class:`InstabilityError` on a runaway or non-finite velocity (above
+        ``50 sqrt(g max(top, 0.1 m))``), or a non-finite material fraction or stress."""
+        v, g = state.v, self.grid
+        speed = np.hypot(v[0], v[1])
+        limit = 50.0 * math.sqrt(GRAVITY * max(self.cfg.hopper.top, 0.1))
+        bad = ~np.isfinite(speed) | (speed > limit)
+        if bad.any():
+            j, i = np.argwhere(bad)[0]
+            raise InstabilityError(
+                f"runaway velocity at step {state.step}, t = {state.t:.6g} s, node r = "
+                f"{g.r_nodes[i]:.4g} m, z = {g.z_nodes[j]:.4g} m (|v| = {speed[j, i]:.3g} m/s, "
+                f"limit {limit:.3g} m/s)")
+        broken = ~np.isfinite(state.alpha) | ~np.isfinite(state.sigma).all(axis=-1)
+        if broken.any():
+            j, i = np.argwhere(broken)[0]
+            raise InstabilityError(
+                f"non-finite material fraction or stress at step {state.step}, t = "
+                f"{state.t:.6g} s, cell r = {g.r_cells[i]:.4g} m, z = {g.z_cells[j]:.4g} m")
+
+    def wall_entries(self) -> tuple:
+        """``(s, normal, segment)`` of every entry of ``contact_list`` (the rows of
+        ``State.wall_impulse``): the arc length from the outlet lip of the node's wall point
+        (m; the lip's entries at ``s = 0``, cone entries within ``[0, s_t]``, bin entries at or
+        above the transition ``s_t``), the contact normal and ``contact_segment``."""
+        geom, g = self.cfg.hopper, self.grid
+        j, i, normals, _ = self.contact_list
+        seg = self.contact_segment
+        r, z = g.r_nodes[i], g.z_nodes[j]
+        theta = geom.half_angle
+        s_t = float(geometry.transition_arc_length(geom))
+        on_cone = (seg == 1) | (seg == -1)
+        s = np.where(seg == 2, s_t + (z - geom.cone_height),
+                     np.where(seg == -1, 0.0,
+                              (r - geom.outlet_radius) * np.sin(theta)
+                              + (z * np.cos(theta) if geom.cone_height > 0 else 0.0)))
+        s = np.where(on_cone, np.clip(s, 0.0, s_t), np.maximum(s, s_t))
+        return s, normals, seg
+
+    def _wall_band(self):
+        """The cells whose centres lie 0.5 to 2.5 cells from the cone or bin wall, below the
+        fill level, and the arc length of their nearest wall point (cached)."""
+        if not hasattr(self, "_band"):
+            g, geom = self.grid, self.cfg.hopper
+            R, Z = np.meshgrid(g.r_cells, g.z_cells)
+            d = geometry.signed_distance(R, Z, geom)
+            vertices = geometry.wall_polyline(geom, 1e3, 1e3)
+            pr, pz, seg = geometry._nearest_on_polyline(R, Z, vertices)
+            band = (d >= 0.5 * g.h) & (d <= 2.5 * g.h) & (seg >= 1) & (pz >= 0) & (
+                pz < geom.fill_level)
+            s = geometry.arc_length_of_point(pr, pz, geom)
+            cells = np.flatnonzero(band.ravel())
+            self._band = (cells, s.ravel()[cells])
+        return self._band
+
+    def wall_stress_points(self, state: State) -> tuple:
+        """``(s, weight, sigma)`` of the cells 0.5 to 2.5 cells off the wall: the weight is
+        ``alpha kappa V`` where ``alpha > 1/2`` (else 0: fronts and free surfaces)."""
+        cells, s = self._wall_band()
+        alpha = state.alpha.ravel()[cells]
+        w = np.where(alpha > 0.5, (state.alpha * self.open_volume).ravel()[cells], 0.0)
+        return s, w, state.sigma.reshape(-1, 4)[cells]
+
+    def flow_mode_measures(self, state: State, rule) -> tuple:
+        from . import diagnostics
+        return diagnostics.flow_mode_measures(self, state, rule)
+
+    def empty_channel(self, state: State, rule) -> tuple:
+        from . import diagnostics
+        return diagnostics.empty_channel(self, state, rule)
+
+    def summary_extras(self, state: State) -> dict:
+        return {}
+
+    def reset_caches(self) -> None:
+        self._mass = None
+
     # ------------------------------------------------------------------ step
     def step(self, state: State) -> State:
         """Advance ``state`` by one explicit step ``self.dt`` (in place) and return it."""

@@ -9,8 +9,9 @@
 - :func:`wall_pressure`: the normal wall pressure along the wall (from the wall's reaction, with
   the stress-sampled estimate beside it) at rest, in discharge and its envelope, against
   Janssen in the bin (``K = 1 - sin(phi)``, Jaky, used at the wall), Walker's slice method in
-  the cone (filling and discharge ratios) and EN 1991-4's discharge factor, all from
-  :mod:`fipy_hopper.theory`; the overpressure factor per bin and the switch peak;
+  the cone (filling and discharge ratios), EN 1991-4's discharge factor for the bin and its
+  hopper loads (filling and discharge), all from :mod:`fipy_hopper.theory`; the overpressure
+  factor per bin and the switch peak;
 - :func:`stress_pattern`: the major principal stress trajectories over the mobilised
   friction, at rest and in discharge;
 - :func:`animate`: an animated GIF of the snapshots.
@@ -319,19 +320,26 @@ def discharge_curves(run):
 
 # ---------------------------------------------------------------- wall pressure
 def theory_wall_pressure(cfg: HopperConfig, n: int = 120) -> dict:
-    """Closed-form normal wall pressures against the arc length ``s`` from the outlet lip.
+    """Closed-form normal wall pressures p_n (Pa) against the arc length s (m) from the outlet
+    lip.
 
     Bin (``s`` above the transition): Janssen with ``K = 1 - sin(phi)`` (Jaky, taken as the
     wall value) and ``mu = tan(phi_w)``, depth from the levelled fill surface.  Cone: Walker's
-    slice method (D = 1) with the EN 1991-4 filling ratio and Walker's discharge ratio, the
-    Janssen vertical stress at the transition as its top load.  A wedge gets the plane forms:
-    Janssen for a long bin of width B and Walker's plane slice (``S = 1``).  Returns ``{name: (s, p_n)}``;
-    a curve the theory cannot give (e.g. a frictionless wall) is left out.
+    slice method (D = 1) with the EN 1991-4 filling ratio and Walker's discharge ratio, on the
+    Janssen vertical stress at the transition; and EN 1991-4's hopper loads in filling and
+    discharge (section 6: the class, steep or shallow, picks F and n) with ``mu_h = tan(phi_w)``,
+    ``phi_i = phi`` and the code's ``K_m = 1.1 (1 - sin phi)`` for the lower characteristic K
+    (no a_K is known), on ``p_vft`` = EN's vertical-wall filling stress at the transition
+    (the slender-silo form, Janssen with K_m; ``C_b = 1``).  A wedge gets the plane forms:
+    Janssen for a long bin of width B and the slices with ``S = 1``.  Returns
+    ``{name: (s, p_n)}``; a curve the theory refuses (a frictionless wall; for EN, a bottom
+    flatter than 85 deg) is left out.
     """
     geom, mat, wall = cfg.hopper, cfg.material, cfg.wall
     phi, phi_w = mat.friction_angle_deg, wall.friction_angle_deg
     rho, D = mat.density, geom.bin_diameter
     K = float(theory.k_jaky(phi))
+    K_m = float(theory.k_en1991(phi))
     mu = math.tan(math.radians(phi_w))
     s_t = float(geometry.transition_arc_length(geom))
     s_fill = float(geometry.arc_length(geom.fill_level, geom))
@@ -352,25 +360,35 @@ def theory_wall_pressure(cfg: HopperConfig, n: int = 120) -> dict:
     theta = geom.half_angle
     x = s_cone * math.cos(theta) + geom.outlet_radius / math.tan(theta)
     h = geom.bin_radius / math.tan(theta)
+    x = np.clip(x, 0.0, h)
     for mode in ("filling", "discharge"):
         try:
-            p = theory.walker_hopper_wall_pressure(np.clip(x, 0.0, h), h, geom.half_angle_deg,
-                                                   rho, phi, phi_w, sigma_vt, mode=mode,
-                                                   S=slices)
+            p = theory.walker_hopper_wall_pressure(x, h, geom.half_angle_deg, rho, phi, phi_w,
+                                                   sigma_vt, mode=mode, S=slices)
             curves[f"Walker, {hopper_name}, {mode}"] = (s_cone, np.asarray(p))
         except ValueError:
-            continue
+            pass
+        try:
+            p_vft = float(vertical(geom.fill_height, rho, D, K_m, mu))
+            en = theory.en1991_hopper_pressures(x, h, geom.half_angle_deg, rho * theory.G, K_m,
+                                                mu, p_vft, mode=mode, phi_i=phi, S=slices)
+            curves[f"EN 1991-4, {hopper_name}, {mode}"] = (s_cone, np.asarray(en.p_n))
+        except ValueError:
+            pass
     return curves
 
 
 def wall_pressure(run):
     """The wall loads of a run against Janssen (bin), Walker (cone) and EN 1991-4.
 
-    Left: the normal pressure along the wall from the wall's reaction (markers joined by
-    lines) at rest and at the discharge stages, the discharge envelope (the largest windowed
-    pressure per bin), the stress-sampled estimate at rest (open markers), and the closed
-    forms.  Right: the overpressure factor (envelope / at rest) per bin with EN 1991-4's
-    discharge factor for the bin wall, and the switch peak against Walker's switch pressure.
+    Left: the normal pressure along the wall (kPa) from the wall's reaction (markers joined
+    by lines) at rest and at the discharge stages, the discharge envelope (the largest
+    windowed pressure per bin), the stress-sampled estimate at rest (open markers), and the
+    closed forms of :func:`theory_wall_pressure`: Janssen (solid black), Walker's slices
+    (solid filling, dashed discharge), EN 1991-4's hopper loads (dash-dot) and its bin
+    discharge load ``C_h`` x Janssen (dotted black).  Right: the overpressure factor
+    (envelope / at rest) per bin with EN 1991-4's discharge factor for the bin wall, and the
+    switch peak against Walker's switch pressure.
     """
     run = Path(run)
     cfg = _config(run)
@@ -396,7 +414,9 @@ def wall_pressure(run):
                     label="stress-sampled estimate, at rest")
     styles = {"Janssen": ("k", "-"), "Walker, cone, filling": ("C0", "-"),
               "Walker, cone, discharge": ("C3", "--"), "Walker, wedge, filling": ("C0", "-"),
-              "Walker, wedge, discharge": ("C3", "--")}
+              "Walker, wedge, discharge": ("C3", "--"), "EN 1991-4, cone, filling": ("C9", "-."),
+              "EN 1991-4, cone, discharge": ("C6", "-."), "EN 1991-4, wedge, filling": ("C9", "-."),
+              "EN 1991-4, wedge, discharge": ("C6", "-.")}
     curves = theory_wall_pressure(cfg)
     for name, (s, p) in curves.items():
         colour, ls = next((v for k, v in styles.items() if name.startswith(k)), ("0.4", "-"))
@@ -516,10 +536,53 @@ def stress_pattern(run):
 
 
 # ---------------------------------------------------------------- all of them
+def lagrangian_mesh(run):
+    """The Lagrangian mesh of a ``formulation = "lagrangian"`` run, coloured by layer, at the
+    opening of the outlet (the last snapshot of the fill) and at the end of the run (where a
+    distortion stopped it), with the hopper wall."""
+    import meshio
+    from matplotlib.collections import PolyCollection
+
+    run = Path(run)
+    cfg, summary = _config(run), _summary(run)
+    entries = snapshots(run)
+    filled = [e for e in entries if e["stage"] == "filling"]
+    chosen = ([filled[-1]] if filled else []) + ([entries[-1]] if entries else [])
+    fig = _figure(4.2 * max(len(chosen), 1), 5.2)
+    axes = np.atleast_1d(fig.subplots(1, max(len(chosen), 1)))
+    wall = geometry.wall_polyline(cfg.hopper, 0.0, cfg.hopper.top)
+    n_layers = 8
+    cmap, norm = _layer_colours(n_layers)
+    for ax, entry in zip(axes, chosen):
+        mesh = meshio.read(run / RunDirectory.FIELDS / entry["file"])
+        quads = mesh.cells_dict["quad"]
+        active = np.asarray(mesh.cell_data["alpha"][0]) > 0.5
+        layer = np.asarray(mesh.cell_data["layer"][0])
+        polys = mesh.points[quads][active][:, :, :2]
+        ax.add_collection(PolyCollection(polys, array=layer[active], cmap=cmap, norm=norm,
+                                         edgecolors="k", linewidths=0.3))
+        ax.plot(wall[:, 0], wall[:, 1], "k-", lw=1.5)
+        ax.set_aspect("equal")
+        ax.set_xlim(0.0, 1.05 * cfg.hopper.bin_radius)
+        ax.set_ylim(-cfg.hopper.outlet_diameter, cfg.hopper.fill_level * 1.05)
+        ax.set_xlabel("r (m)")
+        ax.set_ylabel("z (m)")
+        t_dis = entry.get("discharge_time_s", math.nan)
+        ax.set_title("at the opening" if entry["stage"] == "filling"
+                     else f"{t_dis:.3g} s after the opening", fontsize=9)
+    kind = summary.get("distortion_kind")
+    stop = (f"stopped by distortion: {kind}, element {summary.get('distortion_element')}"
+            if kind else f"stop: {summary.get('stop_reason', '')}")
+    fig.suptitle(f"Lagrangian mesh ({stop})", fontsize=9)
+    return fig
+
+
 def plot_run(run) -> list:
     """Draw every picture of a run directory into it; returns the paths written.
 
-    A picture whose data are missing (no snapshots yet, no wall samples) is skipped.
+    A picture whose data are missing (no snapshots yet, no wall samples) is skipped.  A
+    Lagrangian run (``numerics.formulation = "lagrangian"``) gets ``lagrangian_mesh.png`` in
+    place of the pictures of the grid's fields.
     """
     run = Path(run)
     written = []
@@ -528,6 +591,9 @@ def plot_run(run) -> list:
     if (run / RunDirectory.WALL_PRESSURE).is_file():
         written.append(_save(wall_pressure(run), run / "wall_pressure.png"))
     entries = snapshots(run)
+    if entries and _config(run).numerics.formulation == "lagrangian":
+        written.append(_save(lagrangian_mesh(run), run / "lagrangian_mesh.png"))
+        return written
     if entries:
         written.append(_save(stress_pattern(run), run / "stress_pattern.png"))
     if any(e["stage"] == "discharge" for e in entries):

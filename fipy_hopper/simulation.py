@@ -1,7 +1,10 @@
-"""Simulation: owns a run of a :class:`HopperModel` — filling, discharge, stop rules, schedules.
+"""Simulation: owns a run of a hopper model — filling, discharge, stop rules, schedules.
 
-The model steps; the simulation decides when to stop, measures on a schedule and calls the
-writers and diagnostics attached to it (callbacks that read the state and never change it).
+One loop for every formulation: the model is the Eulerian :class:`HopperModel` or the
+updated-Lagrangian :class:`~fipy_hopper.lagrangian.LagrangianModel`, and the simulation uses
+only what :class:`~fipy_hopper.protocol.HopperModelProtocol` declares.  The model steps;
+the simulation decides when to stop, measures on a schedule and calls the writers and
+diagnostics attached to it (callbacks that read the state and never change it).
 Every measurement reads the state between the run's own steps: nothing steps the model but
 the run.
 
@@ -22,6 +25,14 @@ Stages:
   when it stopped), or at ``max_time`` (``"max_time"``); any run stops at ``wall_time_limit``.
   These are :class:`StopRule` objects in ``Simulation.stop_rules`` (checked in order every
   check interval, the first that applies names the reason); a study adds its own there.
+
+What runs, and when: objects the simulation holds and calls, each reading the state —
+``schedules`` (:class:`Schedule`, simulated time, at the checks: the
+:class:`StabilityCheck` first, then field writers and other callbacks), ``stage_marks``
+(:class:`StageMark`: when the wall loads of a discharge stage are measured),
+``stop_rules`` (:class:`StopRule`) and ``wall_schedules`` (:class:`WallTimeSchedule`, wall
+time: checkpoints); the model's ``after_transport`` hooks run after each transport.  A
+study adds or replaces entries of these lists.
 
 What is measured, and when:
 
@@ -53,13 +64,15 @@ import numpy as np
 
 from . import diagnostics
 from .model import GRAVITY, HopperModel, InstabilityError, State
+from .protocol import halt_reason
 
 #: The flow has stopped (stop reason ``"at_rest"``) when, later than ``AT_REST_AFTER`` s after
 #: the opening, every sample of the last ``AT_REST_WINDOW`` s had a discharge rate below
 #: ``AT_REST_RATE`` of the initial mass per second: a heel on a shallow cone, an arch over the
 #: outlet, a rathole (named by :class:`fipy_hopper.diagnostics.OutcomeRule`).
 AT_REST_AFTER, AT_REST_WINDOW, AT_REST_RATE = 0.5, 0.25, 1e-3
-#: Stages whose wall loads are measured from the moment this fraction of the mass is left.
+#: Stages whose wall loads are measured from the moment this fraction of the mass is left
+#: (the default :class:`StageMark` s).
 STAGE_MARKS = {"early_discharge": 0.9, "mid_discharge": 0.5}
 #: Wall-load stages in the order they are written.
 WALL_STAGES = ("filling", "early_discharge", "mid_discharge", "discharge_envelope")
@@ -76,15 +89,66 @@ class Schedule:
 
 
 @dataclass
+class StageMark:
+    """A discharge stage whose wall loads are measured over one ``load_window`` from the first
+    check at which at most ``mass_fraction`` of the initial mass is left in the hopper (the
+    stage ``name`` in ``wall_pressure.csv``)."""
+
+    name: str
+    mass_fraction: float
+
+
+def default_stage_marks() -> list:
+    """:data:`STAGE_MARKS` as :class:`StageMark` s: 90 % and 50 % of the mass left."""
+    return [StageMark(name, fraction) for name, fraction in STAGE_MARKS.items()]
+
+
+@dataclass
+class WallTimeSchedule:
+    """Call ``fn(sim, state)`` every ``interval`` seconds of wall time (``last``: the wall
+    clock, ``time.perf_counter``, of the last call)."""
+
+    fn: Callable
+    interval: float
+    last: float
+
+
+class StabilityCheck:
+    """The scheduled stability check (first of ``Simulation.schedules``, at every check of
+    both stages): :class:`~fipy_hopper.model.InstabilityError` on a state the model finds
+    unstable (:meth:`~fipy_hopper.protocol.HopperModelProtocol.check_stable`) or on mass that
+    the books do not account for (the mass in the domain plus the mass lost through its bottom
+    against the first check's, to 1e-6)."""
+
+    def __init__(self):
+        self.books = None           # kg, 3D: in the domain and lost, at the first check
+
+    def __call__(self, sim, state):
+        m = sim.model
+        m.check_stable(state)
+        total = m.total_mass(state) + state.lost
+        if self.books is None:
+            self.books = total
+        if not abs(total - self.books) <= 1e-6 * self.books:
+            raise InstabilityError(
+                f"mass not accounted for at step {state.step}, t = {state.t:.6g} s: "
+                f"{total:.9g} kg in the grid and lost, {self.books:.9g} kg at the start")
+
+
+@dataclass
 class StopRule:
     """A rule that ends the discharge: ``applies(sim, t_discharge, mass)`` (the simulation, the
     time since the outlet opened in s, the mass left in the hopper in kg) is checked every
     check interval, after the measurements of that check; the first rule of
-    ``Simulation.stop_rules`` that applies names the stop reason ``name``.  Rules read the
-    state; they never change it."""
+    ``Simulation.stop_rules`` that applies names the stop reason: ``name``, or the string it
+    returns if it returns one.  Rules read the state; they never change it."""
 
     name: str
     applies: Callable
+
+
+def _halt_rule(sim, t_dis, mass):
+    return halt_reason(sim.state)
 
 
 def _end_time_rule(sim, t_dis, mass):
@@ -109,11 +173,14 @@ def _wall_time_rule(sim, t_dis, mass):
 
 
 def default_stop_rules() -> list:
-    """The discharge's stop rules, in order: ``end_time`` (a discharge of ``end_time`` s),
+    """The discharge's stop rules, in order: ``halt`` (the model cannot go on, e.g. a
+    Lagrangian mesh too distorted: the reason is the state's ``halt``), ``end_time`` (a
+    discharge of ``end_time`` s),
     ``empty`` and ``at_rest`` (for ``end_time = "empty"``: less than ``empty_fraction`` of the
     initial mass left; the flow has stopped, :data:`AT_REST_AFTER`), ``max_time`` and
     ``wall_time_limit``."""
-    return [StopRule("end_time", _end_time_rule), StopRule("empty", _empty_rule),
+    return [StopRule("halt", _halt_rule),
+            StopRule("end_time", _end_time_rule), StopRule("empty", _empty_rule),
             StopRule("at_rest", _at_rest_rule), StopRule("max_time", _max_time_rule),
             StopRule("wall_time_limit", _wall_time_rule)]
 
@@ -162,7 +229,13 @@ class Simulation:
         self.outcome_rule = outcome_rule
         self._rest_samples = 0           # samples that the last check found at rest (0: flowing)
         self.record = RunRecord()
-        self.schedules: list[Schedule] = []
+        #: what runs at the checks (simulated-time schedules, in order): the stability check
+        #: first, then the callbacks (field writers, studies' probes: :meth:`add_callback`)
+        self.stability = StabilityCheck()
+        self.schedules: list[Schedule] = [Schedule(self.stability, 0.0, ("filling", "discharge"),
+                                                   self.state.t)]
+        #: the discharge stages whose wall loads are measured (:class:`StageMark`)
+        self.stage_marks: list[StageMark] = default_stage_marks()
         self.wall_sampler = diagnostics.WallSampler(model)
         self.wall_loads = diagnostics.WallLoads(model, self.wall_sampler)
         self.load_window = run.load_window_s
@@ -176,7 +249,7 @@ class Simulation:
         self._readings: dict = {}        # window name -> WallLoads.reading at its start
         self._stress_sums: dict = {}     # stage -> [sum p_n, sum tau, count] of the window
         self.envelope = None             # largest windowed p_n per bin in discharge
-        self.wall_schedules: list = []   # [fn, wall-time interval, last call]
+        self.wall_schedules: list[WallTimeSchedule] = []   # e.g. checkpoints
         #: the discharge's stop rules, in order (:class:`StopRule`; a custom rule, e.g. a
         #: discharged mass, is inserted or appended here)
         self.stop_rules: list[StopRule] = default_stop_rules()
@@ -190,15 +263,14 @@ class Simulation:
         run repeats the uninterrupted one step for step (a checkpoint written from a
         simulated-time callback would skip the rest of its check on resume).
         """
-        self.wall_schedules.append([fn, interval, time.perf_counter()])
+        self.wall_schedules.append(WallTimeSchedule(fn, interval, time.perf_counter()))
 
     def _call_wall_schedules(self, force=False):
         now = time.perf_counter()
         for entry in self.wall_schedules:
-            fn, interval, last = entry
-            if force or now - last >= interval:
-                fn(self, self.state)
-                entry[2] = time.perf_counter()
+            if force or now - entry.last >= entry.interval:
+                entry.fn(self, self.state)
+                entry.last = time.perf_counter()
 
     # -------------------------------------------------------------- callbacks
     def add_callback(self, fn: Callable, interval: float, stages=("filling", "discharge")):
@@ -211,35 +283,6 @@ class Simulation:
                 s.next_time = self.state.t + s.interval
 
     # -------------------------------------------------------------- stages
-    def _check_stable(self):
-        """Stop with :class:`InstabilityError` on a runaway or non-finite velocity, a
-        non-finite material fraction or stress, or mass that the books do not account for."""
-        st, m = self.state, self.model
-        v = st.v
-        speed = np.hypot(v[0], v[1])
-        limit = 50.0 * math.sqrt(GRAVITY * max(m.cfg.hopper.top, 0.1))
-        bad = ~np.isfinite(speed) | (speed > limit)
-        g = m.grid
-        if bad.any():
-            j, i = np.argwhere(bad)[0]
-            raise InstabilityError(
-                f"runaway velocity at step {st.step}, t = {st.t:.6g} s, node r = "
-                f"{g.r_nodes[i]:.4g} m, z = {g.z_nodes[j]:.4g} m (|v| = {speed[j, i]:.3g} m/s, "
-                f"limit {limit:.3g} m/s)")
-        broken = ~np.isfinite(st.alpha) | ~np.isfinite(st.sigma).all(axis=-1)
-        if broken.any():
-            j, i = np.argwhere(broken)[0]
-            raise InstabilityError(
-                f"non-finite material fraction or stress at step {st.step}, t = {st.t:.6g} s, "
-                f"cell r = {g.r_cells[i]:.4g} m, z = {g.z_cells[j]:.4g} m")
-        total = m.total_mass(st) + st.lost
-        if not hasattr(self, "_mass_books"):
-            self._mass_books = total
-        if not abs(total - self._mass_books) <= 1e-6 * self._mass_books:
-            raise InstabilityError(
-                f"mass not accounted for at step {st.step}, t = {st.t:.6g} s: "
-                f"{total:.9g} kg in the grid and lost, {self._mass_books:.9g} kg at the start")
-
     def _out_of_wall_time(self) -> bool:
         return self.wall_time_limit > 0 and time.perf_counter() - self._started > \
             self.wall_time_limit
@@ -271,10 +314,13 @@ class Simulation:
             if st.t >= self.next_load_sample - 1e-12:
                 self._load_sample("filling")
                 self.next_load_sample += run.output_interval
+            if halt_reason(st):                 # the model cannot go on: the fill ends here
+                self.record.stop_reason = halt_reason(st)
+                self.record.fill_time = st.t
+                return False
             if st.step % check_every:
                 continue
-            self._check_stable()
-            self._call_schedules()
+            self._call_schedules()              # the stability check first
             previous, current = self._readings["check"], loads.reading(m, st)
             self._readings["check"] = current
             balance = loads.balance(previous, current)
@@ -329,17 +375,21 @@ class Simulation:
                 self._log_sample()
                 self.next_sample += run.output_interval
                 self._load_sample("discharge")
-            if st.step % check_every:
+            if st.step % check_every and not halt_reason(st):
                 continue
-            self._check_stable()
-            self._call_schedules()
+            self._call_schedules()              # the stability check first
             t_dis = st.t - self.t_open
             mass = m.mass_in_hopper(st)
             self._discharge_windows(mass, m0)
             resting = t_dis > AT_REST_AFTER and self._at_rest()
             self._rest_samples = len(rec.rate) if resting else 0
-            reason = next((rule.name for rule in self.stop_rules
-                           if rule.applies(self, t_dis, mass)), "")
+            reason = ""
+            for rule in self.stop_rules:
+                applies = rule.applies(self, t_dis, mass)
+                if applies:
+                    reason = applies if isinstance(applies, str) else rule.name
+                    break
+            reason = reason or halt_reason(st)      # a model that cannot go on stops the run
             # last: a checkpoint here resumes exactly (see add_wall_time_callback)
             if not reason:
                 self._call_wall_schedules()
@@ -361,7 +411,7 @@ class Simulation:
         try:
             if self.state.stage == "filling":
                 self.fill()
-            if self.record.stop_reason == "wall_time_limit":
+            if self.record.stop_reason == "wall_time_limit" or halt_reason(self.state):
                 pass
             elif self.end_time != "empty" and float(self.end_time) == 0.0:
                 self.record.stop_reason = "filled"
@@ -436,7 +486,7 @@ class Simulation:
         rec.mass_in_hopper.append(mass)
         rec.discharged.append(st.discharged)
         rec.rate.append(rate)
-        index, stagnant = diagnostics.flow_mode_measures(m, st, self.flow_rule)
+        index, stagnant = m.flow_mode_measures(st, self.flow_rule)
         rec.mass_flow_index.append(index)
         rec.stagnant_fraction.append(stagnant)
 
@@ -458,12 +508,13 @@ class Simulation:
         """At a check of the discharge: start and finish the stage windows, close envelope
         windows, and add the stress-sampled profile to the open stage windows."""
         m, st, loads = self.model, self.state, self.wall_loads
-        for stage, fraction in STAGE_MARKS.items():
+        for mark in self.stage_marks:
+            stage = mark.name
             if stage not in self._readings and stage not in self.record.wall \
-                    and mass <= fraction * m0:
+                    and mass <= mark.mass_fraction * m0:
                 self._readings[stage] = loads.reading(m, st)
                 self._stress_sums[stage] = None
-        for stage in list(STAGE_MARKS):
+        for stage in [mark.name for mark in self.stage_marks]:
             if stage in self._readings:
                 self._add_stress(stage)
                 if st.t - self._readings[stage]["t"] >= self.load_window - 1e-12:
@@ -509,7 +560,7 @@ class Simulation:
         """At the end of the discharge: the envelope as a stage (its ``tau`` is not an
         envelope: NaN) and stage windows that the end cut short, over what they had."""
         m, st = self.model, self.state
-        for stage in list(STAGE_MARKS):
+        for stage in [mark.name for mark in self.stage_marks]:
             if stage in self._readings:
                 start = self._readings.pop(stage)
                 if st.t > start["t"]:
@@ -567,7 +618,7 @@ class Simulation:
                 "next_load_sample": self.next_load_sample,
                 "next_envelope": self.next_envelope, "readings": readings,
                 "stress_sums": {k: v is not None for k, v in self._stress_sums.items()},
-                "mass_books": getattr(self, "_mass_books", None),
+                "mass_books": self.stability.books,
                 "schedules": [s.next_time for s in self.schedules]}
         path = os.fspath(path)
         folder = os.path.dirname(os.path.abspath(path))
@@ -609,17 +660,17 @@ class Simulation:
             self._stress_sums[stage] = ([arrays.pop(f"stresssum__{stage}__{k}")
                                          for k in range(3)] if present else None)
         self.envelope = arrays.pop("envelope", None)
-        self.state = State(**meta["state"], **arrays)
+        self.state = type(self.state)(**meta["state"], **arrays)
         self.record = RunRecord(**meta["record"], wall=wall, wall_stress=wall_stress)
         self.t_open = meta["t_open"]
         self.next_sample = meta["next_sample"]
         self.next_load_sample = meta.get("next_load_sample", math.nan)
         self.next_envelope = meta.get("next_envelope", math.nan)
         if meta.get("mass_books") is not None:
-            self._mass_books = meta["mass_books"]
+            self.stability.books = meta["mass_books"]
         for s, t_next in zip(self.schedules, meta["schedules"]):
             s.next_time = t_next
-        self.model._mass = None
+        self.model.reset_caches()
 
     # -------------------------------------------------------------- results
     def summary(self) -> dict:
@@ -647,7 +698,7 @@ class Simulation:
         stopped = self.flow_stopped_time()
         channel, height = math.nan, math.nan
         if math.isfinite(stopped):
-            channel, height = diagnostics.empty_channel(m, st, self.outcome_rule)
+            channel, height = m.empty_channel(st, self.outcome_rule)
             mode = diagnostics.classify_outcome(mode, True, left, channel, height,
                                                 self.outcome_rule)
         out = {
@@ -668,13 +719,14 @@ class Simulation:
             "fill_at_rest": rec.fill_at_rest,
             "gravity_ramp_time_s": m.ramp_time,
             "stop_reason": rec.stop_reason,
-            "cells": m.grid.n_cells,
+            "cells": m.n_cells,
             "steps": st.step,
             "dt_s": m.dt,
             "wall_time_s": rec.wall_time,
             "youngs_modulus_used": m.cfg.material.youngs_modulus,
-            "cell_size_m": m.grid.h,
+            "cell_size_m": m.cell_size,
             "hourglass_coefficient": m.cfg.numerics.hourglass_coefficient,
         }
         out.update(diagnostics.load_summary(self))
+        out.update(m.summary_extras(st))
         return out

@@ -1,11 +1,12 @@
 """Lagrangian vs Eulerian discharge of the same hopper: the Lagrangian mesh distorts and
 stops, the Eulerian grid follows the material through the complete emptying.
 
-Both runs use the same configuration and the same filling stage (gravity ramp, damping, the same
-at-rest rule), then open the outlet.  :class:`fipy_hopper.lagrangian.LagrangianModel` runs until an
-element passes its distortion limits (the state kept is the last valid step);
-:class:`fipy_hopper.model.HopperModel` with :class:`fipy_hopper.simulation.Simulation` runs until
-the hopper is empty (``run.end_time = "empty"``).  Written to ``--out``:
+Both runs use the same configuration and the same loop, :class:`fipy_hopper.simulation.Simulation`
+(the same filling stage: gravity ramp, damping, at-rest rule; the same stop rules and samples),
+then open the outlet.  :class:`fipy_hopper.lagrangian.LagrangianModel` runs until an element
+passes its distortion limits (the ``halt`` stop rule; the state kept is the last valid step);
+:class:`fipy_hopper.model.HopperModel` runs until the hopper is empty
+(``run.end_time = "empty"``).  Written to ``--out``:
 
 * ``mesh_vs_layers.png``: the deformed Lagrangian mesh at its last valid step (elements coloured
   by their initial layer) beside the Eulerian layers (``state.layer`` masked where
@@ -38,6 +39,7 @@ import math
 import pathlib
 import sys
 import time
+import types
 import warnings
 
 import numpy as np
@@ -88,12 +90,64 @@ def make_config(opts) -> HopperConfig:
         return cfg.replace(numerics=numerics, run=run) if numerics else cfg.replace(run=run)
 
 
-def run_lagrangian(cfg, opts):
+def run_lagrangian(cfg, opts, snapshot_interval=0.02):
+    """Fill and discharge the Lagrangian model through the same :class:`Simulation` as the
+    Eulerian run (samples every ``sample_interval``) until its mesh distorts; returns
+    ``(model, record, state)`` with the last valid state and a record of what the study
+    draws (:func:`lagrangian_record`)."""
     limits = DistortionLimits(max_aspect=opts["max_aspect"], min_angle_deg=opts["min_angle_deg"])
+    cfg = cfg.replace(run={"output_interval": opts["sample_interval"]})
     model = LagrangianModel(cfg, limits=limits, erode_discharged=opts["erode_discharged"],
                             n_layers=N_LAYERS)
-    record, state = model.run(sample_interval=opts["sample_interval"])
-    return model, record, state
+    sim = Simulation(model, end_time="empty", progress=opts["progress"])
+    watched = {"t": [], "max_aspect": [], "min_angle": [], "snapshots": [], "opening": None}
+
+    def at_opening(s, state):           # the last call of the fill sees the state at opening
+        watched["opening"] = state.x.copy()
+
+    def quality(s, state):
+        q = model.quality(state)[state.active]
+        watched["t"].append(state.t - s.t_open)
+        watched["max_aspect"].append(float(q[:, 1].max()))
+        watched["min_angle"].append(float(q[:, 2].min()))
+
+    def snapshot(s, state):
+        watched["snapshots"].append((state.t - s.t_open, state.x.copy()))
+
+    sim.add_callback(at_opening, 0.0, stages=("filling",))
+    sim.add_callback(quality, opts["sample_interval"], stages=("discharge",))
+    sim.add_callback(snapshot, snapshot_interval, stages=("discharge",))
+    sim.run()
+    return model, lagrangian_record(model, sim, watched), sim.state
+
+
+def lagrangian_record(model, sim, watched):
+    """What the study reads of the Lagrangian run: the simulation's time series, the worst
+    element over time (``t_quality``, ``max_aspect``, ``min_angle``), the stop (kind, reason,
+    time, step, discharged fraction), the filled wall pressure (stress-sampled, as the
+    Eulerian one it is compared with) and the mesh snapshots."""
+    rec, state = sim.record, sim.state
+    stopped = state.t - sim.t_open if math.isfinite(sim.t_open) else math.nan
+    empty = np.array([])
+    s, r, z, p_n, tau = (np.asarray(a) for a in rec.wall["filling"][1:]) \
+        if "filling" in rec.wall else (empty,) * 5
+    p_s, tau_s = (np.asarray(a) for a in rec.wall_stress.get("filling", (empty, empty)))
+    ok = np.isfinite(p_s)
+    snapshots = [(0.0, watched["opening"])] if watched["opening"] is not None else []
+    snapshots += watched["snapshots"]
+    if not snapshots or snapshots[-1][0] < stopped:
+        snapshots.append((stopped, state.x.copy()))
+    return types.SimpleNamespace(
+        t=rec.t, discharged=rec.discharged, mass_in_hopper=rec.mass_in_hopper, rate=rec.rate,
+        t_quality=watched["t"], max_aspect=watched["max_aspect"],
+        min_angle=watched["min_angle"], fill_time=rec.fill_time,
+        fill_at_rest=rec.fill_at_rest, total_mass=model.total_mass(state),
+        initial_mass=rec.initial_mass, wall_fill=(s[ok], r[ok], z[ok], p_s[ok], tau_s[ok]),
+        wall_fill_reaction=(s, r, z, p_n, tau), stop_kind=state.halt_kind or rec.stop_reason,
+        stop_reason=state.halt_detail or rec.stop_reason, stop_time=stopped,
+        stop_step=state.step, stop_element=state.halt_element,
+        discharged_fraction=state.discharged / rec.initial_mass, snapshots=snapshots,
+        wall_time=rec.wall_time, summary=sim.summary())
 
 
 def run_eulerian(cfg, opts, capture_times=(), capture_fractions=(0.5,)):
@@ -373,10 +427,11 @@ def plot_rates(data, path):
            title="Discharged fraction")
     a2.legend(fontsize=8)
     lim = lag_model.limits
-    a3.plot(t_l, lag_rec.min_angle, "C2-", label="smallest angle (deg)")
+    t_q = np.asarray(lag_rec.t_quality)
+    a3.plot(t_q, lag_rec.min_angle, "C2-", label="smallest angle (deg)")
     a3.axhline(lim.min_angle_deg, color="C2", ls=":", label=f"limit {lim.min_angle_deg:g} deg")
     a3b = a3.twinx()
-    a3b.plot(t_l, lag_rec.max_aspect, "C4-", label="largest aspect ratio")
+    a3b.plot(t_q, lag_rec.max_aspect, "C4-", label="largest aspect ratio")
     a3b.axhline(lim.max_aspect, color="C4", ls=":", label=f"limit {lim.max_aspect:g}")
     a3.set(xlabel="t since opening (s)", ylabel="smallest interior angle (deg)", ylim=(0, 95),
            title="Worst Lagrangian element (active elements)")
@@ -397,7 +452,7 @@ def plot_wall_pressure(data, path):
     s_l, _, _, p_l, _ = lag_rec.wall_fill
     fig, (ax,) = _figure(1, width=6.0, height=4.2)
     ax.plot(s_e, p_e, "C0o-", label="Eulerian (cells 0.5-2.5 h from the wall)")
-    ax.plot(s_l, p_l, "C3s-", label="Lagrangian (elements within 2 h of the wall)")
+    ax.plot(s_l, p_l, "C3s-", label="Lagrangian (elements within 2.5 h of the wall)")
     cmp = np.asarray(agree["wall_compared"], bool)
     s_c = np.asarray(agree["wall_s_m"])[cmp]
     ax.plot(s_c, np.asarray(agree["wall_p_eulerian_Pa"])[cmp], "ko", mfc="none", ms=10,

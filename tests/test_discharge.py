@@ -127,7 +127,7 @@ def test_a_custom_stop_rule_ends_the_discharge_first():
     mass discharged) ends an "empty" run with its own name, at the first check after its
     condition holds (one check interval, 2 ms, moves under 1 % of the mass here), and the
     mass balance still closes."""
-    from fipy_hopper.simulation import StopRule
+    from fipy_hopper.simulation import StageMark, StopRule
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -137,16 +137,28 @@ def test_a_custom_stop_rule_ends_the_discharge_first():
             "numerics": {"cell_size": 0.01, "gravity_ramp_time": 0.1},
             "run": {"end_time": "empty", "max_time": 10.0, "output_interval": 0.02}})
     sim = Simulation(HopperModel(cfg), progress=False)
-    assert [r.name for r in sim.stop_rules] == ["end_time", "empty", "at_rest", "max_time",
-                                                "wall_time_limit"]
+    assert [r.name for r in sim.stop_rules] == ["halt", "end_time", "empty", "at_rest",
+                                                "max_time", "wall_time_limit"]
     sim.stop_rules.insert(0, StopRule(
         "fifth_discharged", lambda s, t, mass: mass < 0.8 * s.record.initial_mass))
+    # a stage mark is an object too: the wall loads from the moment 90 % of the mass is left
+    sim.stage_marks.append(StageMark("tenth_discharged", 0.9))
+    masses = []
+    sim.add_callback(lambda s, st: masses.append((st.t, s.model.mass_in_hopper(st))), 0.0,
+                     stages=("discharge",))
     sim.run()
     summary = sim.summary()
     assert summary["stop_reason"] == "fifth_discharged"
     left = summary["remaining_mass_kg"] / summary["initial_mass_kg"]
     assert 0.79 < left < 0.8, left
     assert summary["mass_balance_error"] < 1e-9
+    # its window opened at the first check with at most 90 % left, like early_discharge's
+    t_end, *_, p_n, _ = sim.record.wall["tenth_discharged"]
+    opened = sim.t_open + t_end - sim.record.wall_window["tenth_discharged"]
+    first = next(t for t, m in masses if m <= 0.9 * summary["initial_mass_kg"])
+    assert opened == pytest.approx(first, abs=1e-12)
+    assert sim.record.wall["tenth_discharged"][0] == sim.record.wall["early_discharge"][0]
+    assert np.nanmax(p_n) > 0
 
 
 @pytest.mark.slow

@@ -18,6 +18,7 @@ import pytest
 
 from fipy_hopper import geometry, momentum
 from fipy_hopper.config import HopperConfig
+from fipy_hopper.simulation import Simulation
 from fipy_hopper.lagrangian import (DistortionLimits, LagrangianModel, _force_kernel,
                                     _quality_kernel, _strain_kernel, build_mesh,
                                     element_gradients, element_quality, hourglass_force,
@@ -267,9 +268,12 @@ def test_without_shape_limits_an_element_inverts_soon_after():
     (non-positive Jacobian) before 30% of the mass has left."""
     model = LagrangianModel(coarse_config(), limits=DistortionLimits(max_aspect=math.inf,
                                                                      min_angle_deg=0.0))
-    rec, state = model.run()
-    assert rec.stop_kind == "inverted", rec.stop_reason
-    assert rec.discharged_fraction < 0.30
+    sim = Simulation(model, progress=False)
+    sim.run()
+    state = sim.state
+    assert sim.record.stop_reason == "mesh_distorted"
+    assert state.halt_kind == "inverted", state.halt_detail
+    assert state.discharged / sim.record.initial_mass < 0.30
     assert model.check_distortion(state) is None
 
 
@@ -282,8 +286,9 @@ def test_frictionless_flat_bin_fills_hydrostatic():
                        "bin_height": H + 0.02, "fill_height": H},
             "wall": {"friction_angle_deg": 0.0}, "numerics": {"cell_size": 0.01}})
     model = LagrangianModel(cfg)
-    state = model.initial_state()
-    assert model.fill(state)
+    sim = Simulation(model, progress=False)
+    assert sim.fill()
+    state = sim.state
     conn = model.mesh.conn
     z0 = model.mesh.x[conn, 1].mean(axis=1)       # the weight above is rho g (H - z0)
     _, _, A, r_c = element_gradients(state.x, conn)
@@ -308,12 +313,15 @@ def test_contact_and_projection_kernels_equal_the_numpy_reference():
         x[:, 0] = np.abs(x[:, 0])
         v = rng.normal(size=x.shape)
         dt = 2e-3
-        for segments in (model.wall_segments, model.segments_closed):
-            v_k = v.copy()
-            _contact_kernel(x, v_k, dt, segments, len(segments), 2)
-            v_ref = contact_reference(x, v, dt, segments, passes=2)
+        for segments, plate in ((model.wall_segments, -1),
+                                (model.segments_closed, len(model.segments_closed) - 1)):
+            v_k, dv_k = v.copy(), np.zeros_like(v)
+            _contact_kernel(x, v_k, dt, segments, len(segments), 2, plate, dv_k)
+            v_ref, dv_ref = contact_reference(x, v, dt, segments, passes=2, plate_segment=plate)
             assert np.allclose(v_k, v_ref, rtol=1e-12, atol=1e-14)
+            assert np.allclose(dv_k, dv_ref, rtol=1e-12, atol=1e-14)
             assert not np.array_equal(v_k, v)                       # contact acted
+            assert (plate < 0) == (not np.any(dv_k))                # the plate's share apart
         for closed in (True, False):
             x_k = x.copy()
             moved = _project_kernel(x_k, model.vertices, cfg.hopper.outlet_radius,
@@ -322,3 +330,47 @@ def test_contact_and_projection_kernels_equal_the_numpy_reference():
             assert np.allclose(x_k, project_reference(x, cfg.hopper, closed), atol=1e-14)
             d = geometry.signed_distance(x_k[:, 0], x_k[:, 1], cfg.hopper)
             assert d.min() > -1e-12
+
+
+# ------------------------------------------------------------------------ one loop, one API
+def test_the_lagrangian_mode_runs_through_the_api_and_the_same_simulation(tmp_path):
+    """``numerics.formulation = "lagrangian"`` runs through :func:`fipy_hopper.run` and the
+    same :class:`Simulation` as the Eulerian model: its fill comes to rest by the same rule,
+    the wall's and the plate's reactions carry the weight (0.5 %, the bar of the Eulerian
+    fill), the vertical momentum balance closes to round-off in every row of loads.csv (every
+    impulse is counted: gravity, damping, wall, plate), the wall friction is within Coulomb's
+    limit in every bin, and the discharge stops by the ``halt`` rule when the mesh distorts."""
+    from fipy_hopper import api
+
+    cfg = coarse_config(formulation="lagrangian")
+    seen = []
+    summary = api.run(cfg, tmp_path / "run", setup=lambda sim: seen.append(sim))
+    sim = seen[0]
+    assert type(sim) is Simulation and isinstance(sim.model, LagrangianModel)
+    assert summary["formulation"] == "lagrangian" and summary["fill_at_rest"]
+    assert summary["stop_reason"] == "mesh_distorted"
+    assert summary["distortion_kind"] in STOP_KINDS and "element" in summary["distortion"]
+    assert summary["fill_equilibrium_residual"] < 0.005
+    assert summary["load_balance_residual_max"] < 1e-9
+    assert summary["mass_balance_error"] < 1e-12
+    assert 0.0 < summary["discharged_kg"] < 0.3 * summary["initial_mass_kg"]
+    res = api.read_results(tmp_path / "run")
+    fill = res.wall_stage("filling")
+    mu = math.tan(math.radians(cfg.wall.friction_angle_deg))
+    loaded = fill["p_n_Pa"] > 0
+    assert loaded.sum() >= 8
+    assert np.all(np.abs(fill["tau_Pa"][loaded]) <= mu * fill["p_n_Pa"][loaded] * (1 + 1e-9))
+    assert (tmp_path / "run" / "lagrangian_mesh.png").stat().st_size > 0
+    assert len(res.snapshots) >= 2 and res.field(-1).cells_dict["quad"].shape[0] == \
+        sim.model.mesh.n_elements
+
+
+def test_a_lagrangian_wedge_is_refused_naming_the_key():
+    from fipy_hopper.config import ConfigError
+
+    with pytest.raises(ConfigError, match="numerics.formulation"):
+        HopperConfig.from_dict({"hopper": {"shape": "wedge", "bin_width": 0.2,
+                                           "outlet_width": 0.06},
+                                "numerics": {"cell_size": 0.01, "formulation": "lagrangian"}})
+    with pytest.raises(ConfigError, match="numerics.formulation"):
+        coarse_config(formulation="lagrange")

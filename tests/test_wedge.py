@@ -224,14 +224,18 @@ def test_wedge_pictures_compare_with_the_plane_theories():
     """The wall-pressure picture of a wedge draws the plane forms: Janssen for a long bin of
     width B, whose asymptote is rho g B / (2 tan phi_w), and Walker's plane slice (S = 1),
     whose pressure at the transition is F sigma_vt with the plane Janssen sigma_vt as its top
-    load (a cone's slice, S = 2, gives another curve below it)."""
+    load (a cone's slice, S = 2, gives another curve below it).  EN 1991-4's hopper loads
+    (steep here) sit on the plane Janssen sigma_vt with K_m = 1.1 (1 - sin phi):
+    F_f p_vft = 0.9152 x 1980.3 = 1812.4 Pa at the transition when filled, F_e p_vft in
+    discharge, and below it the plane slice (n = (1 - b) mu cot beta) above the cone's."""
     from fipy_hopper.plotting import theory_wall_pressure
 
     cfg = wedge()
     geom, mat = cfg.hopper, cfg.material
     curves = theory_wall_pressure(cfg)
     assert set(curves) == {"Janssen, plane bin (K = 1 - sin phi)", "Walker, wedge, filling",
-                           "Walker, wedge, discharge"}
+                           "Walker, wedge, discharge", "EN 1991-4, wedge, filling",
+                           "EN 1991-4, wedge, discharge"}
     mu = math.tan(math.radians(cfg.wall.friction_angle_deg))
     K = float(theory.k_jaky(mat.friction_angle_deg))
     s_bin, p_bin = curves["Janssen, plane bin (K = 1 - sin phi)"]
@@ -243,8 +247,28 @@ def test_wedge_pictures_compare_with_the_plane_theories():
     assert p_fill[-1] == pytest.approx(F_f * sigma_vt, rel=1e-9)
     h = geom.bin_radius / math.tan(geom.half_angle)
     x = s_cone * math.cos(geom.half_angle) + geom.outlet_radius / math.tan(geom.half_angle)
-    cone = theory.walker_hopper_wall_pressure(np.clip(x, 0.0, h), h, geom.half_angle_deg, RHO,
+    x = np.clip(x, 0.0, h)
+    cone = theory.walker_hopper_wall_pressure(x, h, geom.half_angle_deg, RHO,
                                               mat.friction_angle_deg,
                                               cfg.wall.friction_angle_deg, sigma_vt, S=2)
     assert np.all(p_fill[:-1] > np.asarray(cone)[:-1])
 
+    K_m = float(theory.k_en1991(mat.friction_angle_deg))
+    p_vft = float(theory.janssen_plane_vertical_stress(geom.fill_height, RHO,
+                                                        geom.bin_diameter, K_m, mu))
+    assert theory.en1991_hopper_class(geom.half_angle_deg, K_m, mu) == "steep"
+    s_en, p_en = curves["EN 1991-4, wedge, filling"]
+    assert np.array_equal(s_en, s_cone)
+    assert p_en[-1] == pytest.approx(F_f * p_vft, rel=1e-9)
+    assert p_en[-1] == pytest.approx(1812.4, abs=0.1)
+    gamma = RHO * theory.G
+    n_plane = float(theory.en1991_steep_filling_n(geom.half_angle_deg, mu, S=1))
+    np.testing.assert_allclose(
+        p_en, F_f * np.asarray(theory.hopper_vertical_stress(x, h, gamma, n_plane, p_vft)),
+        rtol=1e-9)
+    en_cone = theory.en1991_hopper_pressures(x, h, geom.half_angle_deg, gamma, K_m, mu, p_vft,
+                                             S=2).p_n
+    assert np.all(p_en[:-1] > np.asarray(en_cone)[:-1])
+    F_e = float(theory.en1991_steep_discharge_F(geom.half_angle_deg, mu,
+                                                mat.friction_angle_deg))
+    assert curves["EN 1991-4, wedge, discharge"][1][-1] == pytest.approx(F_e * p_vft, rel=1e-9)

@@ -1,0 +1,73 @@
+"""The closed forms of the wall-pressure picture of a cone (the wedge's are in test_wedge.py)."""
+
+import math
+
+import numpy as np
+import pytest
+
+from fipy_hopper import theory
+from fipy_hopper.config import HopperConfig
+from fipy_hopper.plotting import theory_wall_pressure
+
+RHO = 1500.0
+
+
+def cone(**hopper):
+    return HopperConfig.from_dict({
+        "hopper": {"bin_diameter": 0.3, "outlet_diameter": 0.06, "half_angle_deg": 20.0,
+                   "bin_height": 0.35, "fill_height": 0.3, **hopper},
+        "material": {"density": RHO, "friction_angle_deg": 30.0},
+        "wall": {"friction_angle_deg": 15.0}})
+
+
+def test_cone_picture_draws_en1991_hopper_loads():
+    """A steep 20 deg cone: EN 1991-4's hopper loads sit on the EN vertical-wall filling stress
+    at the transition (Janssen with K_m = 1.1 (1 - sin phi) = 0.55, C_b = 1): p_vft = 3335.4 Pa,
+    F_f p_vft = 0.9152 x 3335.4 = 3052.5 Pa when filled and F_e p_vft = 1.3927 x 3335.4 =
+    4645.2 Pa in discharge; below it the cone's slice (n = 2 (1 - b) mu cot beta) lies under
+    a wedge's (S = 1) with the same top load."""
+    cfg = cone()
+    geom = cfg.hopper
+    curves = theory_wall_pressure(cfg)
+    assert set(curves) == {"Janssen, bin (K = 1 - sin phi)", "Walker, cone, filling",
+                           "Walker, cone, discharge", "EN 1991-4, cone, filling",
+                           "EN 1991-4, cone, discharge"}
+    beta, phi = geom.half_angle_deg, cfg.material.friction_angle_deg
+    mu = math.tan(math.radians(cfg.wall.friction_angle_deg))
+    gamma = RHO * theory.G
+    K_m = float(theory.k_en1991(phi))
+    p_vft = float(theory.en1991_filling_vertical_walls(geom.fill_height, gamma,
+                                                       geom.bin_diameter, K_m, mu).p_v)
+    assert p_vft == pytest.approx(3335.4, abs=0.1)
+    assert theory.en1991_hopper_class(beta, K_m, mu) == "steep"
+    F_f = float(theory.en1991_steep_filling_F(beta, mu))
+    F_e = float(theory.en1991_steep_discharge_F(beta, mu, phi))
+    s, p_fill = curves["EN 1991-4, cone, filling"]
+    assert p_fill[-1] == pytest.approx(F_f * p_vft, rel=1e-9)
+    assert p_fill[-1] == pytest.approx(3052.5, abs=0.1)
+    p_dis = curves["EN 1991-4, cone, discharge"][1]
+    assert p_dis[-1] == pytest.approx(F_e * p_vft, rel=1e-9)
+    assert p_dis[-1] == pytest.approx(4645.2, abs=0.1)
+    h = geom.bin_radius / math.tan(geom.half_angle)
+    x = np.clip(s * math.cos(geom.half_angle) + geom.outlet_radius / math.tan(geom.half_angle),
+                0.0, h)
+    n_cone = float(theory.en1991_steep_filling_n(beta, mu, S=2))
+    np.testing.assert_allclose(
+        p_fill, F_f * np.asarray(theory.hopper_vertical_stress(x, h, gamma, n_cone, p_vft)),
+        rtol=1e-9)
+    wedge = theory.en1991_hopper_pressures(x, h, beta, gamma, K_m, mu, p_vft, S=1).p_n
+    assert np.all(p_fill[:-1] < np.asarray(wedge)[:-1])
+
+
+def test_cone_picture_en1991_shallow_and_flat():
+    """A 45 deg cone is shallow for EN 1991-4 (tan beta = 1 > (1 - K_m) / (2 mu) = 0.84):
+    its discharge loads equal its filling loads.  Beyond 85 deg (a flat bottom for the code)
+    the EN curves are left out while Walker's are still drawn."""
+    curves = theory_wall_pressure(cone(half_angle_deg=45.0))
+    np.testing.assert_array_equal(curves["EN 1991-4, cone, filling"][1],
+                                  curves["EN 1991-4, cone, discharge"][1])
+    assert not np.allclose(curves["Walker, cone, filling"][1],
+                           curves["Walker, cone, discharge"][1])
+    flat = theory_wall_pressure(cone(half_angle_deg=88.0))
+    assert "Walker, cone, filling" in flat
+    assert not any(name.startswith("EN 1991-4") for name in flat)
