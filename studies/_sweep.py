@@ -298,8 +298,11 @@ def run_cases(cases: list, root, serial: bool = False, scheduler: str | None = N
     started = time.perf_counter()
 
     def report(done, row):
-        summary = (f"{row.get('flow_mode', '?')} flow, W = "
-                   f"{row.get('steady_discharge_rate_kg_s', math.nan):.3g} kg/s")
+        per_metre = "steady_discharge_rate_kg_s_m" in row          # a wedge
+        rate = row.get("steady_discharge_rate_kg_s_m" if per_metre
+                       else "steady_discharge_rate_kg_s", math.nan)
+        summary = (f"{row.get('flow_mode', '?')} flow, W = {rate:.3g} kg/s"
+                   + ("/m" if per_metre else ""))
         if row.get("error"):
             summary = "ERROR " + row["error"]
         log(f"[{done}/{len(todo)}] {row['case']}: {summary} "

@@ -59,6 +59,8 @@ DEFAULTS = {
     "cell_size": 0.005,       # m: 6 cells across the outlet radius
     "end_time": 0.8,          # s of discharge
     "youngs_modulus": 5.0e6,  # Pa
+    "shape": "conical",       # or "wedge": bin_diameter and outlet_diameter are then the
+                              # bin width B and the slot width B0 (plane flow, per metre)
     "case_plots": True,       # each run draws its own pictures
     "thumbnails": 8,          # layer pictures in thumbnails.png
 }
@@ -74,9 +76,11 @@ def setup(quick: bool = False, **options) -> dict:
         raise TypeError(f"unknown options {sorted(unknown)}; known: {sorted(DEFAULTS)}")
     opts = {**DEFAULTS, **(QUICK if quick else {}), **options}
     pairs = opts["pairs"] or [(t, w) for w in opts["wall_angles"] for t in opts["half_angles"]]
-    base = {"hopper": {"bin_diameter": opts["bin_diameter"],
-                       "outlet_diameter": opts["outlet_diameter"],
-                       "fill_height": opts["fill_height"],
+    sizes = ({"bin_diameter": opts["bin_diameter"], "outlet_diameter": opts["outlet_diameter"]}
+             if opts["shape"] == "conical" else
+             {"shape": opts["shape"], "bin_width": opts["bin_diameter"],
+              "outlet_width": opts["outlet_diameter"]})
+    base = {"hopper": {**sizes, "fill_height": opts["fill_height"],
                        "bin_height": opts["fill_height"] + 0.02},
             "material": {"friction_angle_deg": opts["friction_angle"],
                          "youngs_modulus": opts["youngs_modulus"]},
@@ -96,18 +100,32 @@ def setup(quick: bool = False, **options) -> dict:
 
 
 # ---------------------------------------------------------------- analysis
-def jenike(theta, phi, phi_w):
-    """``(theta_c, mode)`` by Jenike's fit with delta = phi (theta_c NaN: no mass flow)."""
-    theta_c = float(theory.jenike_critical_half_angle(phi, phi_w))
-    return theta_c, str(theory.jenike_flow_mode(theta, phi, phi_w))
+def geometry_of(shape: str) -> str:
+    """Jenike's geometry for a hopper shape: ``"conical"`` or ``"plane"`` (a wedge)."""
+    return "plane" if shape == "wedge" else "conical"
+
+
+def critical_angle(phi, phi_w, geometry_name="conical"):
+    """Jenike's critical half-angle (deg) for the geometry, NaN where there is none."""
+    critical = (theory.jenike_critical_half_angle_plane if geometry_name == "plane"
+                else theory.jenike_critical_half_angle)
+    return critical(phi, phi_w)
+
+
+def jenike(theta, phi, phi_w, geometry_name="conical"):
+    """``(theta_c, mode)`` by Jenike's fit with delta = phi (theta_c NaN: no mass flow), for
+    a cone or (``"plane"``) a wedge."""
+    theta_c = float(critical_angle(phi, phi_w, geometry_name))
+    return theta_c, str(theory.jenike_flow_mode(theta, phi, phi_w, geometry=geometry_name))
 
 
 def analyse(rows: list, options: dict) -> dict:
     """Adds ``theta_c_deg``, ``jenike_mode``, ``agrees``, ``distance_deg`` to each row and
     returns the numbers (agreement with Jenike as a fraction of the classified cases)."""
     phi = options["friction_angle"]
+    shape = geometry_of(options.get("shape", "conical"))
     for r in rows:
-        theta_c, mode = jenike(r["half_angle_deg"], phi, r["wall_friction_deg"])
+        theta_c, mode = jenike(r["half_angle_deg"], phi, r["wall_friction_deg"], shape)
         r["theta_c_deg"] = theta_c
         r["jenike_mode"] = mode
         sim = r.get("flow_mode")
@@ -138,13 +156,18 @@ def plot_map(rows, options, numbers):
     fig = _sweep.figure(8.8, 5.0)
     ax = fig.add_subplot()
     pw = np.linspace(0.0, phi - 1e-6, 300)
-    tc = np.asarray(theory.jenike_critical_half_angle(phi, pw), float)
+    plane = geometry_of(options.get("shape", "conical")) == "plane"
+    tc = np.asarray(critical_angle(phi, pw, "plane" if plane else "conical"), float)
     walls = [r["wall_friction_deg"] for r in rows] + [phi]
     x_max = max(walls) + 2.0
     y_max = max([r["half_angle_deg"] for r in rows] + [60.0]) + 5.0
     ax.fill_between(pw, 0.0, tc, color="C0", alpha=0.12, lw=0,
                     label="Jenike: mass flow (theta < theta_c)")
-    ax.plot(pw, tc, "k-", lw=1.5, label=f"Jenike boundary theta_c(delta = phi = {phi:g} deg)")
+    ax.plot(pw, tc, "k-", lw=1.5, label=f"Jenike {'plane-flow ' if plane else ''}boundary "
+                                        f"theta_c(delta = phi = {phi:g} deg)")
+    if plane:           # the conical boundary beside it: plane flow is more generous
+        ax.plot(pw, np.asarray(critical_angle(phi, pw), float), "--", color="0.45", lw=1.2,
+                label="Jenike conical boundary (for comparison)")
     ax.plot(pw, tc - 4.0, "k:", lw=1.0, label="theta_c - 4 deg (design margin)")
     ax.axvline(phi, color="0.4", lw=0.8, ls="--")
     ax.text(phi, 2.0, " phi_w = phi:\n no mass flow", fontsize=7, color="0.3")
@@ -169,10 +192,10 @@ def plot_map(rows, options, numbers):
     ax.set_xlim(0.0, x_max)
     ax.set_ylim(0.0, y_max)
     ax.set_xlabel("wall friction angle phi_w (deg)")
-    ax.set_ylabel("cone half-angle theta from the vertical (deg)")
+    ax.set_ylabel(f"{'wedge' if plane else 'cone'} half-angle theta from the vertical (deg)")
     frac = numbers["agreement_fraction"]
     ax.set_title(f"Flow mode: {numbers['agreeing']}/{numbers['classified']} cases agree with "
-                 f"Jenike ({100 * frac:.0f} %); red edge: disagrees; numbers: mass-flow index",
+                 f"Jenike ({100 * frac:.0f} %)\nred edge: disagrees; numbers: mass-flow index",
                  fontsize=9)
     ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=7)
     return fig

@@ -1,6 +1,6 @@
 """Generate ``studies/REPORT.md`` from the outputs of the studies (never written by hand).
 
-Reads ``ROOT/<study>/study.json`` of each validation study (``flow_mode_map``,
+Reads ``ROOT/<study>/study.json`` of each validation study (``flow_mode_map``, ``plane_flow``,
 ``discharge_rate``, ``wall_pressure``, ``discharge_dynamics``, ``convergence``, ``robustness``,
 ``lagrangian_vs_eulerian``, ``arching``) and the outputs of
 ``element_tests`` (``failure_deviators.csv`` and its pictures), and writes one Markdown report:
@@ -32,8 +32,8 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 DEFAULT_ROOT = HERE / "output"
 DEFAULT_OUT = HERE / "REPORT.md"
-STUDIES = ("flow_mode_map", "discharge_rate", "wall_pressure", "discharge_dynamics",
-           "convergence", "robustness",
+STUDIES = ("flow_mode_map", "plane_flow", "discharge_rate", "wall_pressure",
+           "discharge_dynamics", "convergence", "robustness",
            "lagrangian_vs_eulerian", "arching")
 ELEMENT_TESTS = "element_tests"
 ELEMENT_FIGURES = (("meridional.png", "Stress paths in the meridional (p, q) plane with the "

@@ -77,6 +77,32 @@ def robustness(root):
     return run_quick(root, "robustness")
 
 
+# ---------------------------------------------------------------- plane flow
+def test_plane_flow_study_runs_wedges_against_the_plane_theories(root):
+    """The quick plane-flow study: two wedges on either side of Jenike's plane-flow boundary
+    are classified as it says, the slot runs conserve mass and are fitted, and everything
+    is per metre; the map draws the plane boundary with the conical one beside it."""
+    out = run_quick(root, "plane_flow")
+    data = study_json(out)
+    numbers = data["numbers"]
+    assert data["setting"] == "quick"
+    assert numbers["map_classified"] == 2 and numbers["map_agreement_fraction"] == 1.0
+    rows = {r["case"]: r for r in rows_of(out / "results.csv")}
+    assert rows["theta20_wall12"]["flow_mode"] == "mass"
+    assert rows["theta60_wall25"]["flow_mode"] == "funnel"
+    # the plane boundary: the conical one + 10 deg (theory.jenike_critical_half_angle_plane)
+    theta_c = float(rows["theta20_wall12"]["theta_c_deg"])
+    from fipy_hopper import theory
+    assert theta_c == pytest.approx(float(theory.jenike_critical_half_angle(30.0, 12.0)) + 10.0)
+    slots = rows_of(out / "slots.csv")
+    assert len(slots) == 2 and all(float(r["mass_balance_error"]) < 1e-9 for r in slots)
+    assert all(float(r["steady_discharge_rate_kg_s_m"]) > 0 for r in slots)
+    assert math.isfinite(numbers["slot_exponent_flat"])
+    for name in ("slot_exponent.png", "plane_flow_map.png"):
+        assert_png(out / name)
+    assert (out / "cases" / "slot60_theta90" / "summary.json").is_file()
+
+
 # ---------------------------------------------------------------- flow-mode map
 def test_flow_mode_map_classifies_the_two_clear_cases(flow_map):
     rows = {(float(r["half_angle_deg"]), float(r["wall_friction_deg"])): r
@@ -336,7 +362,8 @@ def test_report_is_generated_from_the_outputs(root, flow_map, discharge, wall, c
                     ignore=shutil.ignore_patterns("cases"))
     result = make_report.build(partial, tmp_path / "partial.md", copy=False)
     assert result["present"] == ["flow_mode_map"]
-    assert set(result["missing"]) == {"discharge_rate", "wall_pressure", "convergence",
+    assert set(result["missing"]) == {"plane_flow", "discharge_rate", "wall_pressure",
+                                      "convergence",
                                       "discharge_dynamics",
                                       "robustness", "element_tests", "lagrangian_vs_eulerian",
                                       "arching"}

@@ -1,0 +1,243 @@
+"""Plane flow: wedge hoppers with a slot outlet, per metre of length.
+
+Two parts, both run as ordinary run directories (``hopper.shape = "wedge"``):
+
+* **Slot exponent.**  A plane bin of width ``slot_bin_width`` (0.3 m) filled ``slot_fill``
+  (0.3 m) above the transition is discharged for ``slot_end_time`` (0.6 s) through slots of the
+  widths ``slot_widths`` (40, 50, 60 and 80 mm), with a flat bottom and with a 20 deg wedge.
+  The steady rate per metre ``W'`` (``summary.json`` ``steady_discharge_rate_kg_s_m``) is
+  fitted as ``W' = a B0^n`` for each bottom; Beverloo's slot form says ``n = 3/2``
+  (:func:`fipy_hopper.theory.beverloo_slot_rate`, ``C' = 1.03``, ``k d = 0``, which the flat
+  bottom is also compared with; there is no plane hopper factor to compare the wedge with).
+* **Plane-flow map.**  The flow-mode map of ``flow_mode_map.py`` on wedges (bin width 0.2 m,
+  slot 0.06 m, fill 0.15 m above the transition, 5 mm cells, 0.8 s): mass or funnel flow by
+  the package's rule (``summary.json`` ``flow_mode``) over the half-angle and the wall
+  friction angle, against Jenike's plane-flow boundary.  That boundary is the conical one plus
+  10 deg (:func:`fipy_hopper.theory.jenike_critical_half_angle_plane`, a rule of thumb, [M]:
+  no closed form of Jenike's plane-flow chart could be read); the conical boundary is drawn
+  beside it, so the picture sets the wedge's map against the cone's.
+
+Written to ``--out`` (default ``studies/output/plane_flow``): ``slots.csv`` and
+``results.csv`` (one row per case), ``slot_exponent.png``, ``plane_flow_map.png``,
+``study.json`` (what ``make_report.py`` reads) and ``cases/<name>/``.
+
+Usage::
+
+    python studies/plane_flow.py [--out DIR] [--quick] [--serial | --scheduler ADDRESS]
+                                 [--cell-size 0.005]
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+if str(HERE) not in sys.path:
+    sys.path.insert(0, str(HERE))
+import _sweep  # noqa: E402
+import flow_mode_map  # noqa: E402
+
+from fipy_hopper import theory  # noqa: E402
+from fipy_hopper.config import HopperConfig  # noqa: E402
+from fipy_hopper.diagnostics import fit_power_law  # noqa: E402
+
+_r = _sweep.rounded
+NAME = "plane_flow"
+TITLE = "Plane flow (wedge hoppers): the slot exponent and the flow-mode map against Jenike"
+RATE = "steady_discharge_rate_kg_s_m"
+DEFAULTS = {
+    "slot_widths": (0.04, 0.05, 0.06, 0.08),    # B0 (m)
+    "slot_half_angles": (90.0, 20.0),            # flat bottom and a wedge (deg)
+    "slot_bin_width": 0.3,                       # m
+    "slot_fill": 0.3,                            # m above the transition
+    "slot_end_time": 0.6,                        # s of discharge
+    "half_angles": (10.0, 20.0, 30.0, 40.0, 50.0, 60.0),
+    "wall_angles": (10.0, 15.0, 20.0, 25.0, 30.0),
+    "pairs": None,
+    "cell_size": 0.005,                          # m
+    "case_plots": False,
+}
+QUICK = {"slot_widths": (0.06, 0.08), "slot_half_angles": (90.0,), "slot_fill": 0.1,
+         "slot_end_time": 0.3, "pairs": ((20.0, 12.0), (60.0, 25.0)), "cell_size": 0.01}
+#: the map's own settings (flow_mode_map.DEFAULTS but for the shape)
+MAP = {"shape": "wedge", "end_time": 0.8, "friction_angle": 30.0, "bin_diameter": 0.2,
+       "outlet_diameter": 0.06, "fill_height": 0.15, "youngs_modulus": 5.0e6}
+
+
+def setup(quick: bool = False, **options) -> dict:
+    """The cases and options (``{"options", "cases", "setting", "map_options"}``); unknown
+    options raise ``TypeError``."""
+    unknown = set(options) - set(DEFAULTS)
+    if unknown:
+        raise TypeError(f"unknown options {sorted(unknown)}; known: {sorted(DEFAULTS)}")
+    opts = {**DEFAULTS, **(QUICK if quick else {}), **options}
+    map_options = {**MAP, "cell_size": opts["cell_size"], "case_plots": opts["case_plots"],
+                   **({"pairs": opts["pairs"]} if opts["pairs"] else
+                      {"half_angles": opts["half_angles"], "wall_angles": opts["wall_angles"]}),
+                   **({"end_time": 0.6} if quick else {})}
+    map_study = flow_mode_map.setup(**map_options)
+    cases = [dict(c, params={**c["params"], "part": "map"}) for c in map_study["cases"]]
+    for theta in opts["slot_half_angles"]:
+        for width in opts["slot_widths"]:
+            config = {"hopper": {"shape": "wedge", "bin_width": opts["slot_bin_width"],
+                                 "outlet_width": float(width), "half_angle_deg": float(theta),
+                                 "fill_height": opts["slot_fill"],
+                                 "bin_height": opts["slot_fill"] + 0.02},
+                      "numerics": {"cell_size": opts["cell_size"]},
+                      "run": {"end_time": opts["slot_end_time"], "output_interval": 0.02,
+                              "field_interval": opts["slot_end_time"]}}
+            cases.append(_sweep.make_case(
+                _sweep.case_name(("slot", 1000 * width), ("theta", theta)),
+                {"part": "slot", "slot_width_m": float(width), "half_angle_deg": float(theta),
+                 "density_kg_m3": HopperConfig.from_dict(config).material.density},
+                config, plots=opts["case_plots"]))
+    return {"options": opts, "cases": cases, "setting": _sweep.setting_label(quick, options),
+            "map_options": map_study["options"]}
+
+
+# ---------------------------------------------------------------- analysis
+def analyse_slots(rows: list, options: dict) -> dict:
+    """Per bottom: the fitted exponent ``n`` of ``W' = a B0^n`` and each rate against
+    Beverloo's slot rate (``ratio_to_beverloo``, added to the rows)."""
+    out = {}
+    for theta in options["slot_half_angles"]:
+        sel = sorted((r for r in rows if r["half_angle_deg"] == theta and not r.get("error")
+                      and _sweep.finite(r.get(RATE))), key=lambda r: r["slot_width_m"])
+        for r in sel:
+            r["beverloo_slot_kg_s_m"] = float(theory.beverloo_slot_rate(
+                r["density_kg_m3"], r["slot_width_m"]))
+            r["ratio_to_beverloo"] = r[RATE] / r["beverloo_slot_kg_s_m"]
+        key = "flat" if theta >= 90.0 else f"wedge_{theta:g}deg"
+        if len(sel) >= 2:
+            _, n = fit_power_law([r["slot_width_m"] for r in sel], [r[RATE] for r in sel])
+            out[f"slot_exponent_{key}"] = float(n)
+        out[f"slot_widths_{key}"] = len(sel)
+        if sel:
+            ratios = [r["ratio_to_beverloo"] for r in sel]
+            out[f"ratio_to_beverloo_{key}_min"] = float(min(ratios))
+            out[f"ratio_to_beverloo_{key}_max"] = float(max(ratios))
+        out[f"mass_balance_error_{key}_max"] = float(max(
+            [r.get("mass_balance_error", math.nan) for r in sel] or [math.nan]))
+    return out
+
+
+def plot_slots(rows, options, numbers):
+    fig = _sweep.figure(6.4, 4.4)
+    ax = fig.add_subplot()
+    widths = np.linspace(min(options["slot_widths"]) * 0.9, max(options["slot_widths"]) * 1.1)
+    rho = next((r["density_kg_m3"] for r in rows), math.nan)
+    ax.loglog(widths, np.asarray(theory.beverloo_slot_rate(rho, widths)), "k--",
+              label="Beverloo, slot (C' = 1.03, k d = 0): n = 1.5")
+    for k, theta in enumerate(options["slot_half_angles"]):
+        sel = sorted((r for r in rows if r["half_angle_deg"] == theta
+                      and _sweep.finite(r.get(RATE))), key=lambda r: r["slot_width_m"])
+        if not sel:
+            continue
+        key = "flat" if theta >= 90.0 else f"wedge_{theta:g}deg"
+        n = numbers.get(f"slot_exponent_{key}", math.nan)
+        label = "flat bottom" if theta >= 90.0 else f"wedge, theta = {theta:g} deg"
+        ax.loglog([r["slot_width_m"] for r in sel], [r[RATE] for r in sel], "os"[k % 2] + "-",
+                  color=f"C{k}", label=f"simulated, {label}: n = {n:.3f}")
+    ax.set_xlabel("slot width B0 (m)")
+    ax.set_ylabel("steady discharge rate W' (kg/s per m)")
+    ax.set_title("Slot outlets: W' ~ B0^n", fontsize=10)
+    ax.legend(fontsize=7)
+    return fig
+
+
+# ---------------------------------------------------------------- outputs
+def write_outputs(out, rows, options, map_options, setting, argv=None) -> dict:
+    out = Path(out)
+    slots = [r for r in rows if r.get("part") == "slot"]
+    cases = [r for r in rows if r.get("part") == "map"]
+    slot_numbers = analyse_slots(slots, options)
+    map_numbers = flow_mode_map.analyse(cases, map_options)
+    _sweep.write_rows_csv(out / "slots.csv", slots, first=(
+        "case", "slot_width_m", "half_angle_deg", RATE, "beverloo_slot_kg_s_m",
+        "ratio_to_beverloo", "mass_balance_error", "discharge_time_s", "wall_time_s", "error"))
+    _sweep.write_rows_csv(out / "results.csv", cases, first=(
+        "case", "half_angle_deg", "wall_friction_deg", "theta_c_deg", "jenike_mode",
+        "flow_mode", "agrees", "distance_deg", "mass_flow_index", "stagnant_fraction", RATE,
+        "mass_balance_error", "wall_time_s", "error"))
+    _sweep.save(plot_slots(slots, options, slot_numbers), out / "slot_exponent.png")
+    _sweep.save(flow_mode_map.plot_map(cases, map_options, map_numbers),
+                out / "plane_flow_map.png")
+    figures = [{"file": "slot_exponent.png",
+                "caption": "Steady rate per metre against the slot width, flat bottom and "
+                           "wedge, with Beverloo's slot form (n = 3/2)."},
+               {"file": "plane_flow_map.png",
+                "caption": "Simulated flow mode of each wedge on the (phi_w, theta) plane over "
+                           "Jenike's plane-flow boundary (the conical one + 10 deg, a rule of "
+                           "thumb) with the conical boundary dashed beside it; a red edge "
+                           "marks a case that disagrees; the numbers are the mass-flow index."}]
+    numbers = {**slot_numbers, **{f"map_{k}": v for k, v in map_numbers.items()}}
+    findings = []
+    for theta in options["slot_half_angles"]:
+        key = "flat" if theta >= 90.0 else f"wedge_{theta:g}deg"
+        label = "flat bottom" if theta >= 90.0 else f"{theta:g} deg wedge"
+        n = slot_numbers.get(f"slot_exponent_{key}", math.nan)
+        findings.append(
+            f"Slot exponent, {label}: n = {n:.3f} over {slot_numbers[f'slot_widths_{key}']} "
+            f"slot widths (Beverloo's slot form: 1.5); W' / Beverloo slot "
+            f"{slot_numbers.get(f'ratio_to_beverloo_{key}_min', math.nan):.3f}-"
+            f"{slot_numbers.get(f'ratio_to_beverloo_{key}_max', math.nan):.3f}; mass balance "
+            f"error at most {slot_numbers[f'mass_balance_error_{key}_max']:.1e}.")
+    findings.append(
+        f"Plane-flow map: {map_numbers['agreeing']} of {map_numbers['classified']} classified "
+        f"wedges agree with Jenike's plane-flow boundary ({map_numbers['agreement_fraction']:.2f}"
+        f"; away from it, |theta - theta_c| > 5 deg: "
+        f"{map_numbers['agreement_fraction_clear']:.2f} of {map_numbers['clear_cases']}); "
+        f"simulated {map_numbers['mass_cases']} mass, {map_numbers['funnel_cases']} funnel; "
+        f"Jenike {map_numbers['jenike_mass_cases']} mass.")
+    if map_numbers["disagreeing"]:
+        findings.append("Disagreeing wedges: " + ", ".join(
+            f"{r['case']} (sim {r['flow_mode']}, index {r['mass_flow_index']:.2f}, "
+            + (f"theta - theta_c = {r['distance_deg']:+.1f} deg)"
+               if math.isfinite(r["distance_deg"]) else "phi_w >= phi: no theta_c)")
+            for r in cases if r["case"] in map_numbers["disagreeing"]) + ".")
+    failed = [r["case"] for r in rows if r.get("error")]
+    if failed:
+        findings.append("Failed runs: " + ", ".join(failed) + ".")
+    tables = [
+        {"title": "Slot outlets (per metre)",
+         "columns": ["B0 (mm)", "theta (deg)", "W' (kg/s/m)", "Beverloo slot (kg/s/m)",
+                     "ratio", "mass balance"],
+         "rows": [[1000 * r["slot_width_m"], r["half_angle_deg"], _r(r.get(RATE), 2),
+                   _r(r.get("beverloo_slot_kg_s_m"), 2), _r(r.get("ratio_to_beverloo"), 3),
+                   _r(r.get("mass_balance_error"), 15)] for r in slots]},
+        {"title": "Plane-flow map", "columns": ["theta (deg)", "phi_w (deg)",
+                                                "theta_c plane (deg)", "Jenike", "simulated",
+                                                "index", "stagnant", "agrees"],
+         "rows": [[r["half_angle_deg"], r["wall_friction_deg"], _r(r["theta_c_deg"], 1),
+                   r["jenike_mode"], r.get("flow_mode"), _r(r.get("mass_flow_index"), 2),
+                   _r(r.get("stagnant_fraction"), 2), r["agrees"]] for r in cases]}]
+    settings = {k: (list(v) if isinstance(v, tuple) else v) for k, v in options.items()
+                if k != "pairs" or v}
+    settings["map"] = {k: v for k, v in MAP.items()}
+    _sweep.write_study_json(out, NAME, TITLE, setting, settings, numbers, findings, figures,
+                            tables, rows, argv)
+    return numbers
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    _sweep.add_arguments(parser, NAME)
+    parser.add_argument("--cell-size", type=float, help="m (default 0.005)")
+    args = parser.parse_args(argv)
+    options = _sweep.study_options(args, ("cell_size",))
+    study = setup(quick=args.quick, **options)
+    rows = _sweep.run_study(NAME, study, args)
+    numbers = write_outputs(args.out, rows, study["options"], study["map_options"],
+                            study["setting"], argv)
+    print(f"slot exponent: flat {numbers.get('slot_exponent_flat', math.nan):.3f}; plane-flow "
+          f"map agreement {numbers['map_agreement_fraction']:.2f}; written to {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
