@@ -150,6 +150,16 @@ def analyse(rows: list, options: dict) -> dict:
     }
 
 
+def disagreements(rows, numbers, noun="cases") -> str:
+    """The finding that lists the cases that disagree with Jenike (simulated mode, index,
+    distance from the boundary)."""
+    return f"Disagreeing {noun}: " + ", ".join(
+        f"{r['case']} (sim {r['flow_mode']}, index {r['mass_flow_index']:.2f}, "
+        + (f"theta - theta_c = {r['distance_deg']:+.1f} deg)"
+           if math.isfinite(r["distance_deg"]) else "phi_w >= phi: no theta_c)")
+        for r in rows if r["case"] in numbers["disagreeing"]) + "."
+
+
 # ---------------------------------------------------------------- figures
 def plot_map(rows, options, numbers):
     phi = options["friction_angle"]
@@ -327,11 +337,7 @@ def write_outputs(out, rows, numbers, options, setting, argv=None) -> list:
         f"{numbers['jenike_mass_cases']} mass.",
     ]
     if numbers["disagreeing"]:
-        findings.append("Disagreeing cases: " + ", ".join(
-            f"{r['case']} (sim {r['flow_mode']}, index {r['mass_flow_index']:.2f}, "
-            + (f"theta - theta_c = {r['distance_deg']:+.1f} deg)"
-               if math.isfinite(r["distance_deg"]) else "phi_w >= phi: no theta_c)")
-            for r in rows if r["case"] in numbers["disagreeing"]) + ".")
+        findings.append(disagreements(rows, numbers))
     if numbers["failed"]:
         findings.append("Failed runs: " + ", ".join(numbers["failed"]) + ".")
     table = {"title": "Cases", "columns": ["theta (deg)", "phi_w (deg)", "theta_c (deg)",

@@ -195,11 +195,7 @@ def write_outputs(out, rows, options, map_options, setting, argv=None) -> dict:
         f"simulated {map_numbers['mass_cases']} mass, {map_numbers['funnel_cases']} funnel; "
         f"Jenike {map_numbers['jenike_mass_cases']} mass.")
     if map_numbers["disagreeing"]:
-        findings.append("Disagreeing wedges: " + ", ".join(
-            f"{r['case']} (sim {r['flow_mode']}, index {r['mass_flow_index']:.2f}, "
-            + (f"theta - theta_c = {r['distance_deg']:+.1f} deg)"
-               if math.isfinite(r["distance_deg"]) else "phi_w >= phi: no theta_c)")
-            for r in cases if r["case"] in map_numbers["disagreeing"]) + ".")
+        findings.append(flow_mode_map.disagreements(cases, map_numbers, noun="wedges"))
     failed = [r["case"] for r in rows if r.get("error")]
     if failed:
         findings.append("Failed runs: " + ", ".join(failed) + ".")
