@@ -2,11 +2,15 @@
 
 Two parts, both run as ordinary run directories (``hopper.shape = "wedge"``):
 
-* **Slot exponent.**  A plane bin of width ``slot_bin_width`` (0.3 m) filled ``slot_fill``
-  (0.3 m) above the transition is discharged for ``slot_end_time`` (0.6 s) through slots of the
-  widths ``slot_widths`` (40, 50, 60 and 80 mm), with a flat bottom and with a 20 deg wedge.
-  The steady rate per metre ``W'`` (``summary.json`` ``steady_discharge_rate_kg_s_m``) is
-  fitted as ``W' = a B0^n`` for each bottom; Beverloo's slot form says ``n = 3/2``
+* **Slot exponent.**  A plane bin of width ``slot_bin_width`` (0.5 m: at least six slot
+  widths, so that the walls do not feed the slot) filled ``slot_fill`` (0.5 m) above the
+  transition is discharged for ``slot_end_time`` (0.6 s) through slots of the widths
+  ``slot_widths`` (40, 50, 60 and 80 mm), with a flat bottom and with a 20 deg wedge.  The
+  rate per metre ``W'`` is the mean over the same window for every slot, from
+  ``rate_window_start`` (0.2 s, past the opening transient) to the end, read from
+  ``timeseries.csv`` (the summary's steady rate picks its plateau by the mass left, a
+  different window for each slot in so short a run); it is fitted as ``W' = a B0^n`` for
+  each bottom; Beverloo's slot form says ``n = 3/2``
   (:func:`fipy_hopper.theory.beverloo_slot_rate`, ``C' = 1.03``, ``k d = 0``, which the flat
   bottom is also compared with; there is no plane hopper factor to compare the wedge with).
 * **Plane-flow map.**  The flow-mode map of ``flow_mode_map.py`` on wedges (bin width 0.2 m,
@@ -50,12 +54,14 @@ _r = _sweep.rounded
 NAME = "plane_flow"
 TITLE = "Plane flow (wedge hoppers): the slot exponent and the flow-mode map against Jenike"
 RATE = "steady_discharge_rate_kg_s_m"
+RATE_WINDOW = "window_rate_kg_s_m"
 DEFAULTS = {
     "slot_widths": (0.04, 0.05, 0.06, 0.08),    # B0 (m)
     "slot_half_angles": (90.0, 20.0),            # flat bottom and a wedge (deg)
-    "slot_bin_width": 0.3,                       # m
-    "slot_fill": 0.3,                            # m above the transition
+    "slot_bin_width": 0.5,                       # m
+    "slot_fill": 0.5,                            # m above the transition
     "slot_end_time": 0.6,                        # s of discharge
+    "rate_window_start": 0.2,                    # s after the opening
     "half_angles": (10.0, 20.0, 30.0, 40.0, 50.0, 60.0),
     "wall_angles": (10.0, 15.0, 20.0, 25.0, 30.0),
     "pairs": None,
@@ -63,7 +69,7 @@ DEFAULTS = {
     "case_plots": False,
 }
 QUICK = {"slot_widths": (0.06, 0.08), "slot_half_angles": (90.0,), "slot_fill": 0.1,
-         "slot_end_time": 0.3, "pairs": ((20.0, 12.0), (60.0, 25.0)), "cell_size": 0.01}
+         "slot_bin_width": 0.3, "slot_end_time": 0.3, "rate_window_start": 0.1, "pairs": ((20.0, 12.0), (60.0, 25.0)), "cell_size": 0.01}
 #: the map's own settings (flow_mode_map.DEFAULTS but for the shape)
 MAP = {"shape": "wedge", "end_time": 0.8, "friction_angle": 30.0, "bin_diameter": 0.2,
        "outlet_diameter": 0.06, "fill_height": 0.15, "youngs_modulus": 5.0e6}
@@ -101,20 +107,36 @@ def setup(quick: bool = False, **options) -> dict:
 
 
 # ---------------------------------------------------------------- analysis
+def window_rate(run_dir, start: float) -> float:
+    """Mean discharge rate per metre (kg/s/m) from ``start`` s after the opening to the last
+    sample of ``timeseries.csv``: the discharged mass's change over that time."""
+    from fipy_hopper.io import read_csv
+
+    table = read_csv(Path(run_dir) / "timeseries.csv")
+    t, out = np.asarray(table["t_s"], float), np.asarray(table["discharged_kg_m"], float)
+    if len(t) < 2 or t[-1] <= start:
+        return math.nan
+    return float((out[-1] - np.interp(start, t, out)) / (t[-1] - start))
+
+
 def analyse_slots(rows: list, options: dict) -> dict:
-    """Per bottom: the fitted exponent ``n`` of ``W' = a B0^n`` and each rate against
-    Beverloo's slot rate (``ratio_to_beverloo``, added to the rows)."""
+    """Per bottom: the window rate of each slot (``window_rate_kg_s_m``, added to the rows),
+    the fitted exponent ``n`` of ``W' = a B0^n`` and each rate against Beverloo's slot rate
+    (``ratio_to_beverloo``)."""
     out = {}
+    for r in rows:
+        if not r.get("error") and r.get("run_dir"):
+            r[RATE_WINDOW] = window_rate(r["run_dir"], options["rate_window_start"])
     for theta in options["slot_half_angles"]:
         sel = sorted((r for r in rows if r["half_angle_deg"] == theta and not r.get("error")
-                      and _sweep.finite(r.get(RATE))), key=lambda r: r["slot_width_m"])
+                      and _sweep.finite(r.get(RATE_WINDOW))), key=lambda r: r["slot_width_m"])
         for r in sel:
             r["beverloo_slot_kg_s_m"] = float(theory.beverloo_slot_rate(
                 r["density_kg_m3"], r["slot_width_m"]))
-            r["ratio_to_beverloo"] = r[RATE] / r["beverloo_slot_kg_s_m"]
+            r["ratio_to_beverloo"] = r[RATE_WINDOW] / r["beverloo_slot_kg_s_m"]
         key = "flat" if theta >= 90.0 else f"wedge_{theta:g}deg"
         if len(sel) >= 2:
-            _, n = fit_power_law([r["slot_width_m"] for r in sel], [r[RATE] for r in sel])
+            _, n = fit_power_law([r["slot_width_m"] for r in sel], [r[RATE_WINDOW] for r in sel])
             out[f"slot_exponent_{key}"] = float(n)
         out[f"slot_widths_{key}"] = len(sel)
         if sel:
@@ -135,16 +157,18 @@ def plot_slots(rows, options, numbers):
               label="Beverloo, slot (C' = 1.03, k d = 0): n = 1.5")
     for k, theta in enumerate(options["slot_half_angles"]):
         sel = sorted((r for r in rows if r["half_angle_deg"] == theta
-                      and _sweep.finite(r.get(RATE))), key=lambda r: r["slot_width_m"])
+                      and _sweep.finite(r.get(RATE_WINDOW))), key=lambda r: r["slot_width_m"])
         if not sel:
             continue
         key = "flat" if theta >= 90.0 else f"wedge_{theta:g}deg"
         n = numbers.get(f"slot_exponent_{key}", math.nan)
         label = "flat bottom" if theta >= 90.0 else f"wedge, theta = {theta:g} deg"
-        ax.loglog([r["slot_width_m"] for r in sel], [r[RATE] for r in sel], "os"[k % 2] + "-",
+        ax.loglog([r["slot_width_m"] for r in sel], [r[RATE_WINDOW] for r in sel],
+                  "os"[k % 2] + "-",
                   color=f"C{k}", label=f"simulated, {label}: n = {n:.3f}")
     ax.set_xlabel("slot width B0 (m)")
-    ax.set_ylabel("steady discharge rate W' (kg/s per m)")
+    ax.set_ylabel(f"discharge rate W' (kg/s per m), mean from "
+                  f"{options['rate_window_start']:g} s")
     ax.set_title("Slot outlets: W' ~ B0^n", fontsize=10)
     ax.legend(fontsize=7)
     return fig
@@ -158,7 +182,7 @@ def write_outputs(out, rows, options, map_options, setting, argv=None) -> dict:
     slot_numbers = analyse_slots(slots, options)
     map_numbers = flow_mode_map.analyse(cases, map_options)
     _sweep.write_rows_csv(out / "slots.csv", slots, first=(
-        "case", "slot_width_m", "half_angle_deg", RATE, "beverloo_slot_kg_s_m",
+        "case", "slot_width_m", "half_angle_deg", RATE_WINDOW, RATE, "beverloo_slot_kg_s_m",
         "ratio_to_beverloo", "mass_balance_error", "discharge_time_s", "wall_time_s", "error"))
     _sweep.write_rows_csv(out / "results.csv", cases, first=(
         "case", "half_angle_deg", "wall_friction_deg", "theta_c_deg", "jenike_mode",
@@ -201,9 +225,11 @@ def write_outputs(out, rows, options, map_options, setting, argv=None) -> dict:
         findings.append("Failed runs: " + ", ".join(failed) + ".")
     tables = [
         {"title": "Slot outlets (per metre)",
-         "columns": ["B0 (mm)", "theta (deg)", "W' (kg/s/m)", "Beverloo slot (kg/s/m)",
-                     "ratio", "mass balance"],
-         "rows": [[1000 * r["slot_width_m"], r["half_angle_deg"], _r(r.get(RATE), 2),
+         "columns": ["B0 (mm)", "theta (deg)", "W' window (kg/s/m)",
+                     "W' steady, summary (kg/s/m)", "Beverloo slot (kg/s/m)", "ratio",
+                     "mass balance"],
+         "rows": [[1000 * r["slot_width_m"], r["half_angle_deg"], _r(r.get(RATE_WINDOW), 2),
+                   _r(r.get(RATE), 2),
                    _r(r.get("beverloo_slot_kg_s_m"), 2), _r(r.get("ratio_to_beverloo"), 3),
                    _r(r.get("mass_balance_error"), 15)] for r in slots]},
         {"title": "Plane-flow map", "columns": ["theta (deg)", "phi_w (deg)",
