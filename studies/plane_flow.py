@@ -2,10 +2,12 @@
 
 Two parts, both run as ordinary run directories (``hopper.shape = "wedge"``):
 
-* **Slot exponent.**  A plane bin of width ``slot_bin_width`` (0.5 m: at least six slot
-  widths, so that the walls do not feed the slot) filled ``slot_fill`` (0.5 m) above the
-  transition is discharged for ``slot_end_time`` (0.6 s) through slots of the widths
-  ``slot_widths`` (40, 50, 60 and 80 mm), with a flat bottom and with a 20 deg wedge.  The
+* **Slot exponent.**  A plane bin of width ``slot_bin_width`` (0.6 m: six widths of the
+  largest slot, so that the walls do not feed the slot) filled ``slot_fill`` (0.5 m) above
+  the transition is discharged for ``slot_end_time`` (0.6 s) through slots of the widths
+  ``slot_widths`` (60, 70, 80 and 100 mm: at 5 mm cells, at least the 6 cells across the
+  slot's half-width that a discharge rate needs, as the configuration's resolution warning
+  says), with a flat bottom and with a 20 deg wedge.  The
   rate per metre ``W'`` is the mean over the same window for every slot, from
   ``rate_window_start`` (0.2 s, past the opening transient) to the end, read from
   ``timeseries.csv`` (the summary's steady rate picks its plateau by the mass left, a
@@ -56,9 +58,9 @@ TITLE = "Plane flow (wedge hoppers): the slot exponent and the flow-mode map aga
 RATE = "steady_discharge_rate_kg_s_m"
 RATE_WINDOW = "window_rate_kg_s_m"
 DEFAULTS = {
-    "slot_widths": (0.04, 0.05, 0.06, 0.08),    # B0 (m)
+    "slot_widths": (0.06, 0.07, 0.08, 0.10),    # B0 (m)
     "slot_half_angles": (90.0, 20.0),            # flat bottom and a wedge (deg)
-    "slot_bin_width": 0.5,                       # m
+    "slot_bin_width": 0.6,                       # m
     "slot_fill": 0.5,                            # m above the transition
     "slot_end_time": 0.6,                        # s of discharge
     "rate_window_start": 0.2,                    # s after the opening
