@@ -8,9 +8,8 @@ Two parts, both run as ordinary run directories (``hopper.shape = "wedge"``):
   slot's half-width that a discharge rate needs, as the configuration's resolution warning
   says), with a flat bottom (a bin 1 m wide: ten widths of the largest slot) and with a
   20 deg wedge (from a bin 0.6 m wide; the wedge's walls lead to the slot, whatever the
-  bin).  The flat bin must be wide: measured, a 60 mm slot runs 11 % faster in a 0.3 m bin
-  than in a 0.6 m one (68.4 kg/s/m), and in the 0.6 m bin the 100 mm slot ran 6 % above
-  Beverloo and the 60 mm one 4 % below (n = 1.69).  The
+  bin).  Measured: the flat bin's width does not matter from 0.6 m on (every slot's rate
+  within 0.3 % in a 0.6 m and a 1 m bin).  The
   rate per metre ``W'`` is the mean over the same window for every slot, from
   ``rate_window_start`` (0.2 s, past the opening transient) to the end, read from
   ``timeseries.csv`` (the summary's steady rate picks its plateau by the mass left, a
@@ -18,6 +17,9 @@ Two parts, both run as ordinary run directories (``hopper.shape = "wedge"``):
   each bottom; Beverloo's slot form says ``n = 3/2``
   (:func:`fipy_hopper.theory.beverloo_slot_rate`, ``C' = 1.03``, ``k d = 0``, which the flat
   bottom is also compared with; there is no plane hopper factor to compare the wedge with).
+  The flat bottom's two extreme slots are run again on ``fine_cell_size`` (2.5 mm) cells, in
+  a 0.6 m bin: the exponent between them at both cell sizes, and its extrapolation to zero
+  cell size (first order), tell a resolution effect from a law.
 * **Plane-flow map.**  The flow-mode map of ``flow_mode_map.py`` on wedges (bin width 0.2 m,
   slot 0.06 m, fill 0.15 m above the transition, 5 mm cells, 0.8 s): mass or funnel flow by
   the package's rule (``summary.json`` ``flow_mode``) over the half-angle and the wall
@@ -67,6 +69,9 @@ DEFAULTS = {
     "slot_fill": 0.5,                            # m above the transition
     "slot_end_time": 0.6,                        # s of discharge
     "rate_window_start": 0.2,                    # s after the opening
+    "fine_cell_size": 0.0025,                    # m: the flat bottom's exponent refined
+    "fine_widths": (0.06, 0.10),                 # m, in a flat bin fine_bin_width wide
+    "fine_bin_width": 0.6,                       # m
     "half_angles": (10.0, 20.0, 30.0, 40.0, 50.0, 60.0),
     "wall_angles": (10.0, 15.0, 20.0, 25.0, 30.0),
     "pairs": None,
@@ -74,7 +79,7 @@ DEFAULTS = {
     "case_plots": False,
 }
 QUICK = {"slot_widths": (0.06, 0.08), "slot_bottoms": ((90.0, 0.3),), "slot_fill": 0.1,
-         "slot_end_time": 0.3, "rate_window_start": 0.1, "pairs": ((20.0, 12.0), (60.0, 25.0)), "cell_size": 0.01}
+         "slot_end_time": 0.3, "fine_widths": (), "rate_window_start": 0.1, "pairs": ((20.0, 12.0), (60.0, 25.0)), "cell_size": 0.01}
 #: the map's own settings (flow_mode_map.DEFAULTS but for the shape)
 MAP = {"shape": "wedge", "end_time": 0.8, "friction_angle": 30.0, "bin_diameter": 0.2,
        "outlet_diameter": 0.06, "fill_height": 0.15, "youngs_modulus": 5.0e6}
@@ -107,6 +112,19 @@ def setup(quick: bool = False, **options) -> dict:
                 {"part": "slot", "slot_width_m": float(width), "half_angle_deg": float(theta),
                  "density_kg_m3": HopperConfig.from_dict(config).material.density},
                 config, plots=opts["case_plots"]))
+    for width in opts["fine_widths"]:
+        config = {"hopper": {"shape": "wedge", "bin_width": opts["fine_bin_width"],
+                             "outlet_width": float(width), "half_angle_deg": 90.0,
+                             "fill_height": opts["slot_fill"],
+                             "bin_height": opts["slot_fill"] + 0.02},
+                  "numerics": {"cell_size": opts["fine_cell_size"]},
+                  "run": {"end_time": opts["slot_end_time"], "output_interval": 0.02,
+                          "field_interval": opts["slot_end_time"]}}
+        cases.append(_sweep.make_case(
+            _sweep.case_name(("fine_slot", 1000 * width), ("theta", 90.0)),
+            {"part": "slot_fine", "slot_width_m": float(width), "half_angle_deg": 90.0,
+             "density_kg_m3": HopperConfig.from_dict(config).material.density},
+            config, plots=opts["case_plots"]))
     return {"options": opts, "cases": cases, "setting": _sweep.setting_label(quick, options),
             "map_options": map_study["options"]}
 
@@ -153,6 +171,33 @@ def analyse_slots(rows: list, options: dict) -> dict:
     return out
 
 
+def two_point_exponent(rows, widths) -> float:
+    """``ln(W'_2 / W'_1) / ln(B0_2 / B0_1)`` between the rows of the two slot widths."""
+    rate = {r["slot_width_m"]: r.get(RATE_WINDOW, math.nan) for r in rows}
+    a, b = widths
+    if a not in rate or b not in rate:
+        return math.nan
+    return float(math.log(rate[b] / rate[a]) / math.log(b / a))
+
+
+def analyse_refinement(fine: list, slots: list, options: dict) -> dict:
+    """The flat bottom's exponent between the two ``fine_widths`` at the study's cells and at
+    ``fine_cell_size``, and its extrapolation to zero cell size, first order in the cell size
+    (the cells halve: ``n_0 = 2 n_fine - n_coarse``)."""
+    widths = tuple(options["fine_widths"])
+    if len(widths) != 2:
+        return {}
+    for r in fine:
+        if not r.get("error") and r.get("run_dir"):
+            r[RATE_WINDOW] = window_rate(r["run_dir"], options["rate_window_start"])
+    coarse = two_point_exponent([r for r in slots if r["half_angle_deg"] >= 90.0], widths)
+    refined = two_point_exponent(fine, widths)
+    ratio = options["cell_size"] / options["fine_cell_size"]
+    extrapolated = refined + (refined - coarse) / (ratio - 1.0)
+    return {"flat_exponent_two_widths_coarse": coarse, "flat_exponent_two_widths_fine": refined,
+            "flat_exponent_two_widths_extrapolated": extrapolated}
+
+
 def plot_slots(rows, options, numbers):
     fig = _sweep.figure(6.4, 4.4)
     ax = fig.add_subplot()
@@ -171,6 +216,14 @@ def plot_slots(rows, options, numbers):
         ax.loglog([r["slot_width_m"] for r in sel], [r[RATE_WINDOW] for r in sel],
                   "os"[k % 2] + "-",
                   color=f"C{k}", label=f"simulated, {label}: n = {n:.3f}")
+    fine = sorted((r for r in rows if r.get("part") == "slot_fine"
+                   and _sweep.finite(r.get(RATE_WINDOW))), key=lambda r: r["slot_width_m"])
+    if fine:
+        n = numbers.get("flat_exponent_two_widths_fine", math.nan)
+        ax.loglog([r["slot_width_m"] for r in fine], [r[RATE_WINDOW] for r in fine], "o--",
+                  mfc="none", color="C0",
+                  label=f"flat bottom at {1000 * options['fine_cell_size']:g} mm cells: "
+                        f"n = {n:.3f}")
     ax.set_xlabel("slot width B0 (m)")
     ax.set_ylabel(f"discharge rate W' (kg/s per m), mean from "
                   f"{options['rate_window_start']:g} s")
@@ -183,17 +236,19 @@ def plot_slots(rows, options, numbers):
 def write_outputs(out, rows, options, map_options, setting, argv=None) -> dict:
     out = Path(out)
     slots = [r for r in rows if r.get("part") == "slot"]
+    fine = [r for r in rows if r.get("part") == "slot_fine"]
     cases = [r for r in rows if r.get("part") == "map"]
     slot_numbers = analyse_slots(slots, options)
+    slot_numbers.update(analyse_refinement(fine, slots, options))
     map_numbers = flow_mode_map.analyse(cases, map_options)
-    _sweep.write_rows_csv(out / "slots.csv", slots, first=(
-        "case", "slot_width_m", "half_angle_deg", RATE_WINDOW, RATE, "beverloo_slot_kg_s_m",
+    _sweep.write_rows_csv(out / "slots.csv", slots + fine, first=(
+        "case", "slot_width_m", "half_angle_deg", "cell_size_m", RATE_WINDOW, RATE, "beverloo_slot_kg_s_m",
         "ratio_to_beverloo", "mass_balance_error", "discharge_time_s", "wall_time_s", "error"))
     _sweep.write_rows_csv(out / "results.csv", cases, first=(
         "case", "half_angle_deg", "wall_friction_deg", "theta_c_deg", "jenike_mode",
         "flow_mode", "agrees", "distance_deg", "mass_flow_index", "stagnant_fraction", RATE,
         "mass_balance_error", "wall_time_s", "error"))
-    _sweep.save(plot_slots(slots, options, slot_numbers), out / "slot_exponent.png")
+    _sweep.save(plot_slots(slots + fine, options, slot_numbers), out / "slot_exponent.png")
     _sweep.save(flow_mode_map.plot_map(cases, map_options, map_numbers),
                 out / "plane_flow_map.png")
     figures = [{"file": "slot_exponent.png",
@@ -216,6 +271,17 @@ def write_outputs(out, rows, options, map_options, setting, argv=None) -> dict:
             f"{slot_numbers.get(f'ratio_to_beverloo_{key}_min', math.nan):.3f}-"
             f"{slot_numbers.get(f'ratio_to_beverloo_{key}_max', math.nan):.3f}; mass balance "
             f"error at most {slot_numbers[f'mass_balance_error_{key}_max']:.1e}.")
+    if "flat_exponent_two_widths_fine" in slot_numbers:
+        a, b = (1000 * w for w in options["fine_widths"])
+        findings.append(
+            f"The flat bottom's exponent is a resolution effect that refining removes: between "
+            f"{a:g} and {b:g} mm slots n = "
+            f"{slot_numbers['flat_exponent_two_widths_coarse']:.3f} at "
+            f"{1000 * options['cell_size']:g} mm cells, "
+            f"{slot_numbers['flat_exponent_two_widths_fine']:.3f} at "
+            f"{1000 * options['fine_cell_size']:g} mm, "
+            f"{slot_numbers['flat_exponent_two_widths_extrapolated']:.3f} extrapolated to "
+            f"zero cell size (first order); the small slot gains most from the finer cells.")
     findings.append(
         f"Plane-flow map: {map_numbers['agreeing']} of {map_numbers['classified']} classified "
         f"wedges agree with Jenike's plane-flow boundary ({map_numbers['agreement_fraction']:.2f}"
@@ -230,13 +296,14 @@ def write_outputs(out, rows, options, map_options, setting, argv=None) -> dict:
         findings.append("Failed runs: " + ", ".join(failed) + ".")
     tables = [
         {"title": "Slot outlets (per metre)",
-         "columns": ["B0 (mm)", "theta (deg)", "W' window (kg/s/m)",
+         "columns": ["B0 (mm)", "theta (deg)", "cell (mm)", "W' window (kg/s/m)",
                      "W' steady, summary (kg/s/m)", "Beverloo slot (kg/s/m)", "ratio",
                      "mass balance"],
-         "rows": [[1000 * r["slot_width_m"], r["half_angle_deg"], _r(r.get(RATE_WINDOW), 2),
+         "rows": [[1000 * r["slot_width_m"], r["half_angle_deg"],
+                   _r(1000 * r.get("cell_size_m", math.nan), 2), _r(r.get(RATE_WINDOW), 2),
                    _r(r.get(RATE), 2),
                    _r(r.get("beverloo_slot_kg_s_m"), 2), _r(r.get("ratio_to_beverloo"), 3),
-                   _r(r.get("mass_balance_error"), 15)] for r in slots]},
+                   _r(r.get("mass_balance_error"), 15)] for r in slots + fine]},
         {"title": "Plane-flow map", "columns": ["theta (deg)", "phi_w (deg)",
                                                 "theta_c plane (deg)", "Jenike", "simulated",
                                                 "index", "stagnant", "agrees"],
