@@ -274,14 +274,15 @@ def write_outputs(out, rows, options, map_options, setting, argv=None) -> dict:
     if "flat_exponent_two_widths_fine" in slot_numbers:
         a, b = (1000 * w for w in options["fine_widths"])
         findings.append(
-            f"The flat bottom's exponent is a resolution effect that refining removes: between "
+            f"The flat bottom's exponent falls as the cells shrink: between "
             f"{a:g} and {b:g} mm slots n = "
             f"{slot_numbers['flat_exponent_two_widths_coarse']:.3f} at "
             f"{1000 * options['cell_size']:g} mm cells, "
             f"{slot_numbers['flat_exponent_two_widths_fine']:.3f} at "
             f"{1000 * options['fine_cell_size']:g} mm, "
             f"{slot_numbers['flat_exponent_two_widths_extrapolated']:.3f} extrapolated to "
-            f"zero cell size (first order); the small slot gains most from the finer cells.")
+            f"zero cell size (first order, from two cell sizes): a resolution effect, the "
+            f"small slot gaining most from the finer cells.")
     findings.append(
         f"Plane-flow map: {map_numbers['agreeing']} of {map_numbers['classified']} classified "
         f"wedges agree with Jenike's plane-flow boundary ({map_numbers['agreement_fraction']:.2f}"
