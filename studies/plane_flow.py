@@ -79,7 +79,8 @@ DEFAULTS = {
     "case_plots": False,
 }
 QUICK = {"slot_widths": (0.06, 0.08), "slot_bottoms": ((90.0, 0.3),), "slot_fill": 0.1,
-         "slot_end_time": 0.3, "fine_widths": (), "rate_window_start": 0.1, "pairs": ((20.0, 12.0), (60.0, 25.0)), "cell_size": 0.01}
+         "slot_end_time": 0.3, "fine_widths": (), "rate_window_start": 0.1,
+         "pairs": ((20.0, 12.0), (60.0, 25.0)), "cell_size": 0.01}
 #: the map's own settings (flow_mode_map.DEFAULTS but for the shape)
 MAP = {"shape": "wedge", "end_time": 0.8, "friction_angle": 30.0, "bin_diameter": 0.2,
        "outlet_diameter": 0.06, "fill_height": 0.15, "youngs_modulus": 5.0e6}
@@ -130,6 +131,16 @@ def setup(quick: bool = False, **options) -> dict:
 
 
 # ---------------------------------------------------------------- analysis
+def bottom_key(theta: float) -> str:
+    """The key of a slot bottom in the numbers: ``flat`` or ``wedge_<theta>deg``."""
+    return "flat" if theta >= 90.0 else f"wedge_{theta:g}deg"
+
+
+def label(theta: float) -> str:
+    """A slot bottom in words."""
+    return "flat bottom" if theta >= 90.0 else f"{theta:g} deg wedge"
+
+
 def window_rate(run_dir, start: float) -> float:
     """Mean discharge rate per metre (kg/s/m) from ``start`` s after the opening to the last
     sample of ``timeseries.csv``: the discharged mass's change over that time."""
@@ -157,7 +168,7 @@ def analyse_slots(rows: list, options: dict) -> dict:
             r["beverloo_slot_kg_s_m"] = float(theory.beverloo_slot_rate(
                 r["density_kg_m3"], r["slot_width_m"]))
             r["ratio_to_beverloo"] = r[RATE_WINDOW] / r["beverloo_slot_kg_s_m"]
-        key = "flat" if theta >= 90.0 else f"wedge_{theta:g}deg"
+        key = bottom_key(theta)
         if len(sel) >= 2:
             _, n = fit_power_law([r["slot_width_m"] for r in sel], [r[RATE_WINDOW] for r in sel])
             out[f"slot_exponent_{key}"] = float(n)
@@ -210,12 +221,11 @@ def plot_slots(rows, options, numbers):
                       and _sweep.finite(r.get(RATE_WINDOW))), key=lambda r: r["slot_width_m"])
         if not sel:
             continue
-        key = "flat" if theta >= 90.0 else f"wedge_{theta:g}deg"
+        key = bottom_key(theta)
         n = numbers.get(f"slot_exponent_{key}", math.nan)
-        label = "flat bottom" if theta >= 90.0 else f"wedge, theta = {theta:g} deg"
         ax.loglog([r["slot_width_m"] for r in sel], [r[RATE_WINDOW] for r in sel],
                   "os"[k % 2] + "-",
-                  color=f"C{k}", label=f"simulated, {label}: n = {n:.3f}")
+                  color=f"C{k}", label=f"simulated, {label(theta)}: n = {n:.3f}")
     fine = sorted((r for r in rows if r.get("part") == "slot_fine"
                    and _sweep.finite(r.get(RATE_WINDOW))), key=lambda r: r["slot_width_m"])
     if fine:
@@ -242,8 +252,8 @@ def write_outputs(out, rows, options, map_options, setting, argv=None) -> dict:
     slot_numbers.update(analyse_refinement(fine, slots, options))
     map_numbers = flow_mode_map.analyse(cases, map_options)
     _sweep.write_rows_csv(out / "slots.csv", slots + fine, first=(
-        "case", "slot_width_m", "half_angle_deg", "cell_size_m", RATE_WINDOW, RATE, "beverloo_slot_kg_s_m",
-        "ratio_to_beverloo", "mass_balance_error", "discharge_time_s", "wall_time_s", "error"))
+        "case", "slot_width_m", "half_angle_deg", "cell_size_m", RATE_WINDOW, RATE,
+        "beverloo_slot_kg_s_m", "ratio_to_beverloo", "mass_balance_error", "discharge_time_s", "wall_time_s", "error"))
     _sweep.write_rows_csv(out / "results.csv", cases, first=(
         "case", "half_angle_deg", "wall_friction_deg", "theta_c_deg", "jenike_mode",
         "flow_mode", "agrees", "distance_deg", "mass_flow_index", "stagnant_fraction", RATE,
@@ -262,11 +272,10 @@ def write_outputs(out, rows, options, map_options, setting, argv=None) -> dict:
     numbers = {**slot_numbers, **{f"map_{k}": v for k, v in map_numbers.items()}}
     findings = []
     for theta, _ in options["slot_bottoms"]:
-        key = "flat" if theta >= 90.0 else f"wedge_{theta:g}deg"
-        label = "flat bottom" if theta >= 90.0 else f"{theta:g} deg wedge"
+        key = bottom_key(theta)
         n = slot_numbers.get(f"slot_exponent_{key}", math.nan)
         findings.append(
-            f"Slot exponent, {label}: n = {n:.3f} over {slot_numbers[f'slot_widths_{key}']} "
+            f"Slot exponent, {label(theta)}: n = {n:.3f} over {slot_numbers[f'slot_widths_{key}']} "
             f"slot widths (Beverloo's slot form: 1.5); W' / Beverloo slot "
             f"{slot_numbers.get(f'ratio_to_beverloo_{key}_min', math.nan):.3f}-"
             f"{slot_numbers.get(f'ratio_to_beverloo_{key}_max', math.nan):.3f}; mass balance "
@@ -314,8 +323,17 @@ def write_outputs(out, rows, options, map_options, setting, argv=None) -> dict:
     settings = {k: (list(v) if isinstance(v, tuple) else v) for k, v in options.items()
                 if k != "pairs" or v}
     settings["map"] = {k: v for k, v in MAP.items()}
+    exponents = "; ".join(
+        f"{label(theta)} {slot_numbers.get('slot_exponent_' + bottom_key(theta), math.nan):.3f}"
+        for theta, _ in options["slot_bottoms"])
+    if "flat_exponent_two_widths_extrapolated" in slot_numbers:
+        exponents += (f" (flat, extrapolated to zero cell size: "
+                      f"{slot_numbers['flat_exponent_two_widths_extrapolated']:.3f})")
+    headline = (f"Slot exponent n (Beverloo 1.5): {exponents}. Plane-flow map: "
+                f"{map_numbers['agreeing']} of {map_numbers['classified']} wedges agree with "
+                f"Jenike's plane-flow boundary.")
     _sweep.write_study_json(out, NAME, TITLE, setting, settings, numbers, findings, figures,
-                            tables, rows, argv)
+                            tables, rows, argv, headline=headline)
     return numbers
 
 
