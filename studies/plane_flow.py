@@ -253,7 +253,8 @@ def write_outputs(out, rows, options, map_options, setting, argv=None) -> dict:
     map_numbers = flow_mode_map.analyse(cases, map_options)
     _sweep.write_rows_csv(out / "slots.csv", slots + fine, first=(
         "case", "slot_width_m", "half_angle_deg", "cell_size_m", RATE_WINDOW, RATE,
-        "beverloo_slot_kg_s_m", "ratio_to_beverloo", "mass_balance_error", "discharge_time_s", "wall_time_s", "error"))
+        "beverloo_slot_kg_s_m", "ratio_to_beverloo", "mass_balance_error", "discharge_time_s",
+        "wall_time_s", "error"))
     _sweep.write_rows_csv(out / "results.csv", cases, first=(
         "case", "half_angle_deg", "wall_friction_deg", "theta_c_deg", "jenike_mode",
         "flow_mode", "agrees", "distance_deg", "mass_flow_index", "stagnant_fraction", RATE,
