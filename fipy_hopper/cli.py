@@ -158,8 +158,24 @@ def _validate(args) -> int:
     ]
     if "unconfined_yield_strength_Pa" in e:
         lines[-1:-1] = _cohesion_lines(cfg, e)
+    if cfg.numerics.formulation == "lagrangian":
+        lines[1], lines[3] = _lagrangian_lines(cfg)
     print("\n".join(lines))
     return EXIT_OK
+
+
+def _lagrangian_lines(cfg) -> tuple:
+    """The mesh and time-step lines of ``validate`` for a Lagrangian run: the mesh's size, its
+    worst element and its first time step (the smallest element length over c_p)."""
+    from .lagrangian import build_mesh, element_quality
+
+    mesh = build_mesh(cfg.hopper, cfg.numerics.cell_size)
+    quality = element_quality(mesh.x, mesh.conn)
+    dt = cfg.material.law().stable_time_step(float(quality[3].min()), cfg.numerics.dt_safety)
+    return (f"  mesh (Lagrangian)  {mesh.n_elements} elements in {mesh.n_cols} columns, moving "
+            f"with the material (worst aspect {quality[1].max():.2f}); the run stops when an "
+            f"element distorts",
+            f"  time step          {dt:.4g} s at the start (it shrinks as the mesh distorts)")
 
 
 def _plot(args) -> int:

@@ -374,3 +374,19 @@ def test_a_lagrangian_wedge_is_refused_naming_the_key():
                                 "numerics": {"cell_size": 0.01, "formulation": "lagrangian"}})
     with pytest.raises(ConfigError, match="numerics.formulation"):
         coarse_config(formulation="lagrange")
+
+
+def test_validate_describes_the_lagrangian_mesh(tmp_path, capsys):
+    """``fipy-hopper validate`` of a Lagrangian configuration prints its mesh (not the grid)
+    and the model's own first time step."""
+    from fipy_hopper.cli import main
+
+    cfg = coarse_config(formulation="lagrangian")
+    path = tmp_path / "lagrangian.toml"
+    path.write_text(cfg.to_toml())
+    assert main(["validate", str(path)]) == 0
+    out = capsys.readouterr().out
+    model = LagrangianModel(cfg)
+    assert f"{model.mesh.n_elements} elements in {model.mesh.n_cols} columns" in out
+    assert f"time step          {model.dt0:.4g} s at the start" in out
+    assert "cells of" not in out
