@@ -40,7 +40,8 @@ Time step
     the Eulerian model's mass-proportional damping, applied after the contact as there, so
     that the walls, not the damping, hold what rests on them; the axis; the strain increment
     ``D dt`` and spin from the new velocity on the mid-step configuration ``x + v dt/2``;
-    Jaumann rotation and :func:`material.update`; then ``x += v dt``.  ``dt = dt_safety L_min / c_p`` with ``L_min`` the smallest element length
+    Jaumann rotation and :func:`material.update`; then ``x += v dt``.
+    ``dt = dt_safety L_min / c_p`` with ``L_min`` the smallest element length
     ``A / (longest edge)`` (``h`` for a square, so the Eulerian step on the same cell size),
     recomputed every step and never above its initial value.
 
