@@ -17,9 +17,9 @@ Two parts, both run as ordinary run directories (``hopper.shape = "wedge"``):
   each bottom; Beverloo's slot form says ``n = 3/2``
   (:func:`fipy_hopper.theory.beverloo_slot_rate`, ``C' = 1.03``, ``k d = 0``, which the flat
   bottom is also compared with; there is no plane hopper factor to compare the wedge with).
-  The flat bottom's two extreme slots are run again on ``fine_cell_size`` (2.5 mm) cells, in
-  a 0.6 m bin: the exponent between them at both cell sizes, and its extrapolation to zero
-  cell size (first order), tell a resolution effect from a law.
+  The flat bottom's four slots are run again on ``fine_cell_size`` (2.5 mm) cells, in a
+  0.6 m bin: the exponent at both cell sizes, and its extrapolation to zero cell size (first
+  order), tell a resolution effect from a law.
 * **Plane-flow map.**  The flow-mode map of ``flow_mode_map.py`` on wedges (bin width 0.2 m,
   slot 0.06 m, fill 0.15 m above the transition, 5 mm cells, 0.8 s): mass or funnel flow by
   the package's rule (``summary.json`` ``flow_mode``) over the half-angle and the wall
@@ -70,7 +70,7 @@ DEFAULTS = {
     "slot_end_time": 0.6,                        # s of discharge
     "rate_window_start": 0.2,                    # s after the opening
     "fine_cell_size": 0.0025,                    # m: the flat bottom's exponent refined
-    "fine_widths": (0.06, 0.10),                 # m, in a flat bin fine_bin_width wide
+    "fine_widths": (0.06, 0.07, 0.08, 0.10),     # m, in a flat bin fine_bin_width wide
     "fine_bin_width": 0.6,                       # m
     "half_angles": (10.0, 20.0, 30.0, 40.0, 50.0, 60.0),
     "wall_angles": (10.0, 15.0, 20.0, 25.0, 30.0),
@@ -182,31 +182,31 @@ def analyse_slots(rows: list, options: dict) -> dict:
     return out
 
 
-def two_point_exponent(rows, widths) -> float:
-    """``ln(W'_2 / W'_1) / ln(B0_2 / B0_1)`` between the rows of the two slot widths."""
+def fitted_exponent(rows, widths) -> float:
+    """``n`` of ``W' = a B0^n`` fitted to the rows of the slot ``widths`` (NaN unless all of
+    them are there)."""
     rate = {r["slot_width_m"]: r.get(RATE_WINDOW, math.nan) for r in rows}
-    a, b = widths
-    if a not in rate or b not in rate:
+    if not all(_sweep.finite(rate.get(w)) for w in widths):
         return math.nan
-    return float(math.log(rate[b] / rate[a]) / math.log(b / a))
+    return float(fit_power_law(list(widths), [rate[w] for w in widths])[1])
 
 
 def analyse_refinement(fine: list, slots: list, options: dict) -> dict:
-    """The flat bottom's exponent between the two ``fine_widths`` at the study's cells and at
+    """The flat bottom's exponent over the ``fine_widths`` at the study's cells and at
     ``fine_cell_size``, and its extrapolation to zero cell size, first order in the cell size
-    (the cells halve: ``n_0 = 2 n_fine - n_coarse``)."""
+    (``n_0 = n_fine + (n_fine - n_coarse) / (h_coarse / h_fine - 1)``)."""
     widths = tuple(options["fine_widths"])
-    if len(widths) != 2:
+    if len(widths) < 2:
         return {}
     for r in fine:
         if not r.get("error") and r.get("run_dir"):
             r[RATE_WINDOW] = window_rate(r["run_dir"], options["rate_window_start"])
-    coarse = two_point_exponent([r for r in slots if r["half_angle_deg"] >= 90.0], widths)
-    refined = two_point_exponent(fine, widths)
+    coarse = fitted_exponent([r for r in slots if r["half_angle_deg"] >= 90.0], widths)
+    refined = fitted_exponent(fine, widths)
     ratio = options["cell_size"] / options["fine_cell_size"]
     extrapolated = refined + (refined - coarse) / (ratio - 1.0)
-    return {"flat_exponent_two_widths_coarse": coarse, "flat_exponent_two_widths_fine": refined,
-            "flat_exponent_two_widths_extrapolated": extrapolated}
+    return {"flat_exponent_coarse": coarse, "flat_exponent_fine": refined,
+            "flat_exponent_extrapolated": extrapolated}
 
 
 def plot_slots(rows, options, numbers):
@@ -229,7 +229,7 @@ def plot_slots(rows, options, numbers):
     fine = sorted((r for r in rows if r.get("part") == "slot_fine"
                    and _sweep.finite(r.get(RATE_WINDOW))), key=lambda r: r["slot_width_m"])
     if fine:
-        n = numbers.get("flat_exponent_two_widths_fine", math.nan)
+        n = numbers.get("flat_exponent_fine", math.nan)
         ax.loglog([r["slot_width_m"] for r in fine], [r[RATE_WINDOW] for r in fine], "o--",
                   mfc="none", color="C0",
                   label=f"flat bottom at {1000 * options['fine_cell_size']:g} mm cells: "
@@ -281,16 +281,16 @@ def write_outputs(out, rows, options, map_options, setting, argv=None) -> dict:
             f"{slot_numbers.get(f'ratio_to_beverloo_{key}_min', math.nan):.3f}-"
             f"{slot_numbers.get(f'ratio_to_beverloo_{key}_max', math.nan):.3f}; mass balance "
             f"error at most {slot_numbers[f'mass_balance_error_{key}_max']:.1e}.")
-    if "flat_exponent_two_widths_fine" in slot_numbers:
-        a, b = (1000 * w for w in options["fine_widths"])
+    if "flat_exponent_fine" in slot_numbers:
+        widths = ", ".join(f"{1000 * w:g}" for w in options["fine_widths"])
         findings.append(
-            f"The flat bottom's exponent falls as the cells shrink: between "
-            f"{a:g} and {b:g} mm slots n = "
-            f"{slot_numbers['flat_exponent_two_widths_coarse']:.3f} at "
+            f"The flat bottom's exponent falls as the cells shrink: over the {widths} mm "
+            f"slots n = "
+            f"{slot_numbers['flat_exponent_coarse']:.3f} at "
             f"{1000 * options['cell_size']:g} mm cells, "
-            f"{slot_numbers['flat_exponent_two_widths_fine']:.3f} at "
+            f"{slot_numbers['flat_exponent_fine']:.3f} at "
             f"{1000 * options['fine_cell_size']:g} mm, "
-            f"{slot_numbers['flat_exponent_two_widths_extrapolated']:.3f} extrapolated to "
+            f"{slot_numbers['flat_exponent_extrapolated']:.3f} extrapolated to "
             f"zero cell size (first order, from two cell sizes): a resolution effect, the "
             f"small slot gaining most from the finer cells.")
     findings.append(
@@ -327,9 +327,9 @@ def write_outputs(out, rows, options, map_options, setting, argv=None) -> dict:
     exponents = "; ".join(
         f"{label(theta)} {slot_numbers.get('slot_exponent_' + bottom_key(theta), math.nan):.3f}"
         for theta, _ in options["slot_bottoms"])
-    if "flat_exponent_two_widths_extrapolated" in slot_numbers:
+    if "flat_exponent_extrapolated" in slot_numbers:
         exponents += (f" (flat, extrapolated to zero cell size: "
-                      f"{slot_numbers['flat_exponent_two_widths_extrapolated']:.3f})")
+                      f"{slot_numbers['flat_exponent_extrapolated']:.3f})")
     headline = (f"Slot exponent n (Beverloo 1.5): {exponents}. Plane-flow map: "
                 f"{map_numbers['agreeing']} of {map_numbers['classified']} wedges agree with "
                 f"Jenike's plane-flow boundary.")
