@@ -201,6 +201,9 @@ def analyse_refinement(fine: list, slots: list, options: dict) -> dict:
     for r in fine:
         if not r.get("error") and r.get("run_dir"):
             r[RATE_WINDOW] = window_rate(r["run_dir"], options["rate_window_start"])
+            r["beverloo_slot_kg_s_m"] = float(theory.beverloo_slot_rate(
+                r["density_kg_m3"], r["slot_width_m"]))
+            r["ratio_to_beverloo"] = r[RATE_WINDOW] / r["beverloo_slot_kg_s_m"]
     coarse = fitted_exponent([r for r in slots if r["half_angle_deg"] >= 90.0], widths)
     refined = fitted_exponent(fine, widths)
     ratio = options["cell_size"] / options["fine_cell_size"]
@@ -328,8 +331,10 @@ def write_outputs(out, rows, options, map_options, setting, argv=None) -> dict:
         f"{label(theta)} {slot_numbers.get('slot_exponent_' + bottom_key(theta), math.nan):.3f}"
         for theta, _ in options["slot_bottoms"])
     if "flat_exponent_extrapolated" in slot_numbers:
-        exponents += (f" (flat, extrapolated to zero cell size: "
-                      f"{slot_numbers['flat_exponent_extrapolated']:.3f})")
+        exponents += (f" (flat: {slot_numbers['flat_exponent_fine']:.3f} at "
+                      f"{1000 * options['fine_cell_size']:g} mm cells, "
+                      f"{slot_numbers['flat_exponent_extrapolated']:.3f} extrapolated to zero "
+                      f"cell size)")
     headline = (f"Slot exponent n (Beverloo 1.5): {exponents}. Plane-flow map: "
                 f"{map_numbers['agreeing']} of {map_numbers['classified']} wedges agree with "
                 f"Jenike's plane-flow boundary.")
