@@ -99,35 +99,31 @@ def setup(quick: bool = False, **options) -> dict:
                    **({"end_time": 0.6} if quick else {})}
     map_study = flow_mode_map.setup(**map_options)
     cases = [dict(c, params={**c["params"], "part": "map"}) for c in map_study["cases"]]
-    for theta, bin_width in opts["slot_bottoms"]:
-        for width in opts["slot_widths"]:
-            config = {"hopper": {"shape": "wedge", "bin_width": bin_width,
-                                 "outlet_width": float(width), "half_angle_deg": float(theta),
-                                 "fill_height": opts["slot_fill"],
-                                 "bin_height": opts["slot_fill"] + 0.02},
-                      "numerics": {"cell_size": opts["cell_size"]},
-                      "run": {"end_time": opts["slot_end_time"], "output_interval": 0.02,
-                              "field_interval": opts["slot_end_time"]}}
-            cases.append(_sweep.make_case(
-                _sweep.case_name(("slot", 1000 * width), ("theta", theta)),
-                {"part": "slot", "slot_width_m": float(width), "half_angle_deg": float(theta),
-                 "density_kg_m3": HopperConfig.from_dict(config).material.density},
-                config, plots=opts["case_plots"]))
-    for width in opts["fine_widths"]:
-        config = {"hopper": {"shape": "wedge", "bin_width": opts["fine_bin_width"],
-                             "outlet_width": float(width), "half_angle_deg": 90.0,
-                             "fill_height": opts["slot_fill"],
-                             "bin_height": opts["slot_fill"] + 0.02},
-                  "numerics": {"cell_size": opts["fine_cell_size"]},
-                  "run": {"end_time": opts["slot_end_time"], "output_interval": 0.02,
-                          "field_interval": opts["slot_end_time"]}}
+    runs = [("slot", "slot", theta, bin_width, width, opts["cell_size"])
+            for theta, bin_width in opts["slot_bottoms"] for width in opts["slot_widths"]]
+    runs += [("slot_fine", "fine_slot", 90.0, opts["fine_bin_width"], width,
+              opts["fine_cell_size"]) for width in opts["fine_widths"]]
+    for part, prefix, theta, bin_width, width, cell_size in runs:
+        config = slot_config(opts, float(theta), bin_width, float(width), cell_size)
         cases.append(_sweep.make_case(
-            _sweep.case_name(("fine_slot", 1000 * width), ("theta", 90.0)),
-            {"part": "slot_fine", "slot_width_m": float(width), "half_angle_deg": 90.0,
+            _sweep.case_name((prefix, 1000 * width), ("theta", theta)),
+            {"part": part, "slot_width_m": float(width), "half_angle_deg": float(theta),
              "density_kg_m3": HopperConfig.from_dict(config).material.density},
             config, plots=opts["case_plots"]))
     return {"options": opts, "cases": cases, "setting": _sweep.setting_label(quick, options),
             "map_options": map_study["options"]}
+
+
+def slot_config(opts, theta, bin_width, width, cell_size) -> dict:
+    """The sections of a slot run: a plane bin ``bin_width`` wide over a bottom of half-angle
+    ``theta`` (90: flat) with a slot ``width`` wide, filled ``slot_fill``, on ``cell_size``
+    cells, discharged for ``slot_end_time``."""
+    return {"hopper": {"shape": "wedge", "bin_width": bin_width, "outlet_width": width,
+                       "half_angle_deg": theta, "fill_height": opts["slot_fill"],
+                       "bin_height": opts["slot_fill"] + 0.02},
+            "numerics": {"cell_size": cell_size},
+            "run": {"end_time": opts["slot_end_time"], "output_interval": 0.02,
+                    "field_interval": opts["slot_end_time"]}}
 
 
 # ---------------------------------------------------------------- analysis
