@@ -390,3 +390,14 @@ def test_validate_describes_the_lagrangian_mesh(tmp_path, capsys):
     assert f"{model.mesh.n_elements} elements in {model.mesh.n_cols} columns" in out
     assert f"time step          {model.dt0:.4g} s at the start" in out
     assert "cells of" not in out
+
+
+def test_a_lagrangian_run_is_not_resumed(tmp_path):
+    """A Lagrangian run writes no checkpoint (it lasts seconds), so ``resume`` is refused with
+    a one-line reason before anything is written."""
+    from fipy_hopper import api
+    from fipy_hopper.config import ConfigError
+
+    with pytest.raises(ConfigError, match="not checkpointed"):
+        api.run(coarse_config(formulation="lagrangian"), tmp_path / "run", resume=True)
+    assert not (tmp_path / "run").exists()
