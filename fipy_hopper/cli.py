@@ -167,15 +167,15 @@ def _validate(args) -> int:
 def _lagrangian_lines(cfg) -> tuple:
     """The mesh and time-step lines of ``validate`` for a Lagrangian run: the mesh's size, its
     worst element and its first time step (the smallest element length over c_p)."""
-    from .lagrangian import build_mesh, element_quality
+    from .lagrangian import LagrangianModel
 
-    mesh = build_mesh(cfg.hopper, cfg.numerics.cell_size)
-    quality = element_quality(mesh.x, mesh.conn)
-    dt = cfg.material.law().stable_time_step(float(quality[3].min()), cfg.numerics.dt_safety)
+    model = LagrangianModel(cfg)
+    mesh = model.mesh
     return (f"  mesh (Lagrangian)  {mesh.n_elements} elements in {mesh.n_cols} columns, moving "
-            f"with the material (worst aspect {quality[1].max():.2f}); the run stops when an "
-            f"element distorts",
-            f"  time step          {dt:.4g} s at the start (it shrinks as the mesh distorts)")
+            f"with the material (worst aspect {model.initial_quality['max_aspect']:.2f}); the "
+            f"run stops when an element distorts",
+            f"  time step          {model.dt0:.4g} s at the start (it shrinks as the mesh "
+            f"distorts)")
 
 
 def _plot(args) -> int:

@@ -593,17 +593,32 @@ def cell_fields(state, grid, cohesion: float = 0.0, friction_angle_deg: float = 
     (degrees) and ``sin_phi_mob`` the mobilised friction (for the material's ``cohesion`` in Pa
     and ``friction_angle_deg``).
     """
-    from .diagnostics import stress_pattern
-
     v = np.asarray(state.v, float)
     v_cell = 0.25 * (v[:, :-1, :-1] + v[:, :-1, 1:] + v[:, 1:, :-1] + v[:, 1:, 1:])
-    velocity = np.column_stack([v_cell[0].ravel(), v_cell[1].ravel(),
-                                np.zeros(v_cell[0].size)])
-    sigma = np.asarray(state.sigma, float).reshape(-1, 4)
+    loose = (np.zeros(np.size(state.alpha)) if getattr(state, "loose", None) is None
+             else np.asarray(state.loose, float).ravel())
     return {
         "alpha": np.asarray(state.alpha, float).ravel(),
         "open_fraction": np.asarray(grid.kappa, float).ravel(),
         "layer": np.asarray(state.layer, float).ravel(),
+        **material_fields(np.column_stack([v_cell[0].ravel(), v_cell[1].ravel()]),
+                          np.asarray(state.sigma, float).reshape(-1, 4),
+                          np.asarray(state.eps_p, float).ravel(), loose, cohesion,
+                          friction_angle_deg),
+    }
+
+
+def material_fields(velocity, sigma, eps_p, loose, cohesion: float = 0.0,
+                    friction_angle_deg: float = 30.0) -> dict:
+    """The cell data of a snapshot that any cell or element has (SI units): ``velocity``
+    ``(v_r, v_z, 0)`` from the ``(n, 2)`` cell velocities (m/s), ``speed``,
+    ``stress_rr/zz/tt/rz`` from the ``(n, 4)`` stresses (Pa, tension positive), ``pressure``
+    ``p = -(s_rr + s_zz + s_tt) / 3`` (Pa), ``plastic_strain``, ``loose_strain`` and the stress
+    pattern (:func:`fipy_hopper.diagnostics.stress_pattern`)."""
+    from .diagnostics import stress_pattern
+
+    velocity = np.column_stack([velocity, np.zeros(len(velocity))])
+    return {
         "velocity": velocity,
         "speed": np.hypot(velocity[:, 0], velocity[:, 1]),
         "stress_rr": sigma[:, 0].copy(),
@@ -611,9 +626,8 @@ def cell_fields(state, grid, cohesion: float = 0.0, friction_angle_deg: float = 
         "stress_tt": sigma[:, 2].copy(),
         "stress_rz": sigma[:, 3].copy(),
         "pressure": -(sigma[:, 0] + sigma[:, 1] + sigma[:, 2]) / 3.0,
-        "plastic_strain": np.asarray(state.eps_p, float).ravel(),
-        "loose_strain": (np.zeros(np.size(state.alpha)) if getattr(state, "loose", None) is None
-                         else np.asarray(state.loose, float).ravel()),
+        "plastic_strain": eps_p,
+        "loose_strain": loose,
         **stress_pattern(sigma, cohesion, friction_angle_deg),
     }
 
@@ -671,11 +685,15 @@ class FieldWriter:
 
     def __init__(self, folder: PathLike, grid, cohesion: float = 0.0,
                  friction_angle_deg: float = 30.0):
+        self._open(folder, cohesion, friction_angle_deg)
+        self.grid = grid
+        self.points, self.quads = grid_points_and_quads(grid)
+
+    def _open(self, folder: PathLike, cohesion: float, friction_angle_deg: float) -> None:
+        """The snapshot folder, the strength for the mobilised friction, no entries yet."""
         self.folder = Path(folder)
         self.folder.mkdir(parents=True, exist_ok=True)
-        self.grid = grid
-        self.strength = (cohesion, friction_angle_deg)    # for the mobilised friction
-        self.points, self.quads = grid_points_and_quads(grid)
+        self.strength = (cohesion, friction_angle_deg)
         self.entries: list = []
 
     def __call__(self, sim, state) -> None:
@@ -761,29 +779,18 @@ class MeshFieldWriter(FieldWriter):
 
     def __init__(self, folder: PathLike, model, cohesion: float = 0.0,
                  friction_angle_deg: float = 30.0):
-        self.folder = Path(folder)
-        self.folder.mkdir(parents=True, exist_ok=True)
+        self._open(folder, cohesion, friction_angle_deg)
         self.conn, self.layer = model.mesh.conn, model.layer
-        self.strength = (cohesion, friction_angle_deg)
-        self.entries: list = []
 
     def _mesh(self, state):
         import meshio
 
-        from .diagnostics import stress_pattern
-
         v = np.asarray(state.v, float)
         zeros = np.zeros((len(v), 1))
-        velocity = np.column_stack([v[self.conn].mean(axis=1), np.zeros(len(self.conn))])
-        sigma = np.asarray(state.sigma, float)
         cells = {"alpha": np.asarray(state.active, float), "layer": self.layer,
-                 "velocity": velocity, "speed": np.hypot(velocity[:, 0], velocity[:, 1]),
-                 "stress_rr": sigma[:, 0].copy(), "stress_zz": sigma[:, 1].copy(),
-                 "stress_tt": sigma[:, 2].copy(), "stress_rz": sigma[:, 3].copy(),
-                 "pressure": -(sigma[:, 0] + sigma[:, 1] + sigma[:, 2]) / 3.0,
-                 "plastic_strain": np.asarray(state.eps_p, float),
-                 "loose_strain": np.asarray(state.loose, float),
-                 **stress_pattern(sigma, *self.strength)}
+                 **material_fields(v[self.conn].mean(axis=1), np.asarray(state.sigma, float),
+                                   np.asarray(state.eps_p, float),
+                                   np.asarray(state.loose, float), *self.strength)}
         return meshio.Mesh(np.column_stack([state.x, zeros]), [("quad", self.conn)],
                            point_data={"node_velocity": np.column_stack([v, zeros])},
                            cell_data={k: [np.asarray(c)] for k, c in cells.items()})

@@ -107,7 +107,7 @@ from . import geometry
 from .config import HopperConfig
 from .dense_loose import close_loose_volume, separation_strain
 from .material import equivalent_plastic_strain
-from .model import GRAVITY, InstabilityError
+from .model import GRAVITY, InstabilityError, runaway_speed
 
 __all__ = ["DistortionLimits", "LagrangianMesh", "LagrangianState",
            "LagrangianModel", "build_mesh", "element_gradients", "internal_force",
@@ -623,7 +623,8 @@ class LagrangianModel:
         mass = np.zeros(m.n_nodes)
         np.add.at(mass, m.conn, 0.25 * self.rho * self.volume0[:, None])
         self.node_mass = mass                                  # kg/rad, fixed
-        self.total_mass_kg = 2.0 * math.pi * float(mass.sum())  # kg
+        self._mass_sum = float(mass.sum())                     # kg/rad
+        self.total_mass_kg = 2.0 * math.pi * self._mass_sum    # kg
         zc0 = m.x[m.conn, 1].mean(axis=1)
         self.layer = np.floor(np.clip(zc0 / geom.fill_level, 0, 0.999999) * n_layers)
         self.axis_nodes = np.flatnonzero(m.x[:, 0] == 0.0)
@@ -760,7 +761,7 @@ class LagrangianModel:
         """Raise :class:`~fipy_hopper.model.InstabilityError` on a non-finite velocity or
         stress, or a runaway velocity (the Eulerian model's limit)."""
         speed = np.hypot(state.v[:, 0], state.v[:, 1])
-        limit = 50.0 * math.sqrt(GRAVITY * max(self.geom.top, 0.1))
+        limit = runaway_speed(self.geom)
         bad = ~np.isfinite(speed) | (speed > limit)
         if bad.any():
             k = int(np.flatnonzero(bad)[0])
@@ -813,7 +814,7 @@ class LagrangianModel:
         g = self.gravity(state)
         v[:, 1] -= dt * g
         budget = state.momentum_budget
-        budget[0] -= dt * g * float(self.node_mass.sum())
+        budget[0] -= dt * g * self._mass_sum
         segments = self.segments_closed if state.plate_closed else self.wall_segments
         v_free = v.copy()
         self._dv_plate[:] = 0.0

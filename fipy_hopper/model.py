@@ -72,6 +72,12 @@ TRANSPORTED = ("alpha", "s_rr", "s_zz", "s_tt", "s_rz", "eps_p", "layer", "loose
 MOMENTUM_BUDGET = ("gravity", "damping", "stopped", "outflow")
 
 
+def runaway_speed(geom) -> float:
+    """The speed (m/s) that no node of a sound run reaches: ``50 sqrt(g max(top, 0.1 m))``,
+    fifty times the free-fall speed from the hopper's top."""
+    return 50.0 * math.sqrt(GRAVITY * max(geom.top, 0.1))
+
+
 class InstabilityError(RuntimeError):
     """The explicit solution went unstable (NaN or runaway velocity)."""
 
@@ -329,10 +335,10 @@ class HopperModel:
 
     def check_stable(self, state: State) -> None:
         """Raise :class:`InstabilityError` on a runaway or non-finite velocity (above
-        ``50 sqrt(g max(top, 0.1 m))``), or a non-finite material fraction or stress."""
+        :func:`runaway_speed`), or a non-finite material fraction or stress."""
         v, g = state.v, self.grid
         speed = np.hypot(v[0], v[1])
-        limit = 50.0 * math.sqrt(GRAVITY * max(self.cfg.hopper.top, 0.1))
+        limit = runaway_speed(self.cfg.hopper)
         bad = ~np.isfinite(speed) | (speed > limit)
         if bad.any():
             j, i = np.argwhere(bad)[0]

@@ -551,14 +551,13 @@ def lagrangian_mesh(run):
     fig = _figure(4.2 * max(len(chosen), 1), 5.2)
     axes = np.atleast_1d(fig.subplots(1, max(len(chosen), 1)))
     wall = geometry.wall_polyline(cfg.hopper, 0.0, cfg.hopper.top)
-    n_layers = 8
-    cmap, norm = _layer_colours(n_layers)
-    for ax, entry in zip(axes, chosen):
-        mesh = meshio.read(run / RunDirectory.FIELDS / entry["file"])
-        quads = mesh.cells_dict["quad"]
-        active = np.asarray(mesh.cell_data["alpha"][0]) > 0.5
-        layer = np.asarray(mesh.cell_data["layer"][0])
-        polys = mesh.points[quads][active][:, :, :2]
+    meshes = [meshio.read(run / RunDirectory.FIELDS / entry["file"]) for entry in chosen]
+    cells = [{"alpha": np.asarray(mesh.cell_data["alpha"][0]),
+              "layer": np.asarray(mesh.cell_data["layer"][0])} for mesh in meshes]
+    cmap, norm = _layer_colours(_n_layers(cells))
+    for ax, entry, mesh, cell in zip(axes, chosen, meshes, cells):
+        active, layer = cell["alpha"] > 0.5, cell["layer"]
+        polys = mesh.points[mesh.cells_dict["quad"]][active][:, :, :2]
         ax.add_collection(PolyCollection(polys, array=layer[active], cmap=cmap, norm=norm,
                                          edgecolors="k", linewidths=0.3))
         ax.plot(wall[:, 0], wall[:, 1], "k-", lw=1.5)
