@@ -125,20 +125,21 @@ class OutcomeRule:
     is where ``alpha`` first reaches ``full`` going out from the axis (linear between cell
     centres); the channel's diameter is twice their median.
 
-    With at least ``most_left`` of the initial mass left:
-
     - ``"rathole"``: such a channel whose height (outlet plane to the top of the material) is
-      at least its diameter: most of the material stands around it, with walls steeper than
-      the 45 deg of a channel as high as it is wide (a crater at the angle of repose is wider);
-    - ``"no_flow"``: otherwise (an arch over the outlet, or over the hollow that the material
-      which fell out left below it).
+      at least its diameter, with at least ``rathole_left`` of the initial mass standing
+      around it: walls steeper than the 45 deg of a channel as high as it is wide (a crater at
+      the angle of repose is wider).  How much stands depends on how wide the bin is around
+      the channel, so this bound is low: it only keeps a film left on the walls from counting;
+    - ``"no_flow"``: otherwise, with at least ``most_left`` of the initial mass left (an arch
+      over the outlet, or over the hollow that the material which fell out left below it).
 
-    With less left, the mass/funnel call of the flowing discharge (a heel on a shallow cone, or
-    a cohesive heel around a crater).
+    Otherwise the mass/funnel call of the flowing discharge (a heel on a shallow cone, or a
+    cohesive heel around a crater).
     """
 
     full: float = 0.5
     most_left: float = 0.5
+    rathole_left: float = 0.1
 
 
 def empty_channel(model, state, rule: OutcomeRule = OutcomeRule()):
@@ -169,11 +170,12 @@ def classify_outcome(mode: str, stopped: bool, left_fraction: float, channel_dia
                      channel_height: float, rule: OutcomeRule = OutcomeRule()) -> str:
     """``"rathole"``, ``"no_flow"`` or ``mode`` (the mass/funnel call) by
     :class:`OutcomeRule`, for a discharge whose flow has ``stopped`` (else ``mode``)."""
-    if not stopped or not left_fraction >= rule.most_left:
+    if not stopped:
         return mode
-    if np.isfinite(channel_diameter) and channel_height >= channel_diameter:
+    if (np.isfinite(channel_diameter) and channel_height >= channel_diameter
+            and left_fraction >= rule.rathole_left):
         return "rathole"
-    return "no_flow"
+    return "no_flow" if left_fraction >= rule.most_left else mode
 
 
 # ---------------------------------------------------------------- wall pressure

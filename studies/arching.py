@@ -44,13 +44,15 @@ g))^n`` per geometry (least squares in log space; 1 for a rate-independent conti
 dimensional analysis), and the E check: one case bisected at E = 2 and 20 MPa.
 
 The rathole case: a funnel-flow hopper (60 deg cone, phi_w = 25 deg, default 0.48 m bin,
-0.16 m outlet, 0.3 m fill) with ``sigma_c / (rho g)`` = 0.1 m, so that Jenike's critical
+0.16 m outlet, 0.3 m fill) with ``sigma_c / (rho g)`` = 0.12 m, so that Jenike's critical
 rathole diameter ``G(phi) sigma_c / (rho g)`` (:func:`fipy_hopper.theory.
-jenike_rathole_diameter`, 0.236 m) is half the bin and larger than the outlet: Jenike expects a
-stable rathole.  Run until empty or at rest (capped at ``rathole_max_time``, 3 s) beside the
-same hopper without cohesion; reported: the outcome, the mass left, when the flow stopped,
-and the empty channel of the final state (:func:`fipy_hopper.diagnostics.empty_channel`)
-against Jenike's diameter.
+jenike_rathole_diameter`, 0.283 m) is larger than the outlet: Jenike expects a stable
+rathole.  The cohesion sits between two measured limits of this hopper: at 0.1 m the flow
+channel keeps widening (still flowing at 3 s, with 35.9 % left on 7.5 mm cells and 37.5 % on
+5 mm cells), from 0.135 m the outlet arches (7.5 mm cells).  Run until empty or at rest (capped at
+``rathole_max_time``, 6 s) beside the same hopper without cohesion; reported: the outcome, the
+mass left, when the flow stopped, and the empty channel of the final state
+(:func:`fipy_hopper.diagnostics.empty_channel`) against Jenike's diameter.
 
 Written to ``--out`` (default ``studies/output/arching``): ``results.csv`` (every run),
 ``brackets.csv`` (every bisection), ``study.json``, ``critical_outlet.png``,
@@ -112,8 +114,8 @@ DEFAULTS = {
     "rathole_bin_diameter": 0.48,   # m
     "rathole_outlet": 0.16,         # m
     "rathole_fill_height": 0.3,     # m above the transition
-    "rathole_head": 0.1,            # sigma_c / (rho g) (m)
-    "rathole_max_time": 3.0,        # s
+    "rathole_head": 0.12,           # sigma_c / (rho g) (m)
+    "rathole_max_time": 6.0,        # s
     "case_plots": False,            # each run draws its own pictures (many short runs: off)
 }
 QUICK = {"heads": (0.06, 0.08), "half_angles": (20.0,), "bin_diameter": 0.3,

@@ -154,6 +154,51 @@ def test_zero_cohesion_is_not_a_special_case():
     assert math.isnan(s0["flow_stopped_time_s"]) and math.isnan(s0["rathole_diameter_m"])
 
 
+def rathole_config(cohesion: float) -> HopperConfig:
+    """A funnel-flow hopper with a wide outlet: a 0.24 m bin on a 60 deg cone, phi_w = 25 deg,
+    D0 = 0.08 m, filled 0.15 m above the transition, 1 cm cells (4 across the outlet radius)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return HopperConfig.from_dict({
+            "hopper": {"bin_diameter": 0.24, "outlet_diameter": 0.08, "half_angle_deg": 60.0,
+                       "bin_height": 0.17, "fill_height": 0.15},
+            "material": {"density": RHO, "friction_angle_deg": PHI, "cohesion": cohesion},
+            "wall": {"friction_angle_deg": 25.0},
+            "numerics": {"cell_size": 0.01},
+            "run": {"end_time": "empty", "max_time": 4.0, "output_interval": 0.02,
+                    "markers_per_side": 0}})
+
+
+def test_a_cohesive_funnel_flow_hopper_leaves_a_rathole():
+    """sigma_c / (rho g) = 55 mm (c = 233.6 Pa): Jenike's rathole diameter G(phi) sigma_c /
+    (rho g) = 130 mm is larger than the outlet, and his critical outlet for arching (165 mm)
+    too, but the simulated critical outlet is about half of his (``studies/arching.py``): the
+    outlet flows, the flow channel empties and stops with the rest standing around it.
+    Measured: the flow stopped at 3.10 s with 29.1 % of the mass left, around an empty
+    channel 76 mm wide and 90 mm high (from the outlet plane to the top of the material):
+    narrower than Jenike's rathole diameter, as his theory requires of a stable rathole.  The
+    bounds: a tenth to a half of the mass left (the rule's rathole bound, and below an arch's),
+    the channel at most Jenike's diameter.  Without cohesion the same hopper discharges to a
+    heel on the cone (3.4 % left at 4 s, still flowing)."""
+    head = 0.055
+    sigma_c = head * RHO * theory.G
+    cohesion = sigma_c * (1.0 - math.sin(math.radians(PHI))) / (2.0 * math.cos(math.radians(PHI)))
+    d_f = float(theory.jenike_rathole_diameter(sigma_c, RHO, PHI))
+    sim = Simulation(HopperModel(rathole_config(cohesion), threads=1), progress=False)
+    sim.run()
+    s = sim.summary()
+    assert s["flow_mode"] == "rathole" and s["stop_reason"] == "at_rest"
+    assert 0.1 <= s["remaining_mass_fraction"] <= 0.5
+    assert np.isfinite(s["flow_stopped_time_s"])
+    assert 0.0 < s["rathole_diameter_m"] <= d_f
+    assert s["mass_balance_error"] < 1e-9
+    sim0 = Simulation(HopperModel(rathole_config(0.0), threads=1), progress=False)
+    sim0.run()
+    s0 = sim0.summary()
+    assert s0["flow_mode"] == "funnel" and s0["remaining_mass_fraction"] < 0.1
+    assert math.isnan(s0["rathole_diameter_m"])
+
+
 class _Grid:
     def __init__(self, h, nr, nz, z0):
         self.r_cells = (np.arange(nr) + 0.5) * h
@@ -175,9 +220,9 @@ def test_outcome_rule_on_constructed_states():
     """The stated rule on hand-made fields (1 cm cells, outlet plane at z = 0, 3 rows of free
     fall below it): an empty channel through 20 rows of material, whose wall is the centre of
     the half-full third cell (alpha = 1/2 there), is 0.05 m wide and 0.2 m high: a rathole
-    when the flow has stopped with most of the mass left, else the flow's own call; an arch
-    over a one-row hollow is no_flow; a channel wider than high (a low ring) is not a
-    rathole."""
+    when the flow has stopped with at least a tenth of the mass around it, else the flow's
+    own call; an arch over a one-row hollow is no_flow; a channel wider than high (a low
+    ring) is not a rathole."""
     g = _Grid(0.01, 10, 23, -0.03)
     model = _Model(g)
     alpha = np.zeros((23, 10))
@@ -189,7 +234,8 @@ def test_outcome_rule_on_constructed_states():
     rule = diagnostics.OutcomeRule()
     assert diagnostics.classify_outcome("funnel", True, 0.85, d, h, rule) == "rathole"
     assert diagnostics.classify_outcome("funnel", False, 0.85, d, h, rule) == "funnel"
-    assert diagnostics.classify_outcome("funnel", True, 0.3, d, h, rule) == "funnel"
+    assert diagnostics.classify_outcome("funnel", True, 0.3, d, h, rule) == "rathole"
+    assert diagnostics.classify_outcome("funnel", True, 0.05, d, h, rule) == "funnel"
     arch = np.zeros((23, 10))
     arch[4:, :] = 1.0                          # the fallen first row leaves a hollow below
     d, h = diagnostics.empty_channel(model, _State(arch))
