@@ -230,6 +230,11 @@ def setup(quick: bool = False, **options) -> dict:
 
 
 # ---------------------------------------------------------------- one task (runs on a worker)
+def _number(value) -> float:
+    """``value`` as a float; NaN for a run that failed or did not measure it (None)."""
+    return math.nan if value is None else float(value)
+
+
 def outcome(row: dict) -> str:
     """``"arches"``, ``"flows"`` or ``"failed"`` of a run's row (see the module docstring)."""
     if row.get("error") or not _sweep.finite(row.get("remaining_mass_fraction")):
@@ -250,7 +255,7 @@ def run_task(task: dict, root, force: bool = False, threads=1, log=None) -> dict
             rows.append(row)
             if log:
                 log(f"  {case['name']}: {row.get('flow_mode')}, "
-                    f"{row.get('remaining_mass_fraction', math.nan):.3f} left")
+                    f"{_number(row.get('remaining_mass_fraction')):.3f} left")
         return {"key": task["key"], "kind": "runs", "label": task["label"], "runs": rows,
                 "task_wall_time_s": time.perf_counter() - started}
     runs = {}
@@ -269,7 +274,7 @@ def run_task(task: dict, root, force: bool = False, threads=1, log=None) -> dict
             runs[d0] = row
             if log:
                 log(f"  {case['name']}: {row['outcome']} ({row.get('flow_mode')}, "
-                    f"{row.get('remaining_mass_fraction', math.nan):.4f} left"
+                    f"{_number(row.get('remaining_mass_fraction')):.4f} left"
                     + (", reused" if row.get("reused") else "") + ")")
         return runs[d0]["outcome"]
 
@@ -593,7 +598,7 @@ def plot_outcomes(results, options):
         for run in rat["runs"]:
             picked.append((run, f"rathole case, {run['rathole_run']}\n"
                                 f"{run.get('flow_mode')}, "
-                                f"{100 * run.get('remaining_mass_fraction', math.nan):.0f} % left"))
+                                f"{100 * _number(run.get('remaining_mass_fraction')):.0f} % left"))
     picked = [(run, t) for run, t in picked if Path(run.get("run_dir", "")).is_dir()]
     if not picked:
         return None
@@ -725,12 +730,12 @@ def write_outputs(out, results, numbers, fits, options, setting, argv=None):
             f"{1000 * options['rathole_head']:g} mm; Jenike's rathole diameter "
             f"{mm(rat['jenike_rathole_diameter_m'])}, larger than the outlet, so Jenike expects a "
             f"stable rathole): outcome {co.get('flow_mode')} ({co.get('stop_reason')}), "
-            f"{100 * co.get('remaining_mass_fraction', math.nan):.1f} % of the mass left, flow "
-            f"stopped at {co.get('flow_stopped_time_s', math.nan):.2f} s, reported rathole "
+            f"{100 * _number(co.get('remaining_mass_fraction')):.1f} % of the mass left, flow "
+            f"stopped at {_number(co.get('flow_stopped_time_s')):.2f} s, reported rathole "
             f"diameter {mm(co.get('rathole_diameter_m'))}, empty channel through the final "
             f"state {mm(co.get('final_channel_diameter_m'))}; without cohesion "
             f"{c0.get('flow_mode')} ({c0.get('stop_reason')}), "
-            f"{100 * c0.get('remaining_mass_fraction', math.nan):.1f} % left.")
+            f"{100 * _number(c0.get('remaining_mass_fraction')):.1f} % left.")
     runs = [x for r in results for x in r["runs"]]
     unsettled = [x for x in runs if x.get("fill_at_rest") is False]
     if unsettled:
