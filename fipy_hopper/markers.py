@@ -26,6 +26,7 @@ did, the markers drained faster than the material near a cone wall).
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -147,9 +148,11 @@ def advance(markers, displacement, grid, geom) -> np.ndarray:
     return np.column_stack([r_new[keep], z_new[keep], markers[keep, 2]])
 
 
+@functools.lru_cache(maxsize=16)
 def _wall_segments(geom):
     """Vertices (4, 2) of the wall polyline and the unit normal (3, 2) of each segment into
-    the wall, as :func:`fipy_hopper.geometry.wall_normal` computes them."""
+    the wall, as :func:`fipy_hopper.geometry.wall_normal` computes them (once per geometry:
+    read-only arrays, shared by every call)."""
     vertices = geometry.wall_polyline(geom, 1e3, 1e3)
     seg_dir = vertices[1:] - vertices[:-1]
     seg_dir = seg_dir / np.linalg.norm(seg_dir, axis=1)[:, None]
@@ -157,7 +160,10 @@ def _wall_segments(geom):
     mid = 0.5 * (vertices[1:] + vertices[:-1])
     probe = mid + 1e-9 * normals
     normals[~geometry.in_solid(probe[:, 0], probe[:, 1], geom)] *= -1.0
-    return np.ascontiguousarray(vertices), np.ascontiguousarray(normals)
+    vertices, normals = np.ascontiguousarray(vertices), np.ascontiguousarray(normals)
+    vertices.flags.writeable = False
+    normals.flags.writeable = False
+    return vertices, normals
 
 
 def advance_reference(markers, displacement, grid, geom) -> np.ndarray:
