@@ -193,8 +193,7 @@ class Transport:
             fields[0] = alpha_new
             return record
         return _redistribute_compiled(fields[0], fields[1:], self._open_volume(),
-                                      self.neighbours(), alpha_max, sweeps, tol, room_min,
-                                      row_length=self.grid.nr)
+                                      self.neighbours(), alpha_max, sweeps, tol, room_min)
 
     def _open_volume(self):
         """``kappa V`` (nCells,): the open volume the redistribution counts contents in."""

@@ -238,7 +238,7 @@ def _out_of_bounds(alpha, kappa_volume, alpha_max, tol):
 def _relieve_kernel(upper, c, full, slack, significant, is_open, fields, kappa_volume,
                     touched, indptr, neighbour, edge_pair, edge_sign, pair_flux, work,
                     index_work, base, log_donor, log_offsets, log_receiver, log_fraction,
-                    n_groups, n_transfers, scan_lo, scan_hi, seed_lo, seed_hi):
+                    n_groups, n_transfers):
     """One pass of one bound (``_relieve``) if any open cell is out of that bound by more
     than ``slack``, transfer by transfer; appends to the log (whose arrays must have room for
     ``2 nEdges`` transfers and ``2 nCells`` groups more).
@@ -246,11 +246,8 @@ def _relieve_kernel(upper, c, full, slack, significant, is_open, fields, kappa_v
     Returns ``(n_groups, n_transfers, out, under)``: ``out`` whether the pass ran, ``under``
     whether any open cell was below ``-slack`` at the start.  ``work`` (4, nCells) floats
     (must be zero on entry, left so) and ``index_work`` (4, nCells) ints are scratch.  One
-    scan of the cells ``scan_lo <= i < scan_hi`` per call (every cell outside holds nothing,
-    and so does every neighbour of a cell outside ``[seed_lo, seed_hi)``: such empty cells
-    with room discover nothing in the search, and only those inside are its seeds); the
-    rest only visits the cells concerned, and the breadth-first search stops at the farthest
-    boxed cell's level.
+    scan of all cells per call; the rest only visits the cells concerned, and the
+    breadth-first search stops at the farthest boxed cell's level.
     """
     n = c.size
     n_fields = fields.shape[0]
@@ -265,7 +262,7 @@ def _relieve_kernel(upper, c, full, slack, significant, is_open, fields, kappa_v
     under = False
     n_wanting = 0
     tail = 0
-    for i in range(scan_lo, scan_hi):
+    for i in range(n):
         hops[i] = -1
         if not is_open[i]:
             continue
@@ -287,9 +284,8 @@ def _relieve_kernel(upper, c, full, slack, significant, is_open, fields, kappa_v
             n_wanting += 1
         elif room > significant[i]:
             hops[i] = 0
-            if seed_lo <= i < seed_hi:
-                queue[tail] = i
-                tail += 1
+            queue[tail] = i
+            tail += 1
     if not out:
         return n_groups, n_transfers, out, under
 
@@ -475,7 +471,7 @@ def _relieve_kernel(upper, c, full, slack, significant, is_open, fields, kappa_v
 def _redistribute_kernel(alpha, fields, kappa_volume, alpha_max, tol, room_min, sweeps,
                          indptr, neighbour, edge_pair, edge_sign, pair_flux, cell_work,
                          is_open, touched, work, index_work, log_donor, log_offsets,
-                         log_receiver, log_fraction, row_length):
+                         log_receiver, log_fraction):
     """Compiled ``redistribute_overshoot``: the rule of ``_redistribute_numpy`` transfer by
     transfer, on ``alpha`` (nCells,) and the alpha-weighted ``fields`` (nF, nCells, moved with
     the same fractions), both in place.
@@ -495,24 +491,14 @@ def _redistribute_kernel(alpha, fields, kappa_volume, alpha_max, tol, room_min, 
     ``index_work`` (4, nCells), and the log arrays, which are returned grown if they had to
     grow.
 
-    ``row_length``: the cells are numbered row by row, this many to a row, and neighbours
-    share a row or are in adjacent rows (a FiPy grid; ``nCells`` for any graph: one row).
-    The excess passes then scan only the rows that hold material and two rows beyond
-    (:func:`_relieve_kernel`); the rows are followed as transfers move content.  The transfers
-    are the same, in the same order.
-
     Returns ``(donor, offsets, receiver, fraction, n_groups, n_transfers, sweeps_done,
     residual_excess, residual_deficit)`` (log arrays longer than used).
     """
     n_fields, n = fields.shape
     c, full, slack, significant = cell_work[0], cell_work[1], cell_work[2], cell_work[3]
-    row_lo, row_hi = n, -1            # the rows holding content (c != 0)
     for i in range(n):
         kv = kappa_volume[i]
         c[i] = alpha[i] * kv
-        if c[i] != 0.0:
-            row_lo = min(row_lo, i // row_length)
-            row_hi = max(row_hi, i // row_length)
         full[i] = alpha_max * kv
         slack[i] = tol * kv
         significant[i] = room_min * kv
@@ -554,25 +540,10 @@ def _redistribute_kernel(alpha, fields, kappa_volume, alpha_max, tol, room_min, 
                     grown_fraction[t] = log_fraction[t]
                 log_receiver = grown
                 log_fraction = grown_fraction
-            if upper:      # empty cells are seeds of the search: the rows with content
-                scan_lo = min(max((row_lo - 2) * row_length, 0), n)
-                scan_hi = min(max((row_hi + 3) * row_length, 0), n)
-                seed_lo = min(max((row_lo - 1) * row_length, 0), n)
-                seed_hi = min(max((row_hi + 2) * row_length, 0), n)
-            else:          # the deficit travels through empty cells: everything
-                scan_lo, scan_hi, seed_lo, seed_hi = 0, n, 0, n
-            first_group, first_transfer = n_groups, n_transfers
             n_groups, n_transfers, out, below = _relieve_kernel(
                 upper, c, full, slack, significant, is_open, fields, kappa_volume, touched,
                 indptr, neighbour, edge_pair, edge_sign, pair_flux, work, index_work, base,
-                log_donor, log_offsets, log_receiver, log_fraction, n_groups, n_transfers,
-                scan_lo, scan_hi, seed_lo, seed_hi)
-            for t in range(first_transfer, n_transfers):   # content may reach new rows
-                row_lo = min(row_lo, log_receiver[t] // row_length)
-                row_hi = max(row_hi, log_receiver[t] // row_length)
-            for g in range(first_group, n_groups):
-                row_lo = min(row_lo, log_donor[g] // row_length)
-                row_hi = max(row_hi, log_donor[g] // row_length)
+                log_donor, log_offsets, log_receiver, log_fraction, n_groups, n_transfers)
             if upper:
                 over = out
                 under = below
@@ -737,10 +708,9 @@ class _RedistributionWork:
 
 
 def _redistribute_compiled(alpha, fields, kappa_volume, graph, alpha_max, sweeps, tol,
-                           room_min, row_length=None):
+                           room_min):
     """Run ``_redistribute_kernel`` on ``alpha`` (nCells,) and ``fields`` (nF, nCells), both
-    C-contiguous float64 and changed in place (``row_length``: cells per grid row, when the
-    cells are a grid's, numbered row by row); returns the ``Redistribution``."""
+    C-contiguous float64 and changed in place; returns the ``Redistribution``."""
     face_flux = None if graph.faces is None else np.zeros(graph.n_faces)
     if not _out_of_bounds(alpha, kappa_volume, float(alpha_max), float(tol)):
         return Redistribution(face_flux=face_flux)
@@ -752,8 +722,7 @@ def _redistribute_compiled(alpha, fields, kappa_volume, graph, alpha_max, sweeps
      deficit) = _redistribute_kernel(alpha, fields, kappa_volume, float(alpha_max), float(tol),
                                      float(room_min), int(sweeps), graph.indptr, graph.neighbour,
                                      graph.edge_pair, graph.edge_sign, pair_flux, w.cell_work,
-                                     w.is_open, w.touched, w.work, w.index_work, *w.log,
-                                     int(graph.n_cells if row_length is None else row_length))
+                                     w.is_open, w.touched, w.work, w.index_work, *w.log)
     w.log = (donor, offsets, receiver, fraction)
     if face_flux is not None:
         face_flux[graph.pair_faces] = pair_flux     # one pair per open face
