@@ -243,6 +243,11 @@ def outcome(row: dict) -> str:
     return "arches" if stopped and row["remaining_mass_fraction"] > ARCH_LEFT else "flows"
 
 
+def _run_line(name: str, row: dict, text: str) -> str:
+    """The progress line of one run: ``text``, or the run's error when it failed."""
+    return f"  {name}: " + (f"FAILED: {row['error']}" if row.get("error") else text)
+
+
 def run_task(task: dict, root, force: bool = False, threads=1, log=None) -> dict:
     """Run one task: a bisection on D0 (each of its runs through ``_sweep.run_case``, so a
     finished run is read, not rerun) or a list of plain runs.  Never raises for a failed run."""
@@ -254,8 +259,8 @@ def run_task(task: dict, root, force: bool = False, threads=1, log=None) -> dict
             row["outcome"] = outcome(row)
             rows.append(row)
             if log:
-                log(f"  {case['name']}: {row.get('flow_mode')}, "
-                    f"{_number(row.get('remaining_mass_fraction')):.3f} left")
+                log(_run_line(case["name"], row, f"{row.get('flow_mode')}, "
+                              f"{_number(row.get('remaining_mass_fraction')):.3f} left"))
         return {"key": task["key"], "kind": "runs", "label": task["label"], "runs": rows,
                 "task_wall_time_s": time.perf_counter() - started}
     runs = {}
@@ -273,9 +278,9 @@ def run_task(task: dict, root, force: bool = False, threads=1, log=None) -> dict
             row["step"] = len(runs)
             runs[d0] = row
             if log:
-                log(f"  {case['name']}: {row['outcome']} ({row.get('flow_mode')}, "
-                    f"{_number(row.get('remaining_mass_fraction')):.4f} left"
-                    + (", reused" if row.get("reused") else "") + ")")
+                log(_run_line(case["name"], row, f"{row['outcome']} ({row.get('flow_mode')}, "
+                              f"{_number(row.get('remaining_mass_fraction')):.4f} left"
+                              + (", reused" if row.get("reused") else "") + ")"))
         return runs[d0]["outcome"]
 
     lo = hi = None          # the largest D0 that arched, the smallest that flowed
