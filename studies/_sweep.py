@@ -228,10 +228,10 @@ def _finished_row(path: Path) -> dict:
 # ---------------------------------------------------------------- running a list of cases
 def study_options(args, names) -> dict:
     """The study options given on the command line: ``args.<name>`` for each of ``names`` that
-    is not ``None``, and ``case_plots=False`` with ``--no-case-plots``."""
+    is not ``None``, and ``case_plots`` with ``--case-plots`` or ``--no-case-plots``."""
     options = {name: getattr(args, name) for name in names if getattr(args, name) is not None}
-    if not args.case_plots:
-        options["case_plots"] = False
+    if args.case_plots is not None:
+        options["case_plots"] = args.case_plots
     return options
 
 
@@ -262,8 +262,11 @@ def add_arguments(parser: argparse.ArgumentParser, study: str) -> None:
                         help="worker processes of the local cluster (default: the cores)")
     parser.add_argument("--force", action="store_true",
                         help="recompute every case, even finished ones")
-    parser.add_argument("--no-case-plots", dest="case_plots", action="store_false",
-                        help="do not draw each run's own pictures (the study's are drawn)")
+    parser.add_argument("--case-plots", dest="case_plots", default=None,
+                        action=argparse.BooleanOptionalAction,
+                        help="draw (or not) each run's own pictures; the study's own are always "
+                             "drawn (default: the study's setting); `fipy-hopper plot RUN_DIR` "
+                             "draws them later")
 
 
 def run_cases(cases: list, root, serial: bool = False, scheduler: str | None = None,

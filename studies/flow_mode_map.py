@@ -16,16 +16,19 @@ Written to ``--out`` (default ``studies/output/flow_mode_map``):
 * ``flow_mode_map.png``: the cases on the (phi_w, theta) plane over Jenike's curve;
 * ``mass_flow_index.png``: the mass-flow index against the distance from Jenike's boundary;
 * ``thumbnails.png``: the layers at the end of the discharge for a few cases;
-* ``cases/<name>/``: the run directory of every case.
+* ``cases/<name>/``: the run directory of every case (results and fields; its own pictures
+  with ``--case-plots``, or later with ``fipy-hopper plot cases/<name>``, about 3 s each).
 
-Default cost (measured on this machine, 2026-11-22, one core per case): 7-14 s per case at
-5 mm, 264 core-seconds for the 30 cases, 162 s on 2 cores (``tests/benchmarks``).
+Default cost (measured on this machine, 2026-12-02, one core per case): 5-12 s of simulation
+per case at 5 mm, 201 core-seconds for the 30 cases, 109 s on 2 cores without the cases' own
+pictures and 154 s with them (``tests/benchmarks``).
 
 Usage::
 
     python studies/flow_mode_map.py [--out DIR] [--quick] [--serial | --scheduler ADDRESS]
                                     [--cell-size 0.005] [--end-time 0.8]
                                     [--half-angles 10 20 ...] [--wall-angles 10 15 ...]
+                                    [--case-plots]
 """
 
 from __future__ import annotations
@@ -61,7 +64,7 @@ DEFAULTS = {
     "youngs_modulus": 5.0e6,  # Pa
     "shape": "conical",       # or "wedge": bin_diameter and outlet_diameter are then the
                               # bin width B and the slot width B0 (plane flow, per metre)
-    "case_plots": True,       # each run draws its own pictures
+    "case_plots": False,      # each run draws its own pictures (30 runs: off, --case-plots)
     "thumbnails": 8,          # layer pictures in thumbnails.png
 }
 QUICK = {"pairs": ((15.0, 12.0), (60.0, 25.0)), "cell_size": 0.01, "end_time": 0.6,

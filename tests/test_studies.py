@@ -122,6 +122,16 @@ def test_flow_mode_map_classifies_the_two_clear_cases(flow_map):
         assert (flow_map / "cases" / case / "config.toml").is_file()
 
 
+def test_case_pictures_are_the_study_setting_unless_asked_for():
+    sweep = load("_sweep")
+    parser = __import__("argparse").ArgumentParser()
+    sweep.add_arguments(parser, "flow_mode_map")
+    assert "case_plots" not in sweep.study_options(parser.parse_args([]), [])
+    assert sweep.study_options(parser.parse_args(["--case-plots"]), [])["case_plots"] is True
+    assert sweep.study_options(parser.parse_args(["--no-case-plots"]), [])["case_plots"] is False
+    assert load("flow_mode_map").DEFAULTS["case_plots"] is False     # 30 runs: off
+
+
 def test_restarted_sweep_does_not_recompute_finished_cases(flow_map, capsys):
     summaries = sorted((flow_map / "cases").glob("*/summary.json"))
     stamps = {p: p.stat().st_mtime_ns for p in summaries}
