@@ -226,6 +226,9 @@ class HopperModel:
         self.hourglass_base = (cfg.numerics.hourglass_coefficient * self.rho
                                * math.sqrt(GRAVITY * g.h)
                                * self.open_volume / g.h)
+        #: grid viscosity ``eta = b rho sqrt(g h) h`` (Pa s; ``numerics.grid_viscosity`` b)
+        self.viscosity = (cfg.numerics.grid_viscosity * self.rho * math.sqrt(GRAVITY * g.h)
+                          * g.h)
         # mass-proportional damping during filling only: critical for the column's lowest mode
         column = max(cfg.hopper.fill_level, g.h)
         self.fill_damping = math.pi * self.c_p / (2.0 * column)
@@ -455,7 +458,7 @@ class HopperModel:
             self._prm, self.dt, GRAVITY, ramp, damping, self.light_mass, num.alpha_min,
             num.transport_cfl, num.max_transport_interval, row_nodes, node_i, node_ptr,
             normal, mu, kind, entry, state.plate_closed, state.wall_impulse,
-            state.plate_impulse, state.momentum_budget, self._work)
+            state.plate_impulse, state.momentum_budget, self._work, self.viscosity)
         state.t, state.flux_time = float(clock[0]), float(clock[2])
         state.step += int(done)
         if due:
@@ -513,7 +516,12 @@ class HopperModel:
     def _nodal_update_numpy(self, state: State, m: np.ndarray, damping: float) -> np.ndarray:
         """Reference (numpy) nodal update: forces, velocity, damping, contact, axis."""
         g, dt = self.grid, self.dt
-        mixture = state.alpha[..., None] * state.sigma
+        stress = state.sigma
+        if self.viscosity > 0.0:       # the grid viscosity: sigma + 2 eta D in loaded cells
+            D, _ = momentum.strain_rate(state.v, self.r_c, g.h)
+            loaded = (state.alpha >= self.cfg.numerics.alpha_min)[..., None]
+            stress = np.where(loaded, state.sigma + 2.0 * self.viscosity * D, state.sigma)
+        mixture = state.alpha[..., None] * stress
         force = -momentum.internal_force(mixture, self.open_volume, self.r_c, g.h)
         force += momentum.hourglass_force(state.v, self.hourglass_base * state.alpha)
         force[1] -= m * self.gravity(state)

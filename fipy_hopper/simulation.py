@@ -726,6 +726,7 @@ class Simulation:
             "youngs_modulus_used": m.cfg.material.youngs_modulus,
             "cell_size_m": m.cell_size,
             "hourglass_coefficient": m.cfg.numerics.hourglass_coefficient,
+            "grid_viscosity": m.cfg.numerics.grid_viscosity,
         }
         out.update(diagnostics.load_summary(self))
         out.update(m.summary_extras(st))

@@ -7,7 +7,8 @@ numpy reference's (``HopperModel(..., backend="numpy")``), with the same arithme
 same order, so that each number is the same to the last bit as that of the sequence of
 compiled kernels it replaces:
 
-1. nodal forces ``-f_int(alpha sigma) + f_hg``: each cell's corner forces, then each node's
+1. nodal forces ``-f_int(alpha (sigma + 2 eta D)) + f_hg`` (``eta``: the grid viscosity, 0 by
+   default): each cell's corner forces, then each node's
    sum of its four cells' in the order in which a cell-by-cell scatter adds them; velocity
    ``v += dt (f / m - g e_z)``, mass-proportional damping, light nodes at rest; then, node row
    by node row, the wall contacts in the order of the model's contact list, the outlet plate
@@ -120,19 +121,38 @@ def _runs(alpha, alpha_min, sigma, loose, v, contrib, carry_runs, load_runs, blo
 
 
 @_jit_parallel
-def _cell_forces(carry_runs, n_carry, alpha, sigma, v, open_volume, r_c, h, hg_base, contrib):
+def _cell_forces(carry_runs, n_carry, alpha, sigma, v, open_volume, r_c, h, hg_base, contrib,
+                 viscosity, alpha_min):
     """Corner forces ``-f_int + f_hg`` of the carrying cells into ``contrib`` (8, nz, nr):
-    (r, z) at SW, SE, NE, NW, as ``momentum.internal_force`` and ``hourglass_force`` sum them."""
+    (r, z) at SW, SE, NE, NW, as ``momentum.internal_force`` and ``hourglass_force`` sum them.
+    With ``viscosity`` ``eta > 0`` (Pa s) the stress of a loaded cell (``alpha >= alpha_min``)
+    is ``sigma + 2 eta D``, ``D`` its strain rate (``momentum.strain_rate``)."""
     g = 1.0 / (2.0 * h)
+    two_eta = 2.0 * viscosity
     for run in prange(n_carry):
         j, i0, i1 = carry_runs[run, 0], carry_runs[run, 1], carry_runs[run, 2]
         for i in range(i0, i1):
             a = alpha[j, i]
             w = open_volume[j, i]
-            s_rr = (a * sigma[j, i, 0]) * w
-            s_zz = (a * sigma[j, i, 1]) * w
-            s_tt = (a * sigma[j, i, 2]) * w
-            s_rz = (a * sigma[j, i, 3]) * w
+            t_rr = sigma[j, i, 0]
+            t_zz = sigma[j, i, 1]
+            t_tt = sigma[j, i, 2]
+            t_rz = sigma[j, i, 3]
+            if viscosity > 0.0 and a >= alpha_min:
+                vr_sw, vr_se = v[0, j, i], v[0, j, i + 1]
+                vr_ne, vr_nw = v[0, j + 1, i + 1], v[0, j + 1, i]
+                vz_sw, vz_se = v[1, j, i], v[1, j, i + 1]
+                vz_ne, vz_nw = v[1, j + 1, i + 1], v[1, j + 1, i]
+                dvr_dz = g * (vr_nw + vr_ne - vr_sw - vr_se)
+                dvz_dr = g * (vz_se + vz_ne - vz_sw - vz_nw)
+                t_rr = t_rr + two_eta * (g * (vr_se + vr_ne - vr_sw - vr_nw))
+                t_zz = t_zz + two_eta * (g * (vz_nw + vz_ne - vz_sw - vz_se))
+                t_tt = t_tt + two_eta * (0.25 * (vr_sw + vr_se + vr_ne + vr_nw) / r_c[i])
+                t_rz = t_rz + two_eta * (0.5 * (dvr_dz + dvz_dr))
+            s_rr = (a * t_rr) * w
+            s_zz = (a * t_zz) * w
+            s_tt = (a * t_tt) * w
+            s_rz = (a * t_rz) * w
             hoop = s_tt / (4.0 * r_c[i])
             c = hg_base[j, i] * a
             mode_r = v[0, j, i] - v[0, j, i + 1] + v[0, j + 1, i + 1] - v[0, j + 1, i]
@@ -528,7 +548,8 @@ def material_steps(max_steps, clock, v, mass, alpha, sigma, loose, eps_p, face_f
                    dt, g_full,
                    ramp_time, damping, light_mass, alpha_min, transport_cfl,
                    max_transport_interval, row_nodes, node_i, node_ptr, normal, mu, kind,
-                   entry, plate_closed, contact_impulse, plate_impulse, budget, work):
+                   entry, plate_closed, contact_impulse, plate_impulse, budget, work,
+                   viscosity):
     """Up to ``max_steps`` material steps, in place.
 
     The symmetry is data: ``r_c`` is the radius of the hoop terms (the cell-centre radius;
@@ -540,7 +561,8 @@ def material_steps(max_steps, clock, v, mass, alpha, sigma, loose, eps_p, face_f
     ``contact_impulse``, ``plate_impulse`` and ``budget[0:3]`` (vertical impulses of gravity,
     damping and stopped light nodes; kg m/s per radian).  ``work = (carry runs (n, 3), load
     runs (n, 3), block pointers (n + 1,), corner forces (8, nz, nr), row speeds (nz + 1,),
-    row budgets (nz + 1, 3))``, sized by the model.  Returns ``(steps done, transport due)``:
+    row budgets (nz + 1, 3))``, sized by the model.  ``viscosity``: the grid viscosity ``eta``
+    (Pa s; 0: none) of :func:`_cell_forces`.  Returns ``(steps done, transport due)``:
     the loop stops after the step at which a transport is due (the caller transports; alpha is
     constant until then).
     """
@@ -553,7 +575,7 @@ def material_steps(max_steps, clock, v, mass, alpha, sigma, loose, eps_p, face_f
         t = clock[0]
         gravity = g_full * min(1.0, t / ramp_time) if ramp_time > 0.0 else g_full
         _cell_forces(carry_runs, n_carry, alpha, sigma, v, open_volume, r_c, h, hg_base,
-                     contrib)
+                     contrib, viscosity, alpha_min)
         _node_update(j0, j1, v, mass, contrib, gravity, dt, damping, light_mass, row_nodes,
                      node_i, node_ptr, normal, mu, kind, entry, plate_closed, contact_impulse,
                      plate_impulse, row_budget)

@@ -75,7 +75,8 @@ def material_call(model, state, prm=None, part="all"):
     calls = {
         "forces": lambda: stepping._cell_forces(carry_runs, n_carry, state.alpha, sigma, v,
                                                 model.open_volume, model.r_c, g.h,
-                                                model.hourglass_base, contrib),
+                                                model.hourglass_base, contrib,
+                                                model.viscosity, model.cfg.numerics.alpha_min),
         "nodes": lambda: stepping._node_update(j0, j1, v, mass, contrib, GRAVITY, model.dt,
                                                0.0, model.light_mass, groups[0], *groups[2:],
                                                False, wall, plate, row_budget),
