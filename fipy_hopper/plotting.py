@@ -170,15 +170,24 @@ def _draw_section(ax, snap, cfg, n_layers, speed_max):
     cells are the grid cells closed by the wall (open fraction 0); the black line is the exact
     wall of :func:`fipy_hopper.geometry.wall_polyline`.
     """
+    return _draw_section_parts(ax, snap, cfg, n_layers, speed_max)[0]
+
+
+def _masked_speed(snap):
+    return np.ma.masked_where(snap["alpha"] < 0.05, snap["speed"])
+
+
+def _draw_section_parts(ax, snap, cfg, n_layers, speed_max):
+    """:func:`_draw_section`; returns ``(speed mesh, layers artist)``."""
     from matplotlib.colors import ListedColormap
 
     r, z = snap["r_nodes"], snap["z_nodes"]
     alpha = snap["alpha"]
-    speed = np.ma.masked_where(alpha < 0.05, snap["speed"])
     solid = np.ma.masked_where(snap["open_fraction"] > 0, np.ones_like(alpha))
     grey = ListedColormap(["0.78"])
-    draw_layers(ax, snap, n_layers, side=-1.0)
-    mesh = ax.pcolormesh(r, z, speed, cmap="viridis", vmin=0.0, vmax=speed_max, shading="flat")
+    layers = draw_layers(ax, snap, n_layers, side=-1.0)
+    mesh = ax.pcolormesh(r, z, _masked_speed(snap), cmap="viridis", vmin=0.0, vmax=speed_max,
+                         shading="flat")
     wall = geometry.wall_polyline(cfg.hopper, r[-1], z[-1])
     for sign in (-1.0, 1.0):
         ax.pcolormesh(sign * r, z, solid, cmap=grey, vmin=0, vmax=1, shading="flat")
@@ -188,7 +197,18 @@ def _draw_section(ax, snap, cfg, n_layers, speed_max):
     ax.set_ylim(z[0], z[-1])
     ax.set_aspect("equal")
     ax.set_xlabel("r (m)")
-    return mesh
+    return mesh, layers
+
+
+def _update_section(ax, mesh, layers, snap, n_layers):
+    """Another snapshot of the same run on a section drawn by :func:`_draw_section_parts`: the
+    speed and the layers change, the grid, the wall and the axes stay.  Returns the new
+    layers artist (drawn first, beneath the rest, as in a fresh section)."""
+    mesh.set_array(_masked_speed(snap))
+    layers.remove()
+    layers = draw_layers(ax, snap, n_layers, side=-1.0)
+    layers.set_zorder(0.5)
+    return layers
 
 
 def _speed_scale(snaps):
@@ -262,13 +282,13 @@ def animate(run, path=None, max_frames: int = 80, fps: int = 6) -> Path:
     with atomic_path(path) as tmp:
         with writer.saving(fig, str(tmp), dpi=80):
             for k, snap in enumerate(snaps):
-                if k:
-                    ax.clear()             # same axes, same colour bar (one speed scale)
-                mesh = _draw_section(ax, snap, cfg, n_layers, vmax)
-                ax.set_ylabel("z (m)")
-                ax.set_title(_label(snap), fontsize=9)
-                if not k:
+                if not k:                  # the grid, the wall, the axes and the colour bar
+                    mesh, layers = _draw_section_parts(ax, snap, cfg, n_layers, vmax)
+                    ax.set_ylabel("z (m)")
                     fig.colorbar(mesh, ax=ax, label="speed (m/s)", shrink=0.8)
+                else:                      # serve every frame (one speed scale)
+                    layers = _update_section(ax, mesh, layers, snap, n_layers)
+                ax.set_title(_label(snap), fontsize=9)
                 writer.grab_frame()
                 if not k:                  # the layout of the first frame serves them all
                     fig.set_layout_engine("none")

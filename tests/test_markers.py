@@ -261,7 +261,7 @@ def test_field_writer_writes_markers_and_resume_drops_them(tmp_path, cone):
 @pytest.fixture(scope="module")
 def run_dir(tmp_path_factory, cone):
     """A tiny run directory: the config and two discharge snapshots, the second with markers
-    moved down by a uniform displacement."""
+    moved down by a uniform displacement and the material moving (speed rising with r)."""
     cfg, grid = cone
     run = tmp_path_factory.mktemp("run")
     (run / "config.toml").write_text(cfg.to_toml())
@@ -273,6 +273,8 @@ def run_dir(tmp_path_factory, cone):
     writer.write(state, t_open=0.0)
     state.step, state.t = 20, 0.2
     state.markers = markers.advance(m, uniform(grid, 0.0, -0.02), grid, cfg.hopper)
+    state.v = np.zeros_like(state.v)
+    state.v[1] = -np.linspace(0.0, 0.5, grid.nr + 1)[None, :]
     writer.write(state, t_open=0.0)
     return run, state.markers
 
@@ -307,6 +309,50 @@ def test_sections_draw_markers_as_discs_and_fall_back_to_the_tracer(run_dir):
     # only the speed, the closed cells and the wall are cell meshes on the marker section
     assert sum(isinstance(c, QuadMesh) for c in ax_b.collections) == \
         sum(isinstance(c, QuadMesh) for c in ax_a.collections) - 1
+
+
+def test_animation_frames_hold_their_own_snapshot(run_dir, tmp_path, monkeypatch):
+    """The animation draws the grid, the wall and the axes once and then changes only the
+    speed and the layers: every frame holds its snapshot's speed, layers and title, and
+    nothing of the frame before (the first snapshot has the cell tracer, the second markers)."""
+    from matplotlib.animation import PillowWriter
+    from matplotlib.collections import EllipseCollection, QuadMesh
+
+    run, m = run_dir
+    snaps = [plotting.load_snapshot(run, e) for e in plotting.snapshots(run)]
+    frames = []
+    original = PillowWriter.grab_frame
+
+    def grab(writer, **kwargs):
+        ax = writer.fig.axes[0]
+        meshes = [c for c in ax.collections if isinstance(c, QuadMesh)]
+        discs = [c for c in ax.collections if isinstance(c, EllipseCollection)]
+        frames.append({"meshes": [np.ma.getdata(c.get_array()).copy() for c in meshes],
+                       "masks": [np.ma.getmaskarray(c.get_array()).copy() for c in meshes],
+                       "discs": [c.get_offsets().copy() for c in discs],
+                       "title": ax.get_title()})
+        original(writer, **kwargs)
+
+    monkeypatch.setattr(PillowWriter, "grab_frame", grab)
+    plotting.animate(run, tmp_path / "a.gif")
+    assert len(frames) == 2
+    cfg = plotting._config(run)
+    for frame, snap in zip(frames, snaps):
+        fig = plotting._figure(3.6, 4.6)
+        ax = fig.add_subplot()
+        plotting._draw_section(ax, snap, cfg, 6, 1.0)
+        fresh = [c for c in ax.collections if isinstance(c, QuadMesh)]
+        assert len(frame["meshes"]) == len(fresh)          # nothing left of the frame before
+        speed = plotting._masked_speed(snap)
+        assert any(np.array_equal(d.ravel(), np.ma.getdata(speed).ravel())
+                   and np.array_equal(k.ravel(), np.ma.getmaskarray(speed).ravel())
+                   for d, k in zip(frame["meshes"], frame["masks"]))
+        assert frame["title"] == plotting._label(snap)
+    assert not np.array_equal(np.ma.getdata(plotting._masked_speed(snaps[0])),
+                              np.ma.getdata(plotting._masked_speed(snaps[1])))
+    assert frames[0]["discs"] == []
+    assert len(frames[1]["discs"]) == 1
+    assert np.allclose(frames[1]["discs"][0], np.column_stack([-m[:, 0], m[:, 1]]))
 
 
 def test_flow_pattern_and_thumbnails_with_markers(run_dir):
