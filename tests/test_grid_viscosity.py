@@ -34,18 +34,10 @@ def config(**numerics):
 
 
 @pytest.fixture(scope="module")
-def discharging():
+def discharging(flowing):
     """A model with b = 0.5 and a state 0.1 s into its discharge."""
     model = HopperModel(config(grid_viscosity=0.5))
-    state = model.initial_state()
-    while state.step < 500:
-        model.advance(state, 500 - state.step)
-    model.transport_step(state)
-    model.open_outlet(state)
-    t_end = state.t + 0.1
-    while state.t < t_end:
-        model.advance(state, 50)
-    return model, state
+    return model, flowing(model)
 
 
 def corner_forces(model, state, sigma, viscosity):

@@ -25,19 +25,10 @@ def small_cfg():
 
 
 @pytest.fixture(scope="module")
-def discharging(small_cfg):
+def discharging(small_cfg, flowing):
     """A model and a state 0.1 s into the discharge (flowing, plastic, loose, with markers)."""
     model = HopperModel(small_cfg)
-    state = model.initial_state()
-    model.advance(state, 500)
-    while state.step < 500:
-        model.advance(state, 500 - state.step)
-    model.transport_step(state)
-    model.open_outlet(state)
-    t_end = state.t + 0.1
-    while state.t < t_end:
-        model.advance(state, 50)
-    return model, state
+    return model, flowing(model)
 
 
 def _run(model, state, steps, threads):
