@@ -77,7 +77,7 @@ def _parser() -> argparse.ArgumentParser:
                        description="Run the reference hopper (D = 0.3 m, 20 deg cone, "
                        "D0 = 0.06 m, 0.3 m of dry sand; the defaults of HopperConfig) from "
                        "filling to empty: two to three minutes on two cores (126-179 s measured "
-                       "on different days, 11-16 s of it for writing and the pictures).")
+                       "on different days, 10-16 s of it for writing and the pictures).")
     run_options(q, out_required=False)
 
     q = sub.add_parser("plot", help="draw the pictures of a run directory",
