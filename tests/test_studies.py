@@ -341,6 +341,23 @@ def test_discharge_dynamics_reads_the_bin_plug_without_changing_the_run(root):
 
 
 # ---------------------------------------------------------------- the report
+def test_stiffness_spread_runs_both_hoppers_with_and_without_the_viscosity(root):
+    out = run_quick(root, "stiffness_spread")
+    data = study_json(out)
+    assert data["setting"] == "quick"
+    numbers = data["numbers"]
+    for b in ("0", "0.5"):
+        masses = numbers[f"funnel_mass_kg[b={b}]"]
+        assert len(masses) == 2 and all(m > 0 for m in masses.values())
+        assert 0 <= numbers[f"funnel_mass_spread_pct[b={b}]"] < 50
+        for stage in ("filling", "early_discharge", "discharge_envelope"):
+            assert math.isfinite(numbers[f"reference_wall_l2_pct[b={b}|{stage}]"])
+    rows = rows_of(out / "results.csv")
+    assert {r["grid_viscosity"] for r in rows} == {"0.0", "0.5"}
+    assert all(r["error"] == "" for r in rows)
+    assert_png(out / "stiffness_spread.png")
+
+
 def test_report_is_generated_from_the_outputs(root, flow_map, discharge, wall, convergence,
                                               robustness, tmp_path):
     assert load("element_tests").main(["--out", str(root / "element_tests"),
@@ -374,7 +391,7 @@ def test_report_is_generated_from_the_outputs(root, flow_map, discharge, wall, c
     assert result["present"] == ["flow_mode_map"]
     assert set(result["missing"]) == {"plane_flow", "discharge_rate", "wall_pressure",
                                       "convergence",
-                                      "discharge_dynamics",
+                                      "discharge_dynamics", "stiffness_spread",
                                       "robustness", "element_tests", "lagrangian_vs_eulerian",
                                       "arching"}
     assert "python studies/robustness.py" in (tmp_path / "partial.md").read_text()

@@ -1,0 +1,249 @@
+"""Stiffness spread: how the discharge depends on E, without and with the grid viscosity.
+
+Two hoppers, each discharged at several Young's moduli E and grid viscosities b
+(``numerics.grid_viscosity``, 0 by default: ``docs/physics_and_numerics.md`` §4):
+
+* the funnel-flow hopper (the reference with a 60 deg cone and phi_w = 25 deg) for its first
+  ``funnel_time`` s of discharge: the mass discharged, whose spread over E measures how much
+  the stiffness decides the flow pattern;
+* the reference hopper (mass flow) for ``reference_time`` s, the wall-pressure study's
+  discharge: the steady rate and the wall loads from the wall's reaction, filled, at 90 % of
+  the mass left and their envelope over the discharge, compared between the moduli by the
+  relative L2 difference on the wall-pressure study's 45 mm bins
+  (``wall_pressure.common_profile``).
+
+Written to ``--out`` (default ``studies/output/stiffness_spread``): ``results.csv`` (one row per
+run), ``spread.csv`` (the spreads per hopper, b and stage), ``study.json`` and
+``stiffness_spread.png``.
+
+Default cost (2 cores, 2026-12-02): 10 runs, about 1 400 core-seconds.
+
+Usage::
+
+    python studies/stiffness_spread.py [--out DIR] [--quick] [--serial | --scheduler ADDRESS]
+                                       [--moduli 2e6 5e6 2e7] [--viscosities 0 0.25]
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+if str(HERE) not in sys.path:
+    sys.path.insert(0, str(HERE))
+import _sweep  # noqa: E402
+import wall_pressure  # noqa: E402
+
+from fipy_hopper import geometry  # noqa: E402
+from fipy_hopper.diagnostics import relative_l2  # noqa: E402
+
+NAME = "stiffness_spread"
+TITLE = "How the discharge depends on the stiffness, without and with the grid viscosity"
+DEFAULTS = {
+    "moduli": (2.0e6, 5.0e6, 20.0e6),          # Pa, the funnel hopper
+    "reference_moduli": (2.0e6, 20.0e6),       # Pa, the reference hopper (the extremes)
+    "viscosities": (0.0, 0.25),                # b
+    "cell_size": 0.005,                        # m
+    "funnel_time": 3.0,                        # s of discharge
+    "reference_time": 8.78,                    # s: the wall-pressure study's discharge
+    "hopper": {},                              # changes to both hoppers (the quick setting)
+    "case_plots": False,
+}
+QUICK = {"moduli": (2.0e6, 20.0e6), "reference_moduli": (2.0e6, 20.0e6),
+         "viscosities": (0.0, 0.5), "cell_size": 0.01, "funnel_time": 0.4,
+         "reference_time": 0.4,
+         "hopper": {"bin_diameter": 0.2, "fill_height": 0.1, "bin_height": 0.12}}
+HOPPERS = {"funnel": {"hopper": {"half_angle_deg": 60.0}, "wall": {"friction_angle_deg": 25.0}},
+           "reference": {}}
+STAGES = ("filling", "early_discharge", "discharge_envelope")
+
+
+def case_for(opts, hopper, modulus, b):
+    extra = HOPPERS[hopper]
+    end = opts["funnel_time"] if hopper == "funnel" else opts["reference_time"]
+    config = {"hopper": {**opts["hopper"], **extra.get("hopper", {})},
+              "material": {"youngs_modulus": float(modulus)},
+              "wall": dict(extra.get("wall", {})),
+              "numerics": {"cell_size": float(opts["cell_size"]), "grid_viscosity": float(b)},
+              "run": {"end_time": float(end), "output_interval": 0.05,
+                      "markers_per_side": 0}}
+    name = _sweep.case_name((hopper, ""), ("E", round(modulus / 1e6, 4)), ("b", float(b)))
+    return _sweep.make_case(name, {"hopper": hopper, "youngs_modulus_MPa": modulus / 1e6,
+                                   "grid_viscosity": float(b)},
+                            config, plots=opts["case_plots"])
+
+
+def setup(quick: bool = False, **options) -> dict:
+    """The cases and options (``{"options", "cases", "setting"}``); unknown options raise."""
+    unknown = set(options) - set(DEFAULTS)
+    if unknown:
+        raise TypeError(f"unknown options {sorted(unknown)}; known: {sorted(DEFAULTS)}")
+    opts = {**DEFAULTS, **(QUICK if quick else {}), **options}
+    cases = [case_for(opts, "funnel", E, b) for b in opts["viscosities"] for E in opts["moduli"]]
+    cases += [case_for(opts, "reference", E, b) for b in opts["viscosities"]
+              for E in opts["reference_moduli"]]
+    return {"options": opts, "cases": cases, "setting": _sweep.setting_label(quick, options)}
+
+
+# ---------------------------------------------------------------- analysis
+def _results(row):
+    from fipy_hopper.api import read_results
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return read_results(row["run_dir"])
+
+
+def analyse(rows, options) -> tuple:
+    """``(spread rows, numbers)``: per hopper and b, the spread of the funnel's discharged mass
+    over E ((max - min) / mean, %) and the reference hopper's largest L2 difference (%) of
+    each stage's wall profile between two moduli."""
+    spread, numbers = [], {}
+    for b in options["viscosities"]:
+        funnel = [r for r in rows if r["hopper"] == "funnel" and r["grid_viscosity"] == b]
+        masses = [float(r.get("discharged_kg", math.nan)) for r in funnel]
+        ok = [m for m in masses if _sweep.finite(m)]
+        if len(ok) >= 2:
+            value = 100.0 * (max(ok) - min(ok)) / float(np.mean(ok))
+            spread.append({"hopper": "funnel", "grid_viscosity": b,
+                           "measure": f"kg discharged in {options['funnel_time']:g} s",
+                           "spread_pct": value})
+            numbers[f"funnel_mass_spread_pct[b={b:g}]"] = value
+            numbers[f"funnel_mass_kg[b={b:g}]"] = {
+                f"{r['youngs_modulus_MPa']:g} MPa": m for r, m in zip(funnel, masses)}
+        ref = [r for r in rows if r["hopper"] == "reference" and r["grid_viscosity"] == b]
+        loaded = []
+        for r in ref:
+            try:
+                loaded.append((r, _results(r)))
+            except FileNotFoundError:
+                continue
+        numbers[f"reference_rate_kg_s[b={b:g}]"] = {
+            f"{r['youngs_modulus_MPa']:g} MPa": r.get("steady_discharge_rate_kg_s", math.nan)
+            for r in ref}
+        for stage in STAGES:
+            profiles = [wall_pressure.common_profile(res, stage) for _, res in loaded]
+            profiles = [p for p in profiles if p is not None]
+            if len(profiles) < 2:
+                continue
+            worst = 0.0
+            for i, (_, pa) in enumerate(profiles):
+                for _, pb in profiles[i + 1:]:
+                    n = min(len(pa), len(pb))
+                    worst = max(worst, relative_l2(pa[:n], pb[:n]))
+            spread.append({"hopper": "reference", "grid_viscosity": b,
+                           "measure": f"wall profile L2, {stage.replace('_', ' ')}",
+                           "spread_pct": 100.0 * worst})
+            numbers[f"reference_wall_l2_pct[b={b:g}|{stage}]"] = 100.0 * worst
+    numbers["failed"] = [r["case"] for r in rows if r.get("error")]
+    return spread, numbers
+
+
+# ---------------------------------------------------------------- figure
+def plot(rows, options):
+    fig = _sweep.figure(11.0, 4.2)
+    a1, a2 = fig.subplots(1, 2)
+    for k, b in enumerate(options["viscosities"]):
+        funnel = sorted((r for r in rows if r["hopper"] == "funnel"
+                         and r["grid_viscosity"] == b), key=lambda r: r["youngs_modulus_MPa"])
+        if funnel:
+            a1.semilogx([r["youngs_modulus_MPa"] for r in funnel],
+                        [r.get("discharged_kg", math.nan) for r in funnel], "o-",
+                        color=f"C{k}", label=f"b = {b:g}")
+        for j, r in enumerate(sorted((r for r in rows if r["hopper"] == "reference"
+                                      and r["grid_viscosity"] == b),
+                                     key=lambda r: r["youngs_modulus_MPa"])):
+            try:
+                res = _results(r)
+            except FileNotFoundError:
+                continue
+            prof = wall_pressure.common_profile(res, "discharge_envelope")
+            if prof is None:
+                continue
+            a2.plot(prof[0], prof[1] / 1e3, ("-", "--", ":")[j % 3], color=f"C{k}", marker=".",
+                    label=f"b = {b:g}, E = {r['youngs_modulus_MPa']:g} MPa")
+            s_t = float(geometry.transition_arc_length(res.config.hopper))
+    a1.set_xlabel("Young's modulus E (MPa)")
+    a1.set_ylabel(f"mass discharged in {options['funnel_time']:g} s (kg)")
+    a1.set_title("Funnel-flow hopper (60 deg cone, phi_w = 25 deg)", fontsize=9)
+    a1.legend(fontsize=7)
+    if a2.lines:
+        a2.axvline(s_t, color="0.5", lw=0.8, ls=":")
+        a2.legend(fontsize=6)
+    a2.set_xlabel("arc length from the outlet lip, s (m)")
+    a2.set_ylabel("discharge envelope of p_n (kPa)")
+    a2.set_title("Reference hopper: envelope of the wall pressure over the discharge",
+                 fontsize=9)
+    return fig
+
+
+def write_outputs(out, rows, spread, numbers, options, setting, argv=None):
+    out = Path(out)
+    _sweep.write_rows_csv(out / "results.csv", rows, first=(
+        "case", "hopper", "youngs_modulus_MPa", "grid_viscosity", "discharged_kg",
+        "steady_discharge_rate_kg_s", "flow_mode", "mass_balance_error", "steps", "wall_time_s",
+        "error"))
+    _sweep.write_rows_csv(out / "spread.csv", spread)
+    _sweep.save(plot(rows, options), out / "stiffness_spread.png")
+    figures = [{"file": "stiffness_spread.png",
+                "caption": "Left: the funnel-flow hopper's discharged mass against E, per grid "
+                           "viscosity b. Right: the reference hopper's envelope of the wall "
+                           "pressure over the discharge, per b and E."}]
+    findings = []
+    for b in options["viscosities"]:
+        masses = numbers.get(f"funnel_mass_kg[b={b:g}]")
+        if masses:
+            findings.append(
+                f"Funnel-flow hopper, b = {b:g}: " + ", ".join(
+                    f"{k} {v:.3f} kg" for k, v in masses.items())
+                + f" in {options['funnel_time']:g} s; spread "
+                f"{numbers[f'funnel_mass_spread_pct[b={b:g}]']:.1f} %.")
+        parts = [f"{stage.replace('_', ' ')} {numbers[key]:.2f} %" for stage in STAGES
+                 if (key := f"reference_wall_l2_pct[b={b:g}|{stage}]") in numbers]
+        rates = numbers.get(f"reference_rate_kg_s[b={b:g}]", {})
+        if parts:
+            findings.append(
+                f"Reference hopper, b = {b:g}: wall-profile L2 between the moduli: "
+                + ", ".join(parts) + "; steady rates " + ", ".join(
+                    f"{k} {v:.3f} kg/s" for k, v in rates.items()) + ".")
+    if numbers["failed"]:
+        findings.append("Failed runs: " + ", ".join(numbers["failed"]) + ".")
+    tables = [{"title": "Spread over E",
+               "columns": ["hopper", "b", "measure", "spread %"],
+               "rows": [[s["hopper"], s["grid_viscosity"], s["measure"],
+                         round(s["spread_pct"], 2)] for s in spread]}]
+    settings = {k: (list(v) if isinstance(v, tuple) else v) for k, v in options.items()}
+    _sweep.write_study_json(out, NAME, TITLE, setting, settings, numbers, findings, figures,
+                            tables, rows, argv)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    _sweep.add_arguments(parser, NAME)
+    parser.add_argument("--moduli", type=float, nargs="+", help="Pa, the funnel hopper")
+    parser.add_argument("--viscosities", type=float, nargs="+", help="grid viscosity b")
+    args = parser.parse_args(argv)
+    options = _sweep.study_options(args, ("moduli", "viscosities"))
+    if "moduli" in options:
+        options["moduli"] = tuple(options["moduli"])
+    if "viscosities" in options:
+        options["viscosities"] = tuple(options["viscosities"])
+    study = setup(quick=args.quick, **options)
+    rows = _sweep.run_study(NAME, study, args)
+    spread, numbers = analyse(rows, study["options"])
+    write_outputs(args.out, rows, spread, numbers, study["options"], study["setting"], argv)
+    for s in spread:
+        print(f"{s['hopper']}, b = {s['grid_viscosity']:g}, {s['measure']}: "
+              f"{s['spread_pct']:.2f} %")
+    print(f"written to {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
