@@ -169,6 +169,11 @@ def plot(rows, options):
             a2.plot(prof[0], prof[1] / 1e3, ("-", "--", ":")[j % 3], color=f"C{k}", marker=".",
                     label=f"b = {b:g}, E = {r['youngs_modulus_MPa']:g} MPa")
             s_t = float(geometry.transition_arc_length(res.config.hopper))
+    moduli = sorted({r["youngs_modulus_MPa"] for r in rows if r["hopper"] == "funnel"})
+    if moduli:
+        a1.minorticks_off()
+        a1.set_xticks(moduli)
+        a1.set_xticklabels([f"{m:g}" for m in moduli])
     a1.set_xlabel("Young's modulus E (MPa)")
     a1.set_ylabel(f"mass discharged in {options['funnel_time']:g} s (kg)")
     a1.set_title("Funnel-flow hopper (60 deg cone, phi_w = 25 deg)", fontsize=9)
