@@ -235,6 +235,15 @@ def study_options(args, names) -> dict:
     return options
 
 
+def resolve_options(defaults: dict, options: dict, quick_options: dict | None = None) -> dict:
+    """A study's options: ``defaults``, then ``quick_options`` (the quick setting, if given),
+    then ``options``; an option the study does not have raises ``TypeError``."""
+    unknown = set(options) - set(defaults)
+    if unknown:
+        raise TypeError(f"unknown options {sorted(unknown)}; known: {sorted(defaults)}")
+    return {**defaults, **(quick_options or {}), **options}
+
+
 def run_study(name: str, study: dict, args) -> list:
     """Create ``args.out`` and run the study's cases there (:func:`sweep`); returns the rows."""
     args.out.mkdir(parents=True, exist_ok=True)

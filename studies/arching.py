@@ -206,10 +206,7 @@ def rathole_task(opts) -> dict:
 def setup(quick: bool = False, **options) -> dict:
     """The tasks and options: ``{"options", "tasks", "setting"}`` (each task a bisection or
     the rathole pair); unknown options raise ``TypeError``."""
-    unknown = set(options) - set(DEFAULTS)
-    if unknown:
-        raise TypeError(f"unknown options {sorted(unknown)}; known: {sorted(DEFAULTS)}")
-    opts = {**DEFAULTS, **(QUICK if quick else {}), **options}
+    opts = _sweep.resolve_options(DEFAULTS, options, QUICK if quick else None)
     if not opts["tolerance"] <= 1.1:
         raise ValueError(f"tolerance = {opts['tolerance']}: at most 1.1 (a 10 % bracket)")
     tasks = []

@@ -80,10 +80,7 @@ def case_for(opts, cell, modulus):
 
 def setup(quick: bool = False, **options) -> dict:
     """The cases and options (``{"options", "cases", "setting"}``); unknown options raise."""
-    unknown = set(options) - set(DEFAULTS)
-    if unknown:
-        raise TypeError(f"unknown options {sorted(unknown)}; known: {sorted(DEFAULTS)}")
-    opts = {**DEFAULTS, **(QUICK if quick else {}), **options}
+    opts = _sweep.resolve_options(DEFAULTS, options, QUICK if quick else None)
     pairs = {(float(c), float(opts["base_modulus"])): None for c in opts["cell_sizes"]}
     pairs.update({(float(opts["base_cell"]), float(e)): None for e in opts["moduli"]})
     cases = [case_for(opts, c, e) for c, e in pairs]

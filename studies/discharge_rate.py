@@ -77,10 +77,7 @@ QUICK = {"outlets": (0.06, 0.08, 0.1, 0.12), "outlet_half_angles": (45.0,),
 
 def setup(quick: bool = False, **options) -> dict:
     """The cases and options (``{"options", "cases", "setting"}``); unknown options raise."""
-    unknown = set(options) - set(DEFAULTS)
-    if unknown:
-        raise TypeError(f"unknown options {sorted(unknown)}; known: {sorted(DEFAULTS)}")
-    opts = {**DEFAULTS, **(QUICK if quick else {}), **options}
+    opts = _sweep.resolve_options(DEFAULTS, options, QUICK if quick else None)
     base = {"hopper": {"bin_diameter": opts["bin_diameter"], "fill_height": opts["fill_height"],
                        "bin_height": opts["fill_height"] + 0.02},
             "material": {"friction_angle_deg": opts["friction_angle"],

@@ -74,10 +74,7 @@ QUICK = {"pairs": ((15.0, 12.0), (60.0, 25.0)), "cell_size": 0.01, "end_time": 0
 def setup(quick: bool = False, **options) -> dict:
     """The cases and options: ``{"options", "cases", "setting"}``; ``quick`` starts from the
     tiny setting (two clear cases on a 1 cm grid).  Unknown options raise ``TypeError``."""
-    unknown = set(options) - set(DEFAULTS)
-    if unknown:
-        raise TypeError(f"unknown options {sorted(unknown)}; known: {sorted(DEFAULTS)}")
-    opts = {**DEFAULTS, **(QUICK if quick else {}), **options}
+    opts = _sweep.resolve_options(DEFAULTS, options, QUICK if quick else None)
     pairs = opts["pairs"] or [(t, w) for w in opts["wall_angles"] for t in opts["half_angles"]]
     sizes = ({"bin_diameter": opts["bin_diameter"], "outlet_diameter": opts["outlet_diameter"]}
              if opts["shape"] == "conical" else

@@ -283,10 +283,7 @@ def wall_pressure_agreement(cfg, lag_rec, sim):
 def setup(**options):
     """Run both; returns a dict: options, cfg, the Lagrangian (model, record, state), the
     Eulerian (model, sim, captured states) and the comparison ``results``."""
-    unknown = set(options) - set(DEFAULTS)
-    if unknown:
-        raise TypeError(f"unknown options {sorted(unknown)}; known: {sorted(DEFAULTS)}")
-    opts = {**DEFAULTS, **options}
+    opts = _sweep.resolve_options(DEFAULTS, options)
     cfg = make_config(opts)
     started = time.perf_counter()
     lag_model, lag_rec, lag_state = run_lagrangian(cfg, opts)

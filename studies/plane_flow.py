@@ -89,10 +89,7 @@ MAP = {"shape": "wedge", "end_time": 0.8, "friction_angle": 30.0, "bin_diameter"
 def setup(quick: bool = False, **options) -> dict:
     """The cases and options (``{"options", "cases", "setting", "map_options"}``); unknown
     options raise ``TypeError``."""
-    unknown = set(options) - set(DEFAULTS)
-    if unknown:
-        raise TypeError(f"unknown options {sorted(unknown)}; known: {sorted(DEFAULTS)}")
-    opts = {**DEFAULTS, **(QUICK if quick else {}), **options}
+    opts = _sweep.resolve_options(DEFAULTS, options, QUICK if quick else None)
     map_options = {**MAP, "cell_size": opts["cell_size"], "case_plots": opts["case_plots"],
                    **({"pairs": opts["pairs"]} if opts["pairs"] else
                       {"half_angles": opts["half_angles"], "wall_angles": opts["wall_angles"]}),

@@ -83,10 +83,7 @@ BANDS = {"stiffness": 0.05, "cell_size": 0.05, "hourglass": 0.03, "alpha_max": 1
 
 def setup(quick: bool = False, **options) -> dict:
     """The cases and options (``{"options", "cases", "setting"}``); unknown options raise."""
-    unknown = set(options) - set(DEFAULTS)
-    if unknown:
-        raise TypeError(f"unknown options {sorted(unknown)}; known: {sorted(DEFAULTS)}")
-    opts = {**DEFAULTS, **(QUICK if quick else {}), **options}
+    opts = _sweep.resolve_options(DEFAULTS, options, QUICK if quick else None)
     base_e, base_h, base_k = (float(opts["base_modulus"]), float(opts["base_cell"]),
                               float(opts["base_hourglass"]))
     knobs = {(base_h, float(e), 1.0) for e in opts["moduli"]}

@@ -81,10 +81,7 @@ def case_for(opts, hopper, modulus, b):
 
 def setup(quick: bool = False, **options) -> dict:
     """The cases and options (``{"options", "cases", "setting"}``); unknown options raise."""
-    unknown = set(options) - set(DEFAULTS)
-    if unknown:
-        raise TypeError(f"unknown options {sorted(unknown)}; known: {sorted(DEFAULTS)}")
-    opts = {**DEFAULTS, **(QUICK if quick else {}), **options}
+    opts = _sweep.resolve_options(DEFAULTS, options, QUICK if quick else None)
     cases = [case_for(opts, "funnel", E, b) for b in opts["viscosities"] for E in opts["moduli"]]
     cases += [case_for(opts, "reference", E, b) for b in opts["viscosities"]
               for E in opts["reference_moduli"]]

@@ -123,10 +123,7 @@ def case_variants(opts) -> list:
 
 def setup(quick: bool = False, **options) -> dict:
     """The cases and options (``{"options", "cases", "setting"}``); unknown options raise."""
-    unknown = set(options) - set(DEFAULTS)
-    if unknown:
-        raise TypeError(f"unknown options {sorted(unknown)}; known: {sorted(DEFAULTS)}")
-    opts = {**DEFAULTS, **(QUICK if quick else {}), **options}
+    opts = _sweep.resolve_options(DEFAULTS, options, QUICK if quick else None)
     cases = []
     for theta, cell, E, series in case_variants(opts):
         config = base_config(opts, theta, cell, E)

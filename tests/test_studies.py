@@ -132,6 +132,14 @@ def test_case_pictures_are_the_study_setting_unless_asked_for():
     assert load("flow_mode_map").DEFAULTS["case_plots"] is False     # 30 runs: off
 
 
+@pytest.mark.parametrize("name", ["flow_mode_map", "plane_flow", "discharge_rate",
+                                  "wall_pressure", "stiffness_spread", "convergence",
+                                  "robustness", "lagrangian_vs_eulerian", "arching"])
+def test_a_study_refuses_an_option_it_does_not_have(name):
+    with pytest.raises(TypeError, match=r"unknown options \['bogus'\]; known: "):
+        load(name).setup(bogus=1)
+
+
 def test_restarted_sweep_does_not_recompute_finished_cases(flow_map, capsys):
     summaries = sorted((flow_map / "cases").glob("*/summary.json"))
     stamps = {p: p.stat().st_mtime_ns for p in summaries}
