@@ -98,10 +98,12 @@ def _results(row):
 
 
 def analyse(rows, options) -> tuple:
-    """``(spread rows, numbers)``: per hopper and b, the spread of the funnel's discharged mass
-    over E ((max - min) / mean, %) and the reference hopper's largest L2 difference (%) of
-    each stage's wall profile between two moduli."""
-    spread, numbers = [], {}
+    """``(spread rows, numbers, envelopes)``: per hopper and b, the spread of the funnel's
+    discharged mass over E ((max - min) / mean, %) and the reference hopper's largest L2
+    difference (%) of each stage's wall profile between two moduli; ``envelopes`` maps each
+    reference run's case to ``(centres, p_n envelope, transition arc length)`` for the
+    figure."""
+    spread, numbers, envelopes = [], {}, {}
     for b in options["viscosities"]:
         funnel = [r for r in rows if r["hopper"] == "funnel" and r["grid_viscosity"] == b]
         masses = [float(r.get("discharged_kg", math.nan)) for r in funnel]
@@ -124,6 +126,11 @@ def analyse(rows, options) -> tuple:
         numbers[f"reference_rate_kg_s[b={b:g}]"] = {
             f"{r['youngs_modulus_MPa']:g} MPa": r.get("steady_discharge_rate_kg_s", math.nan)
             for r in ref}
+        for r, res in loaded:
+            envelope = wall_pressure.common_profile(res, "discharge_envelope")
+            if envelope is not None:
+                envelopes[r["case"]] = (*envelope, float(
+                    geometry.transition_arc_length(res.config.hopper)))
         for stage in STAGES:
             profiles = [wall_pressure.common_profile(res, stage) for _, res in loaded]
             profiles = [p for p in profiles if p is not None]
@@ -139,11 +146,11 @@ def analyse(rows, options) -> tuple:
                            "spread_pct": 100.0 * worst})
             numbers[f"reference_wall_l2_pct[b={b:g}|{stage}]"] = 100.0 * worst
     numbers["failed"] = [r["case"] for r in rows if r.get("error")]
-    return spread, numbers
+    return spread, numbers, envelopes
 
 
 # ---------------------------------------------------------------- figure
-def plot(rows, options):
+def plot(rows, envelopes, options):
     fig = _sweep.figure(11.0, 4.2)
     a1, a2 = fig.subplots(1, 2)
     for k, b in enumerate(options["viscosities"]):
@@ -154,18 +161,11 @@ def plot(rows, options):
                         [r.get("discharged_kg", math.nan) for r in funnel], "o-",
                         color=f"C{k}", label=f"b = {b:g}")
         for j, r in enumerate(sorted((r for r in rows if r["hopper"] == "reference"
-                                      and r["grid_viscosity"] == b),
+                                      and r["grid_viscosity"] == b and r["case"] in envelopes),
                                      key=lambda r: r["youngs_modulus_MPa"])):
-            try:
-                res = _results(r)
-            except FileNotFoundError:
-                continue
-            prof = wall_pressure.common_profile(res, "discharge_envelope")
-            if prof is None:
-                continue
-            a2.plot(prof[0], prof[1] / 1e3, ("-", "--", ":")[j % 3], color=f"C{k}", marker=".",
+            centres, p_n, _ = envelopes[r["case"]]
+            a2.plot(centres, p_n / 1e3, ("-", "--", ":")[j % 3], color=f"C{k}", marker=".",
                     label=f"b = {b:g}, E = {r['youngs_modulus_MPa']:g} MPa")
-            s_t = float(geometry.transition_arc_length(res.config.hopper))
     moduli = sorted({r["youngs_modulus_MPa"] for r in rows if r["hopper"] == "funnel"})
     if moduli:
         a1.minorticks_off()
@@ -175,8 +175,8 @@ def plot(rows, options):
     a1.set_ylabel(f"mass discharged in {options['funnel_time']:g} s (kg)")
     a1.set_title("Funnel-flow hopper (60 deg cone, phi_w = 25 deg)", fontsize=9)
     a1.legend(fontsize=7)
-    if a2.lines:
-        a2.axvline(s_t, color="0.5", lw=0.8, ls=":")
+    if envelopes:
+        a2.axvline(next(iter(envelopes.values()))[2], color="0.5", lw=0.8, ls=":")
         a2.legend(fontsize=6)
     a2.set_xlabel("arc length from the outlet lip, s (m)")
     a2.set_ylabel("discharge envelope of p_n (kPa)")
@@ -185,14 +185,14 @@ def plot(rows, options):
     return fig
 
 
-def write_outputs(out, rows, spread, numbers, options, setting, argv=None):
+def write_outputs(out, rows, spread, numbers, envelopes, options, setting, argv=None):
     out = Path(out)
     _sweep.write_rows_csv(out / "results.csv", rows, first=(
         "case", "hopper", "youngs_modulus_MPa", "grid_viscosity", "discharged_kg",
         "steady_discharge_rate_kg_s", "flow_mode", "mass_balance_error", "steps", "wall_time_s",
         "error"))
     _sweep.write_rows_csv(out / "spread.csv", spread)
-    _sweep.save(plot(rows, options), out / "stiffness_spread.png")
+    _sweep.save(plot(rows, envelopes, options), out / "stiffness_spread.png")
     figures = [{"file": "stiffness_spread.png",
                 "caption": "Left: the funnel-flow hopper's discharged mass against E, per grid "
                            "viscosity b. Right: the reference hopper's envelope of the wall "
@@ -238,8 +238,9 @@ def main(argv=None) -> int:
         options["viscosities"] = tuple(options["viscosities"])
     study = setup(quick=args.quick, **options)
     rows = _sweep.run_study(NAME, study, args)
-    spread, numbers = analyse(rows, study["options"])
-    write_outputs(args.out, rows, spread, numbers, study["options"], study["setting"], argv)
+    spread, numbers, envelopes = analyse(rows, study["options"])
+    write_outputs(args.out, rows, spread, numbers, envelopes, study["options"],
+                  study["setting"], argv)
     for s in spread:
         print(f"{s['hopper']}, b = {s['grid_viscosity']:g}, {s['measure']}: "
               f"{s['spread_pct']:.2f} %")

@@ -159,14 +159,10 @@ def rathole_config(cohesion: float) -> HopperConfig:
     D0 = 0.08 m, filled 0.15 m above the transition, 1 cm cells (4 across the outlet radius)."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        return HopperConfig.from_dict({
-            "hopper": {"bin_diameter": 0.24, "outlet_diameter": 0.08, "half_angle_deg": 60.0,
-                       "bin_height": 0.17, "fill_height": 0.15},
-            "material": {"density": RHO, "friction_angle_deg": PHI, "cohesion": cohesion},
-            "wall": {"friction_angle_deg": 25.0},
-            "numerics": {"cell_size": 0.01},
-            "run": {"end_time": "empty", "max_time": 4.0, "output_interval": 0.02,
-                    "markers_per_side": 0}})
+        return config(cohesion, end_time="empty", max_time=4.0, output_interval=0.02).replace(
+            hopper={"bin_diameter": 0.24, "outlet_diameter": 0.08, "half_angle_deg": 60.0,
+                    "bin_height": 0.17},
+            wall={"friction_angle_deg": 25.0})
 
 
 def test_a_cohesive_funnel_flow_hopper_leaves_a_rathole():

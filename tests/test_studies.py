@@ -5,6 +5,7 @@ cases on a one-worker Dask ``LocalCluster`` when dask.distributed is installed. 
 is generated from the outputs of all of them.
 """
 
+import argparse
 import csv
 import importlib.util
 import json
@@ -124,7 +125,7 @@ def test_flow_mode_map_classifies_the_two_clear_cases(flow_map):
 
 def test_case_pictures_are_the_study_setting_unless_asked_for():
     sweep = load("_sweep")
-    parser = __import__("argparse").ArgumentParser()
+    parser = argparse.ArgumentParser()
     sweep.add_arguments(parser, "flow_mode_map")
     assert "case_plots" not in sweep.study_options(parser.parse_args([]), [])
     assert sweep.study_options(parser.parse_args(["--case-plots"]), [])["case_plots"] is True
