@@ -332,6 +332,14 @@ class NumericsConfig:
       ``eta`` vanishes as ``h^1.5`` under refinement.  At 5 mm, ``b = 0.25`` gives ``eta =
       0.41 Pa s``, the order of the rate dependence of a 1 mm sand (``mu(I)``).  Eulerian
       formulation only.
+    - ``bulk_viscosity`` ``b_1`` (dimensionless, 0: off): a viscous pressure ``eta_b tr(D)``
+      added to the normal stresses of every loaded cell in the internal forces, ``eta_b = b_1
+      rho c_p h`` (Pa s), the linear bulk viscosity of explicit dynamics codes: it damps the
+      shortest compression wave at about the fraction ``b_1`` of critical, and the time step
+      is reduced by ``sqrt(1 + b_1^2) - b_1`` for it.  It acts on volume changes only, which
+      plastic flow at zero dilation does not make; in flowing material it removes most of the
+      cells that the ringing of compression waves drives to the stress-free apex
+      (``docs/physics_and_numerics.md`` §4).  Eulerian formulation only.
     - ``alpha_min``: cells with less material fraction carry no stress.
     - ``free_fall_depth``: depth of the free-fall zone below the outlet, in outlet diameters.
     - ``gravity_ramp_time``: gravity rises linearly during filling over ``gravity_ramp_periods``
@@ -362,6 +370,7 @@ class NumericsConfig:
     max_transport_interval: int = 50
     hourglass_coefficient: float = 0.1
     grid_viscosity: float = 0.0
+    bulk_viscosity: float = 0.0
     alpha_min: float = 1.0e-3
     free_fall_depth: float = 1.0
     gravity_ramp_time: Union[float, str] = "auto"
@@ -382,6 +391,7 @@ class NumericsConfig:
         _check_int("numerics.max_transport_interval", self.max_transport_interval, 1, 100_000)
         _check_range("numerics.hourglass_coefficient", self.hourglass_coefficient, 0, 100)
         _check_range("numerics.grid_viscosity", self.grid_viscosity, 0, 10)
+        _check_range("numerics.bulk_viscosity", self.bulk_viscosity, 0, 1)
         _check_range("numerics.alpha_min", self.alpha_min, 0, 0.5, low_open=True)
         _check_range("numerics.free_fall_depth", self.free_fall_depth, 0.25, 10)
         if isinstance(self.gravity_ramp_time, str):
@@ -528,10 +538,12 @@ class HopperConfig:
         if self.numerics.formulation == "lagrangian" and not self.hopper.axisymmetric:
             raise ConfigError('numerics.formulation = "lagrangian" models conical hoppers only; '
                               'a wedge (hopper.shape = "wedge") runs with "eulerian"')
-        if self.numerics.formulation == "lagrangian" and self.numerics.grid_viscosity > 0.0:
-            raise ConfigError(f"numerics.grid_viscosity = {self.numerics.grid_viscosity:g} "
-                              'applies to numerics.formulation = "eulerian" only; allowed '
-                              'range with "lagrangian" is [0, 0]')
+        for key in ("grid_viscosity", "bulk_viscosity"):
+            value = getattr(self.numerics, key)
+            if self.numerics.formulation == "lagrangian" and value > 0.0:
+                raise ConfigError(f"numerics.{key} = {value:g} applies to "
+                                  'numerics.formulation = "eulerian" only; allowed range with '
+                                  '"lagrangian" is [0, 0]')
         self._check_grid_size()
         self._check_step_count()
         if self.ramp_time > self.numerics.max_fill_time:

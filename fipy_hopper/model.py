@@ -166,7 +166,13 @@ class HopperModel:
         g = self.grid
         self.rho = self.material.rho
         self.c_p = self.material.p_wave_speed
-        self.dt = self.material.stable_time_step(g.h, cfg.numerics.dt_safety)
+        #: bulk viscosity ``eta_b = b_1 rho c_p h`` (Pa s; ``numerics.bulk_viscosity`` b_1): about
+        #: the fraction b_1 of critical damping for the shortest compression wave
+        self.bulk_viscosity = cfg.numerics.bulk_viscosity * self.rho * self.c_p * g.h
+        # a damped mode's explicit limit is (sqrt(1 + xi^2) - xi) of the undamped one
+        bulk = cfg.numerics.bulk_viscosity
+        self.dt = (self.material.stable_time_step(g.h, cfg.numerics.dt_safety)
+                   * (math.sqrt(1.0 + bulk * bulk) - bulk))
         self.mu_wall = cfg.wall.friction_coefficient
         # the symmetry as data: an axisymmetric cone, or a wedge in plane strain (per metre)
         axisymmetric = cfg.hopper.axisymmetric
@@ -458,7 +464,8 @@ class HopperModel:
             self._prm, self.dt, GRAVITY, ramp, damping, self.light_mass, num.alpha_min,
             num.transport_cfl, num.max_transport_interval, row_nodes, node_i, node_ptr,
             normal, mu, kind, entry, state.plate_closed, state.wall_impulse,
-            state.plate_impulse, state.momentum_budget, self._work, self.viscosity)
+            state.plate_impulse, state.momentum_budget, self._work, self.viscosity,
+            self.bulk_viscosity)
         state.t, state.flux_time = float(clock[0]), float(clock[2])
         state.step += int(done)
         if due:
@@ -517,10 +524,17 @@ class HopperModel:
         """Reference (numpy) nodal update: forces, velocity, damping, contact, axis."""
         g, dt = self.grid, self.dt
         stress = state.sigma
-        if self.viscosity > 0.0:       # the grid viscosity: sigma + 2 eta D in loaded cells
+        if self.viscosity > 0.0 or self.bulk_viscosity > 0.0:
+            # the grid and the bulk viscosity: sigma + 2 eta D + eta_b tr(D) I in loaded cells
             D, _ = momentum.strain_rate(state.v, self.r_c, g.h)
             loaded = (state.alpha >= self.cfg.numerics.alpha_min)[..., None]
-            stress = np.where(loaded, state.sigma + 2.0 * self.viscosity * D, state.sigma)
+            viscous = state.sigma
+            if self.viscosity > 0.0:
+                viscous = viscous + 2.0 * self.viscosity * D
+            if self.bulk_viscosity > 0.0:
+                p_b = self.bulk_viscosity * (D[..., 0] + D[..., 1] + D[..., 2])
+                viscous = viscous + np.stack([p_b, p_b, p_b, np.zeros_like(p_b)], axis=-1)
+            stress = np.where(loaded, viscous, state.sigma)
         mixture = state.alpha[..., None] * stress
         force = -momentum.internal_force(mixture, self.open_volume, self.r_c, g.h)
         force += momentum.hourglass_force(state.v, self.hourglass_base * state.alpha)

@@ -7,9 +7,9 @@ numpy reference's (``HopperModel(..., backend="numpy")``), with the same arithme
 same order, so that each number is the same to the last bit as that of the sequence of
 compiled kernels it replaces:
 
-1. nodal forces ``-f_int(alpha (sigma + 2 eta D)) + f_hg`` (``eta``: the grid viscosity, 0 by
-   default): each cell's corner forces, then each node's
-   sum of its four cells' in the order in which a cell-by-cell scatter adds them; velocity
+1. nodal forces ``-f_int(alpha (sigma + 2 eta D + eta_b tr(D) I)) + f_hg`` (``eta``,
+   ``eta_b``: the grid and the bulk viscosity, 0 by default): each cell's corner forces, then
+   each node's sum of its four cells' in the order in which a cell-by-cell scatter adds them; velocity
    ``v += dt (f / m - g e_z)``, mass-proportional damping, light nodes at rest; then, node row
    by node row, the wall contacts in the order of the model's contact list, the outlet plate
    and the axis (``v_r = 0``);
@@ -122,13 +122,15 @@ def _runs(alpha, alpha_min, sigma, loose, v, contrib, carry_runs, load_runs, blo
 
 @_jit_parallel
 def _cell_forces(carry_runs, n_carry, alpha, sigma, v, open_volume, r_c, h, hg_base, contrib,
-                 viscosity, alpha_min):
+                 viscosity, bulk_viscosity, alpha_min):
     """Corner forces ``-f_int + f_hg`` of the carrying cells into ``contrib`` (8, nz, nr):
     (r, z) at SW, SE, NE, NW, as ``momentum.internal_force`` and ``hourglass_force`` sum them.
-    With ``viscosity`` ``eta > 0`` (Pa s) the stress of a loaded cell (``alpha >= alpha_min``)
-    is ``sigma + 2 eta D``, ``D`` its strain rate (``momentum.strain_rate``)."""
+    With ``viscosity`` ``eta > 0`` or ``bulk_viscosity`` ``eta_b > 0`` (Pa s) the stress of a
+    loaded cell (``alpha >= alpha_min``) is ``sigma + 2 eta D + eta_b tr(D) I``, ``D`` its
+    strain rate (``momentum.strain_rate``)."""
     g = 1.0 / (2.0 * h)
     two_eta = 2.0 * viscosity
+    viscous = viscosity > 0.0 or bulk_viscosity > 0.0
     for run in prange(n_carry):
         j, i0, i1 = carry_runs[run, 0], carry_runs[run, 1], carry_runs[run, 2]
         for i in range(i0, i1):
@@ -138,17 +140,26 @@ def _cell_forces(carry_runs, n_carry, alpha, sigma, v, open_volume, r_c, h, hg_b
             t_zz = sigma[j, i, 1]
             t_tt = sigma[j, i, 2]
             t_rz = sigma[j, i, 3]
-            if viscosity > 0.0 and a >= alpha_min:
+            if viscous and a >= alpha_min:
                 vr_sw, vr_se = v[0, j, i], v[0, j, i + 1]
                 vr_ne, vr_nw = v[0, j + 1, i + 1], v[0, j + 1, i]
                 vz_sw, vz_se = v[1, j, i], v[1, j, i + 1]
                 vz_ne, vz_nw = v[1, j + 1, i + 1], v[1, j + 1, i]
-                dvr_dz = g * (vr_nw + vr_ne - vr_sw - vr_se)
-                dvz_dr = g * (vz_se + vz_ne - vz_sw - vz_nw)
-                t_rr = t_rr + two_eta * (g * (vr_se + vr_ne - vr_sw - vr_nw))
-                t_zz = t_zz + two_eta * (g * (vz_nw + vz_ne - vz_sw - vz_se))
-                t_tt = t_tt + two_eta * (0.25 * (vr_sw + vr_se + vr_ne + vr_nw) / r_c[i])
-                t_rz = t_rz + two_eta * (0.5 * (dvr_dz + dvz_dr))
+                d_rr = g * (vr_se + vr_ne - vr_sw - vr_nw)
+                d_zz = g * (vz_nw + vz_ne - vz_sw - vz_se)
+                d_tt = 0.25 * (vr_sw + vr_se + vr_ne + vr_nw) / r_c[i]
+                if viscosity > 0.0:
+                    dvr_dz = g * (vr_nw + vr_ne - vr_sw - vr_se)
+                    dvz_dr = g * (vz_se + vz_ne - vz_sw - vz_nw)
+                    t_rr = t_rr + two_eta * d_rr
+                    t_zz = t_zz + two_eta * d_zz
+                    t_tt = t_tt + two_eta * d_tt
+                    t_rz = t_rz + two_eta * (0.5 * (dvr_dz + dvz_dr))
+                if bulk_viscosity > 0.0:
+                    p_b = bulk_viscosity * ((d_rr + d_zz) + d_tt)
+                    t_rr = t_rr + p_b
+                    t_zz = t_zz + p_b
+                    t_tt = t_tt + p_b
             s_rr = (a * t_rr) * w
             s_zz = (a * t_zz) * w
             s_tt = (a * t_tt) * w
@@ -549,7 +560,7 @@ def material_steps(max_steps, clock, v, mass, alpha, sigma, loose, eps_p, face_f
                    ramp_time, damping, light_mass, alpha_min, transport_cfl,
                    max_transport_interval, row_nodes, node_i, node_ptr, normal, mu, kind,
                    entry, plate_closed, contact_impulse, plate_impulse, budget, work,
-                   viscosity):
+                   viscosity, bulk_viscosity):
     """Up to ``max_steps`` material steps, in place.
 
     The symmetry is data: ``r_c`` is the radius of the hoop terms (the cell-centre radius;
@@ -561,8 +572,9 @@ def material_steps(max_steps, clock, v, mass, alpha, sigma, loose, eps_p, face_f
     ``contact_impulse``, ``plate_impulse`` and ``budget[0:3]`` (vertical impulses of gravity,
     damping and stopped light nodes; kg m/s per radian).  ``work = (carry runs (n, 3), load
     runs (n, 3), block pointers (n + 1,), corner forces (8, nz, nr), row speeds (nz + 1,),
-    row budgets (nz + 1, 3))``, sized by the model.  ``viscosity``: the grid viscosity ``eta``
-    (Pa s; 0: none) of :func:`_cell_forces`.  Returns ``(steps done, transport due)``:
+    row budgets (nz + 1, 3))``, sized by the model.  ``viscosity`` and ``bulk_viscosity``: the
+    grid viscosity ``eta`` and the bulk viscosity ``eta_b`` (Pa s; 0: none) of
+    :func:`_cell_forces`.  Returns ``(steps done, transport due)``:
     the loop stops after the step at which a transport is due (the caller transports; alpha is
     constant until then).
     """
@@ -575,7 +587,7 @@ def material_steps(max_steps, clock, v, mass, alpha, sigma, loose, eps_p, face_f
         t = clock[0]
         gravity = g_full * min(1.0, t / ramp_time) if ramp_time > 0.0 else g_full
         _cell_forces(carry_runs, n_carry, alpha, sigma, v, open_volume, r_c, h, hg_base,
-                     contrib, viscosity, alpha_min)
+                     contrib, viscosity, bulk_viscosity, alpha_min)
         _node_update(j0, j1, v, mass, contrib, gravity, dt, damping, light_mass, row_nodes,
                      node_i, node_ptr, normal, mu, kind, entry, plate_closed, contact_impulse,
                      plate_impulse, row_budget)
