@@ -1,7 +1,8 @@
-"""Stiffness spread: how the discharge depends on E, without and with the grid viscosity.
+"""Stiffness spread: how the discharge depends on E, without and with the grid or bulk viscosity.
 
-Two hoppers, each discharged at several Young's moduli E and grid viscosities b
-(``numerics.grid_viscosity``, 0 by default: ``docs/physics_and_numerics.md`` §4):
+Two hoppers, each discharged at several Young's moduli E and dampings: pairs of the grid
+viscosity b and the bulk viscosity b_1 (``numerics.grid_viscosity`` and ``bulk_viscosity``, 0
+by default: ``docs/physics_and_numerics.md`` §4):
 
 * the funnel-flow hopper (the reference with a 60 deg cone and phi_w = 25 deg) for its first
   ``funnel_time`` s of discharge: the mass discharged, whose spread over E measures how much
@@ -13,15 +14,15 @@ Two hoppers, each discharged at several Young's moduli E and grid viscosities b
   (``wall_pressure.common_profile``).
 
 Written to ``--out`` (default ``studies/output/stiffness_spread``): ``results.csv`` (one row per
-run), ``spread.csv`` (the spreads per hopper, b and stage), ``study.json`` and
+run), ``spread.csv`` (the spreads per hopper, damping and stage), ``study.json`` and
 ``stiffness_spread.png``.
 
-Default cost (2 cores, 2026-12-02): 10 runs, about 1 400 core-seconds.
+Default cost (2 cores, 2026-12-02): 15 runs, about 2 000 core-seconds.
 
 Usage::
 
     python studies/stiffness_spread.py [--out DIR] [--quick] [--serial | --scheduler ADDRESS]
-                                       [--moduli 2e6 5e6 2e7] [--viscosities 0 0.25]
+                                       [--moduli 2e6 5e6 2e7] [--dampings 0,0 0.25,0 0,0.06]
 """
 
 from __future__ import annotations
@@ -44,11 +45,11 @@ from fipy_hopper import geometry  # noqa: E402
 from fipy_hopper.diagnostics import relative_l2  # noqa: E402
 
 NAME = "stiffness_spread"
-TITLE = "How the discharge depends on the stiffness, without and with the grid viscosity"
+TITLE = "How the discharge depends on the stiffness, without and with the grid or bulk viscosity"
 DEFAULTS = {
     "moduli": (2.0e6, 5.0e6, 20.0e6),          # Pa, the funnel hopper
     "reference_moduli": (2.0e6, 20.0e6),       # Pa, the reference hopper (the extremes)
-    "viscosities": (0.0, 0.25),                # b
+    "dampings": ((0.0, 0.0), (0.25, 0.0), (0.0, 0.06)),   # (b, b_1)
     "cell_size": 0.005,                        # m
     "funnel_time": 3.0,                        # s of discharge
     "reference_time": 8.78,                    # s: the wall-pressure study's discharge
@@ -56,7 +57,7 @@ DEFAULTS = {
     "case_plots": False,
 }
 QUICK = {"moduli": (2.0e6, 20.0e6), "reference_moduli": (2.0e6, 20.0e6),
-         "viscosities": (0.0, 0.5), "cell_size": 0.01, "funnel_time": 0.4,
+         "dampings": ((0.0, 0.0), (0.5, 0.0), (0.0, 0.1)), "cell_size": 0.01, "funnel_time": 0.4,
          "reference_time": 0.4,
          "hopper": {"bin_diameter": 0.2, "fill_height": 0.1, "bin_height": 0.12}}
 HOPPERS = {"funnel": {"hopper": {"half_angle_deg": 60.0}, "wall": {"friction_angle_deg": 25.0}},
@@ -64,28 +65,53 @@ HOPPERS = {"funnel": {"hopper": {"half_angle_deg": 60.0}, "wall": {"friction_ang
 STAGES = ("filling", "early_discharge", "discharge_envelope")
 
 
-def case_for(opts, hopper, modulus, b):
+def damping_label(damping) -> str:
+    """``"b=0.25,b1=0"``: the key of a (grid viscosity, bulk viscosity) pair in the numbers."""
+    return f"b={damping[0]:g},b1={damping[1]:g}"
+
+
+def of_damping(rows, hopper, damping):
+    """The rows of ``hopper`` run with ``damping``."""
+    return [r for r in rows if r["hopper"] == hopper and r["grid_viscosity"] == damping[0]
+            and r["bulk_viscosity"] == damping[1]]
+
+
+def case_for(opts, hopper, modulus, damping):
+    b, b1 = damping
     extra = HOPPERS[hopper]
     end = opts["funnel_time"] if hopper == "funnel" else opts["reference_time"]
     config = {"hopper": {**opts["hopper"], **extra.get("hopper", {})},
               "material": {"youngs_modulus": float(modulus)},
               "wall": dict(extra.get("wall", {})),
-              "numerics": {"cell_size": float(opts["cell_size"]), "grid_viscosity": float(b)},
+              "numerics": {"cell_size": float(opts["cell_size"]), "grid_viscosity": float(b),
+                           "bulk_viscosity": float(b1)},
               "run": {"end_time": float(end), "output_interval": 0.05,
                       "markers_per_side": 0}}
-    name = _sweep.case_name((hopper, ""), ("E", round(modulus / 1e6, 4)), ("b", float(b)))
+    name = _sweep.case_name((hopper, ""), ("E", round(modulus / 1e6, 4)), ("b", float(b)),
+                            ("bulk", float(b1)))
     return _sweep.make_case(name, {"hopper": hopper, "youngs_modulus_MPa": modulus / 1e6,
-                                   "grid_viscosity": float(b)},
+                                   "grid_viscosity": float(b), "bulk_viscosity": float(b1)},
                             config, plots=opts["case_plots"])
 
 
 def setup(quick: bool = False, **options) -> dict:
     """The cases and options (``{"options", "cases", "setting"}``); unknown options raise."""
     opts = _sweep.resolve_options(DEFAULTS, options, QUICK if quick else None)
-    cases = [case_for(opts, "funnel", E, b) for b in opts["viscosities"] for E in opts["moduli"]]
-    cases += [case_for(opts, "reference", E, b) for b in opts["viscosities"]
+    cases = [case_for(opts, "funnel", E, d) for d in opts["dampings"] for E in opts["moduli"]]
+    cases += [case_for(opts, "reference", E, d) for d in opts["dampings"]
               for E in opts["reference_moduli"]]
     return {"options": opts, "cases": cases, "setting": _sweep.setting_label(quick, options)}
+
+
+def damping_pair(text: str) -> tuple:
+    """``"0.25,0"`` -> ``(0.25, 0.0)``: a ``--dampings`` pair (b, b_1)."""
+    parts = text.split(",")
+    if len(parts) != 2:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected B,B1 (grid and bulk viscosity)")
+    try:
+        return float(parts[0]), float(parts[1])
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected two numbers B,B1") from None
 
 
 # ---------------------------------------------------------------- analysis
@@ -98,32 +124,33 @@ def _results(row):
 
 
 def analyse(rows, options) -> tuple:
-    """``(spread rows, numbers, envelopes)``: per hopper and b, the spread of the funnel's
+    """``(spread rows, numbers, envelopes)``: per hopper and damping, the spread of the funnel's
     discharged mass over E ((max - min) / mean, %) and the reference hopper's largest L2
     difference (%) of each stage's wall profile between two moduli; ``envelopes`` maps each
     reference run's case to ``(centres, p_n envelope, transition arc length)`` for the
     figure."""
     spread, numbers, envelopes = [], {}, {}
-    for b in options["viscosities"]:
-        funnel = [r for r in rows if r["hopper"] == "funnel" and r["grid_viscosity"] == b]
+    for damping in options["dampings"]:
+        key = damping_label(damping)
+        funnel = of_damping(rows, "funnel", damping)
         masses = [float(r.get("discharged_kg", math.nan)) for r in funnel]
         ok = [m for m in masses if _sweep.finite(m)]
         if len(ok) >= 2:
             value = 100.0 * (max(ok) - min(ok)) / float(np.mean(ok))
-            spread.append({"hopper": "funnel", "grid_viscosity": b,
+            spread.append({"hopper": "funnel", "damping": key,
                            "measure": f"kg discharged in {options['funnel_time']:g} s",
                            "spread_pct": value})
-            numbers[f"funnel_mass_spread_pct[b={b:g}]"] = value
-            numbers[f"funnel_mass_kg[b={b:g}]"] = {
+            numbers[f"funnel_mass_spread_pct[{key}]"] = value
+            numbers[f"funnel_mass_kg[{key}]"] = {
                 f"{r['youngs_modulus_MPa']:g} MPa": m for r, m in zip(funnel, masses)}
-        ref = [r for r in rows if r["hopper"] == "reference" and r["grid_viscosity"] == b]
+        ref = of_damping(rows, "reference", damping)
         loaded = []
         for r in ref:
             try:
                 loaded.append((r, _results(r)))
             except FileNotFoundError:
                 continue
-        numbers[f"reference_rate_kg_s[b={b:g}]"] = {
+        numbers[f"reference_rate_kg_s[{key}]"] = {
             f"{r['youngs_modulus_MPa']:g} MPa": r.get("steady_discharge_rate_kg_s", math.nan)
             for r in ref}
         for r, res in loaded:
@@ -141,10 +168,10 @@ def analyse(rows, options) -> tuple:
                 for _, pb in profiles[i + 1:]:
                     n = min(len(pa), len(pb))
                     worst = max(worst, relative_l2(pa[:n], pb[:n]))
-            spread.append({"hopper": "reference", "grid_viscosity": b,
+            spread.append({"hopper": "reference", "damping": key,
                            "measure": f"wall profile L2, {stage.replace('_', ' ')}",
                            "spread_pct": 100.0 * worst})
-            numbers[f"reference_wall_l2_pct[b={b:g}|{stage}]"] = 100.0 * worst
+            numbers[f"reference_wall_l2_pct[{key}|{stage}]"] = 100.0 * worst
     numbers["failed"] = [r["case"] for r in rows if r.get("error")]
     return spread, numbers, envelopes
 
@@ -153,19 +180,20 @@ def analyse(rows, options) -> tuple:
 def plot(rows, envelopes, options):
     fig = _sweep.figure(11.0, 4.2)
     a1, a2 = fig.subplots(1, 2)
-    for k, b in enumerate(options["viscosities"]):
-        funnel = sorted((r for r in rows if r["hopper"] == "funnel"
-                         and r["grid_viscosity"] == b), key=lambda r: r["youngs_modulus_MPa"])
+    for k, damping in enumerate(options["dampings"]):
+        label = damping_label(damping).replace("=", " = ").replace(",", ", ")
+        funnel = sorted(of_damping(rows, "funnel", damping),
+                        key=lambda r: r["youngs_modulus_MPa"])
         if funnel:
             a1.semilogx([r["youngs_modulus_MPa"] for r in funnel],
                         [r.get("discharged_kg", math.nan) for r in funnel], "o-",
-                        color=f"C{k}", label=f"b = {b:g}")
-        for j, r in enumerate(sorted((r for r in rows if r["hopper"] == "reference"
-                                      and r["grid_viscosity"] == b and r["case"] in envelopes),
+                        color=f"C{k}", label=label)
+        for j, r in enumerate(sorted((r for r in of_damping(rows, "reference", damping)
+                                      if r["case"] in envelopes),
                                      key=lambda r: r["youngs_modulus_MPa"])):
             centres, p_n, _ = envelopes[r["case"]]
             a2.plot(centres, p_n / 1e3, ("-", "--", ":")[j % 3], color=f"C{k}", marker=".",
-                    label=f"b = {b:g}, E = {r['youngs_modulus_MPa']:g} MPa")
+                    label=f"{label}, E = {r['youngs_modulus_MPa']:g} MPa")
     moduli = sorted({r["youngs_modulus_MPa"] for r in rows if r["hopper"] == "funnel"})
     if moduli:
         a1.minorticks_off()
@@ -188,37 +216,41 @@ def plot(rows, envelopes, options):
 def write_outputs(out, rows, spread, numbers, envelopes, options, setting, argv=None):
     out = Path(out)
     _sweep.write_rows_csv(out / "results.csv", rows, first=(
-        "case", "hopper", "youngs_modulus_MPa", "grid_viscosity", "discharged_kg",
+        "case", "hopper", "youngs_modulus_MPa", "grid_viscosity", "bulk_viscosity",
+        "discharged_kg",
         "steady_discharge_rate_kg_s", "flow_mode", "mass_balance_error", "steps", "wall_time_s",
         "error"))
     _sweep.write_rows_csv(out / "spread.csv", spread)
     _sweep.save(plot(rows, envelopes, options), out / "stiffness_spread.png")
     figures = [{"file": "stiffness_spread.png",
-                "caption": "Left: the funnel-flow hopper's discharged mass against E, per grid "
-                           "viscosity b. Right: the reference hopper's envelope of the wall "
-                           "pressure over the discharge, per b and E."}]
+                "caption": "Left: the funnel-flow hopper's discharged mass against E, per "
+                           "damping (grid viscosity b, bulk viscosity b1). Right: the "
+                           "reference hopper's envelope of the wall pressure over the "
+                           "discharge, per damping and E."}]
     findings = []
-    for b in options["viscosities"]:
-        masses = numbers.get(f"funnel_mass_kg[b={b:g}]")
+    for damping in options["dampings"]:
+        key = damping_label(damping)
+        label = key.replace("=", " = ").replace(",", ", ")
+        masses = numbers.get(f"funnel_mass_kg[{key}]")
         if masses:
             findings.append(
-                f"Funnel-flow hopper, b = {b:g}: " + ", ".join(
+                f"Funnel-flow hopper, {label}: " + ", ".join(
                     f"{k} {v:.3f} kg" for k, v in masses.items())
                 + f" in {options['funnel_time']:g} s; spread "
-                f"{numbers[f'funnel_mass_spread_pct[b={b:g}]']:.1f} %.")
-        parts = [f"{stage.replace('_', ' ')} {numbers[key]:.2f} %" for stage in STAGES
-                 if (key := f"reference_wall_l2_pct[b={b:g}|{stage}]") in numbers]
-        rates = numbers.get(f"reference_rate_kg_s[b={b:g}]", {})
+                f"{numbers[f'funnel_mass_spread_pct[{key}]']:.1f} %.")
+        parts = [f"{stage.replace('_', ' ')} {numbers[name]:.2f} %" for stage in STAGES
+                 if (name := f"reference_wall_l2_pct[{key}|{stage}]") in numbers]
+        rates = numbers.get(f"reference_rate_kg_s[{key}]", {})
         if parts:
             findings.append(
-                f"Reference hopper, b = {b:g}: wall-profile L2 between the moduli: "
+                f"Reference hopper, {label}: wall-profile L2 between the moduli: "
                 + ", ".join(parts) + "; steady rates " + ", ".join(
                     f"{k} {v:.3f} kg/s" for k, v in rates.items()) + ".")
     if numbers["failed"]:
         findings.append("Failed runs: " + ", ".join(numbers["failed"]) + ".")
     tables = [{"title": "Spread over E",
-               "columns": ["hopper", "b", "measure", "spread %"],
-               "rows": [[s["hopper"], s["grid_viscosity"], s["measure"],
+               "columns": ["hopper", "damping", "measure", "spread %"],
+               "rows": [[s["hopper"], s["damping"], s["measure"],
                          round(s["spread_pct"], 2)] for s in spread]}]
     settings = {k: (list(v) if isinstance(v, tuple) else v) for k, v in options.items()}
     _sweep.write_study_json(out, NAME, TITLE, setting, settings, numbers, findings, figures,
@@ -229,20 +261,21 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     _sweep.add_arguments(parser, NAME)
     parser.add_argument("--moduli", type=float, nargs="+", help="Pa, the funnel hopper")
-    parser.add_argument("--viscosities", type=float, nargs="+", help="grid viscosity b")
+    parser.add_argument("--dampings", type=damping_pair, nargs="+", metavar="B,B1",
+                        help="pairs of grid viscosity b and bulk viscosity b_1")
     args = parser.parse_args(argv)
-    options = _sweep.study_options(args, ("moduli", "viscosities"))
+    options = _sweep.study_options(args, ("moduli", "dampings"))
     if "moduli" in options:
         options["moduli"] = tuple(options["moduli"])
-    if "viscosities" in options:
-        options["viscosities"] = tuple(options["viscosities"])
+    if "dampings" in options:
+        options["dampings"] = tuple(options["dampings"])
     study = setup(quick=args.quick, **options)
     rows = _sweep.run_study(NAME, study, args)
     spread, numbers, envelopes = analyse(rows, study["options"])
     write_outputs(args.out, rows, spread, numbers, envelopes, study["options"],
                   study["setting"], argv)
     for s in spread:
-        print(f"{s['hopper']}, b = {s['grid_viscosity']:g}, {s['measure']}: "
+        print(f"{s['hopper']}, {s['damping']}, {s['measure']}: "
               f"{s['spread_pct']:.2f} %")
     print(f"written to {args.out}")
     return 0

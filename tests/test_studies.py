@@ -350,19 +350,20 @@ def test_discharge_dynamics_reads_the_bin_plug_without_changing_the_run(root):
 
 
 # ---------------------------------------------------------------- the report
-def test_stiffness_spread_runs_both_hoppers_with_and_without_the_viscosity(root):
+def test_stiffness_spread_runs_both_hoppers_with_and_without_the_viscosities(root):
     out = run_quick(root, "stiffness_spread")
     data = study_json(out)
     assert data["setting"] == "quick"
     numbers = data["numbers"]
-    for b in ("0", "0.5"):
-        masses = numbers[f"funnel_mass_kg[b={b}]"]
+    for key in ("b=0,b1=0", "b=0.5,b1=0", "b=0,b1=0.1"):
+        masses = numbers[f"funnel_mass_kg[{key}]"]
         assert len(masses) == 2 and all(m > 0 for m in masses.values())
-        assert 0 <= numbers[f"funnel_mass_spread_pct[b={b}]"] < 50
+        assert 0 <= numbers[f"funnel_mass_spread_pct[{key}]"] < 50
         for stage in ("filling", "early_discharge", "discharge_envelope"):
-            assert math.isfinite(numbers[f"reference_wall_l2_pct[b={b}|{stage}]"])
+            assert math.isfinite(numbers[f"reference_wall_l2_pct[{key}|{stage}]"])
     rows = rows_of(out / "results.csv")
-    assert {r["grid_viscosity"] for r in rows} == {"0.0", "0.5"}
+    assert {(r["grid_viscosity"], r["bulk_viscosity"]) for r in rows} == {
+        ("0.0", "0.0"), ("0.5", "0.0"), ("0.0", "0.1")}
     assert all(r["error"] == "" for r in rows)
     assert_png(out / "stiffness_spread.png")
 
