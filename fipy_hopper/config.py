@@ -80,6 +80,12 @@ def _check_number(key: str, value: Any, allowed: str = "") -> float:
     return number
 
 
+def damped_step_factor(xi: float) -> float:
+    """``sqrt(1 + xi^2) - xi``: the explicit step limit of the shortest mode damped at the
+    fraction ``xi`` of critical (the bulk viscosity ``b_1``), relative to the undamped one."""
+    return math.sqrt(1.0 + xi * xi) - xi
+
+
 def _check_range(key: str, value: Any, low=None, high=None, low_open=False, high_open=False,
                  unit: str = "") -> float:
     """Check ``low <(=) value <(=) high`` and return the value as float; error names the key."""
@@ -586,10 +592,12 @@ class HopperConfig:
 
     @property
     def time_step(self) -> float:
-        """The explicit time step ``dt_safety * cell_size / c_p`` (s), as the model takes it
-        (the law's :meth:`~fipy_hopper.material.MohrCoulomb.stable_time_step`)."""
-        return self.material.law().stable_time_step(self.numerics.cell_size,
-                                                    self.numerics.dt_safety)
+        """The explicit time step ``dt_safety * cell_size / c_p`` (the law's
+        :meth:`~fipy_hopper.material.MohrCoulomb.stable_time_step`) times
+        :func:`damped_step_factor` of the bulk viscosity (s), as the model takes it."""
+        return (self.material.law().stable_time_step(self.numerics.cell_size,
+                                                     self.numerics.dt_safety)
+                * damped_step_factor(self.numerics.bulk_viscosity))
 
     def step_estimate(self) -> float:
         """Most time steps a run can take: filling up to ``max_fill_time`` plus the discharge."""

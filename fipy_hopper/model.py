@@ -52,7 +52,7 @@ import numpy as np
 import numba
 
 from . import dense_loose, geometry, markers, material, momentum, stepping
-from .config import HopperConfig
+from .config import HopperConfig, damped_step_factor
 from .mesh import HopperGrid, build_grid
 from .material.law import transported_fields
 from .transport import material_rows
@@ -169,10 +169,8 @@ class HopperModel:
         #: bulk viscosity ``eta_b = b_1 rho c_p h`` (Pa s; ``numerics.bulk_viscosity`` b_1): about
         #: the fraction b_1 of critical damping for the shortest compression wave
         self.bulk_viscosity = cfg.numerics.bulk_viscosity * self.rho * self.c_p * g.h
-        # a damped mode's explicit limit is (sqrt(1 + xi^2) - xi) of the undamped one
-        bulk = cfg.numerics.bulk_viscosity
         self.dt = (self.material.stable_time_step(g.h, cfg.numerics.dt_safety)
-                   * (math.sqrt(1.0 + bulk * bulk) - bulk))
+                   * damped_step_factor(cfg.numerics.bulk_viscosity))
         self.mu_wall = cfg.wall.friction_coefficient
         # the symmetry as data: an axisymmetric cone, or a wedge in plane strain (per metre)
         axisymmetric = cfg.hopper.axisymmetric

@@ -228,8 +228,10 @@ def test_bulk_viscosity_is_b1_rho_cp_h_and_shortens_the_step():
     plain, damped = HopperModel(config()), HopperModel(config(bulk_viscosity=0.1))
     assert plain.bulk_viscosity == 0.0
     assert damped.bulk_viscosity == pytest.approx(0.1 * 1500.0 * damped.c_p * 0.01)
-    # the explicit limit of a mode damped at the fraction xi of critical
+    # the explicit limit of a mode damped at the fraction xi of critical, in the model and in
+    # what the configuration reports (``fipy-hopper validate``)
     assert damped.dt / plain.dt == pytest.approx(math.sqrt(1.01) - 0.1, rel=1e-12)
+    assert damped.cfg.time_step == pytest.approx(damped.dt, rel=1e-12)
 
 
 def test_kernel_forces_are_those_of_sigma_plus_the_bulk_pressure(compressing):
