@@ -17,7 +17,7 @@ Written to ``--out`` (default ``studies/output/stiffness_spread``): ``results.cs
 run), ``spread.csv`` (the spreads per hopper, damping and stage), ``study.json`` and
 ``stiffness_spread.png``.
 
-Default cost (2 cores, 2026-12-02): 15 runs, about 2 000 core-seconds.
+Default cost (2 cores, 2026-12-02): 15 runs, about 1 500 core-seconds (13 minutes).
 
 Usage::
 
