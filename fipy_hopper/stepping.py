@@ -9,10 +9,10 @@ compiled kernels it replaces:
 
 1. nodal forces ``-f_int(alpha (sigma + 2 eta D + eta_b tr(D) I)) + f_hg`` (``eta``,
    ``eta_b``: the grid and the bulk viscosity, 0 by default): each cell's corner forces, then
-   each node's sum of its four cells' in the order in which a cell-by-cell scatter adds them; velocity
-   ``v += dt (f / m - g e_z)``, mass-proportional damping, light nodes at rest; then, node row
-   by node row, the wall contacts in the order of the model's contact list, the outlet plate
-   and the axis (``v_r = 0``);
+   each node's sum of its four cells' in the order in which a cell-by-cell scatter adds them;
+   velocity ``v += dt (f / m - g e_z)``, mass-proportional damping, light nodes at rest;
+   then, node row by node row, the wall contacts in the order of the model's contact list,
+   the outlet plate and the axis (``v_r = 0``);
 2. per *loaded* cell (``alpha >= alpha_min``): the Q1 strain increment and spin, the Jaumann
    rotation, the open-volume divergence as volumetric strain, the closing of loose volume
    (first pass, over runs of cells along a row), then the elastic predictor, the Mohr-Coulomb
