@@ -70,6 +70,11 @@ def damping_label(damping) -> str:
     return f"b={damping[0]:g},b1={damping[1]:g}"
 
 
+def damping_text(damping) -> str:
+    """``"b = 0.25, b1 = 0"``: the pair as the figure and the findings show it."""
+    return damping_label(damping).replace("=", " = ").replace(",", ", ")
+
+
 def of_damping(rows, hopper, damping):
     """The rows of ``hopper`` run with ``damping``."""
     return [r for r in rows if r["hopper"] == hopper and r["grid_viscosity"] == damping[0]
@@ -181,7 +186,7 @@ def plot(rows, envelopes, options):
     fig = _sweep.figure(11.0, 4.2)
     a1, a2 = fig.subplots(1, 2)
     for k, damping in enumerate(options["dampings"]):
-        label = damping_label(damping).replace("=", " = ").replace(",", ", ")
+        label = damping_text(damping)
         funnel = sorted(of_damping(rows, "funnel", damping),
                         key=lambda r: r["youngs_modulus_MPa"])
         if funnel:
@@ -229,8 +234,7 @@ def write_outputs(out, rows, spread, numbers, envelopes, options, setting, argv=
                            "discharge, per damping and E."}]
     findings = []
     for damping in options["dampings"]:
-        key = damping_label(damping)
-        label = key.replace("=", " = ").replace(",", ", ")
+        key, label = damping_label(damping), damping_text(damping)
         masses = numbers.get(f"funnel_mass_kg[{key}]")
         if masses:
             findings.append(

@@ -203,17 +203,20 @@ def test_shear_wave_decays_at_the_stated_rate_whatever_the_stiffness(b):
         assert -math.log(ratio) / t == pytest.approx(4 * b * scale, rel=0.03)
 
 
-# ---------------------------------------------------------------- input
-@pytest.mark.parametrize("value", [-0.1, 11.0, float("nan")])
-def test_bad_grid_viscosity_is_refused(value):
-    with pytest.raises(ConfigError, match="numerics.grid_viscosity"):
-        config(grid_viscosity=value)
+# ---------------------------------------------------------------- input (both viscosities)
+@pytest.mark.parametrize("key, value", [
+    ("grid_viscosity", -0.1), ("grid_viscosity", 11.0), ("grid_viscosity", float("nan")),
+    ("bulk_viscosity", -0.1), ("bulk_viscosity", 1.5), ("bulk_viscosity", float("nan"))])
+def test_bad_viscosity_is_refused(key, value):
+    with pytest.raises(ConfigError, match=f"numerics.{key}"):
+        config(**{key: value})
 
 
-def test_grid_viscosity_is_eulerian_only():
-    with pytest.raises(ConfigError, match="grid_viscosity.*eulerian"):
-        config(grid_viscosity=0.25, formulation="lagrangian")
-    assert config(grid_viscosity=0.0, formulation="lagrangian").numerics.grid_viscosity == 0.0
+@pytest.mark.parametrize("key, value", [("grid_viscosity", 0.25), ("bulk_viscosity", 0.06)])
+def test_viscosity_is_eulerian_only(key, value):
+    with pytest.raises(ConfigError, match=f"{key}.*eulerian"):
+        config(**{key: value}, formulation="lagrangian")
+    assert getattr(config(**{key: 0.0}, formulation="lagrangian").numerics, key) == 0.0
 
 
 # ---------------------------------------------------------------- bulk viscosity
@@ -300,14 +303,3 @@ def test_bulk_viscosity_keeps_flowing_material_off_the_stress_free_apex():
     assert share_0 > 0.10
     assert share_1 < 0.4 * share_0
     assert mass_1 == pytest.approx(mass_0, rel=0.03)
-
-
-@pytest.mark.parametrize("value", [-0.1, 1.5, float("nan")])
-def test_bad_bulk_viscosity_is_refused(value):
-    with pytest.raises(ConfigError, match="numerics.bulk_viscosity"):
-        config(bulk_viscosity=value)
-
-
-def test_bulk_viscosity_is_eulerian_only():
-    with pytest.raises(ConfigError, match="bulk_viscosity.*eulerian"):
-        config(bulk_viscosity=0.06, formulation="lagrangian")
