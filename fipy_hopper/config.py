@@ -80,6 +80,12 @@ def _check_number(key: str, value: Any, allowed: str = "") -> float:
     return number
 
 
+#: ``numerics.bulk_viscosity = "auto"`` with the Eulerian formulation: at this ``b_1`` the
+#: discharge loads and the early funnel-flow rate no longer depend on E and the loads converge
+#: with the grid (``docs/validation.md``); 0.1 gave larger spreads.
+DEFAULT_BULK_VISCOSITY = 0.06
+
+
 def damped_step_factor(xi: float) -> float:
     """``sqrt(1 + xi^2) - xi``: the explicit step limit of the shortest mode damped at the
     fraction ``xi`` of critical (the bulk viscosity ``b_1``), relative to the undamped one."""
@@ -338,7 +344,9 @@ class NumericsConfig:
       ``eta`` vanishes as ``h^1.5`` under refinement.  At 5 mm, ``b = 0.25`` gives ``eta =
       0.41 Pa s``, the order of the rate dependence of a 1 mm sand (``mu(I)``).  Eulerian
       formulation only.
-    - ``bulk_viscosity`` ``b_1`` (dimensionless, 0: off): a viscous pressure ``eta_b tr(D)``
+    - ``bulk_viscosity`` ``b_1`` (dimensionless, 0: off; ``"auto"``, the default, is
+      :data:`DEFAULT_BULK_VISCOSITY` with the Eulerian formulation and 0 with the Lagrangian
+      one, see :attr:`HopperConfig.bulk_viscosity`): a viscous pressure ``eta_b tr(D)``
       added to the normal stresses of every loaded cell in the internal forces, ``eta_b = b_1
       rho c_p h`` (Pa s), the linear bulk viscosity of explicit dynamics codes: it damps the
       shortest compression wave at about the fraction ``b_1`` of critical, and the time step
@@ -376,7 +384,7 @@ class NumericsConfig:
     max_transport_interval: int = 50
     hourglass_coefficient: float = 0.1
     grid_viscosity: float = 0.0
-    bulk_viscosity: float = 0.0
+    bulk_viscosity: Union[float, str] = "auto"
     alpha_min: float = 1.0e-3
     free_fall_depth: float = 1.0
     gravity_ramp_time: Union[float, str] = "auto"
@@ -397,7 +405,9 @@ class NumericsConfig:
         _check_int("numerics.max_transport_interval", self.max_transport_interval, 1, 100_000)
         _check_range("numerics.hourglass_coefficient", self.hourglass_coefficient, 0, 100)
         _check_range("numerics.grid_viscosity", self.grid_viscosity, 0, 10)
-        _check_range("numerics.bulk_viscosity", self.bulk_viscosity, 0, 1)
+        if self.bulk_viscosity != "auto":
+            _check_range("numerics.bulk_viscosity", self.bulk_viscosity, 0, 1,
+                         unit='; or "auto"')
         _check_range("numerics.alpha_min", self.alpha_min, 0, 0.5, low_open=True)
         _check_range("numerics.free_fall_depth", self.free_fall_depth, 0.25, 10)
         if isinstance(self.gravity_ramp_time, str):
@@ -544,8 +554,8 @@ class HopperConfig:
         if self.numerics.formulation == "lagrangian" and not self.hopper.axisymmetric:
             raise ConfigError('numerics.formulation = "lagrangian" models conical hoppers only; '
                               'a wedge (hopper.shape = "wedge") runs with "eulerian"')
-        for key in ("grid_viscosity", "bulk_viscosity"):
-            value = getattr(self.numerics, key)
+        for key, value in (("grid_viscosity", self.numerics.grid_viscosity),
+                           ("bulk_viscosity", self.bulk_viscosity)):
             if self.numerics.formulation == "lagrangian" and value > 0.0:
                 raise ConfigError(f"numerics.{key} = {value:g} applies to "
                                   'numerics.formulation = "eulerian" only; allowed range with '
@@ -597,7 +607,7 @@ class HopperConfig:
         :func:`damped_step_factor` of the bulk viscosity (s), as the model takes it."""
         return (self.material.law().stable_time_step(self.numerics.cell_size,
                                                      self.numerics.dt_safety)
-                * damped_step_factor(self.numerics.bulk_viscosity))
+                * damped_step_factor(self.bulk_viscosity))
 
     def step_estimate(self) -> float:
         """Most time steps a run can take: filling up to ``max_fill_time`` plus the discharge."""
@@ -660,6 +670,16 @@ class HopperConfig:
         if num.gravity_ramp_time == "auto":
             return num.gravity_ramp_periods * self.column_period
         return float(num.gravity_ramp_time)
+
+    @property
+    def bulk_viscosity(self) -> float:
+        """The bulk viscosity ``b_1`` the model uses: ``numerics.bulk_viscosity``, or for
+        ``"auto"`` :data:`DEFAULT_BULK_VISCOSITY` with the Eulerian formulation and 0 with the
+        Lagrangian one (which has no bulk viscosity)."""
+        num = self.numerics
+        if num.bulk_viscosity == "auto":
+            return DEFAULT_BULK_VISCOSITY if num.formulation == "eulerian" else 0.0
+        return float(num.bulk_viscosity)
 
     @classmethod
     def from_dict(cls, data: dict) -> "HopperConfig":

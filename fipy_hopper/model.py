@@ -168,9 +168,9 @@ class HopperModel:
         self.c_p = self.material.p_wave_speed
         #: bulk viscosity ``eta_b = b_1 rho c_p h`` (Pa s; ``numerics.bulk_viscosity`` b_1): about
         #: the fraction b_1 of critical damping for the shortest compression wave
-        self.bulk_viscosity = cfg.numerics.bulk_viscosity * self.rho * self.c_p * g.h
+        self.bulk_viscosity = cfg.bulk_viscosity * self.rho * self.c_p * g.h
         self.dt = (self.material.stable_time_step(g.h, cfg.numerics.dt_safety)
-                   * damped_step_factor(cfg.numerics.bulk_viscosity))
+                   * damped_step_factor(cfg.bulk_viscosity))
         self.mu_wall = cfg.wall.friction_coefficient
         # the symmetry as data: an axisymmetric cone, or a wedge in plane strain (per metre)
         axisymmetric = cfg.hopper.axisymmetric

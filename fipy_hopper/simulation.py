@@ -727,7 +727,7 @@ class Simulation:
             "cell_size_m": m.cell_size,
             "hourglass_coefficient": m.cfg.numerics.hourglass_coefficient,
             "grid_viscosity": m.cfg.numerics.grid_viscosity,
-            "bulk_viscosity": m.cfg.numerics.bulk_viscosity,
+            "bulk_viscosity": m.cfg.bulk_viscosity,
         }
         out.update(diagnostics.load_summary(self))
         out.update(m.summary_extras(st))

@@ -66,7 +66,7 @@ CASES = [
      ["numerics.cell_size", "1e-07", "[0.0001, 10] m"]),
     ("a time step that cannot finish", "[material]\nyoungs_modulus = 1e12\n"
      "[numerics]\ncell_size = 0.001\n",
-     ["numerics.cell_size", "steps", "at most 1e+09", "numerics.cell_size >= 0.00465 m"]),
+     ["numerics.cell_size", "steps", "at most 1e+09", "numerics.cell_size >= 0.00494 m"]),
     ("end_time beyond max_time", "[run]\nend_time = 100.0\nmax_time = 60.0\n",
      ["run.end_time", "100", "run.max_time = 60", "[0, 60] s"]),
     ("a negative end time", "[run]\nend_time = -1.0\n", ["run.end_time", "[0, 1e+06] s"]),

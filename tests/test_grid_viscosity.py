@@ -32,7 +32,8 @@ def config(**numerics):
         return HopperConfig.from_dict({
             "hopper": {"bin_diameter": 0.2, "outlet_diameter": 0.06, "bin_height": 0.25,
                        "fill_height": 0.15},
-            "numerics": {"cell_size": 0.01, "gravity_ramp_time": 0.02, **numerics}})
+            "numerics": {"cell_size": 0.01, "gravity_ramp_time": 0.02, "bulk_viscosity": 0.0,
+                         **numerics}})
 
 
 @pytest.fixture(scope="module")
@@ -217,6 +218,21 @@ def test_viscosity_is_eulerian_only(key, value):
     with pytest.raises(ConfigError, match=f"{key}.*eulerian"):
         config(**{key: value}, formulation="lagrangian")
     assert getattr(config(**{key: 0.0}, formulation="lagrangian").numerics, key) == 0.0
+
+
+def test_bulk_viscosity_auto_is_the_default_for_the_eulerian_formulation_only():
+    """``"auto"`` (the default) is b_1 = DEFAULT_BULK_VISCOSITY on the fixed grid and 0 on the
+    Lagrangian mesh, which has none; other words are refused naming the key."""
+    from fipy_hopper.config import DEFAULT_BULK_VISCOSITY
+    assert DEFAULT_BULK_VISCOSITY == 0.06
+    eulerian = config(bulk_viscosity="auto")
+    assert eulerian.bulk_viscosity == DEFAULT_BULK_VISCOSITY
+    assert HopperConfig().bulk_viscosity == DEFAULT_BULK_VISCOSITY
+    assert HopperModel(eulerian).bulk_viscosity == pytest.approx(
+        0.06 * 1500.0 * eulerian.material.p_wave_speed * 0.01, rel=1e-12)
+    assert config(bulk_viscosity="auto", formulation="lagrangian").bulk_viscosity == 0.0
+    with pytest.raises(ConfigError, match='numerics.bulk_viscosity.*"auto"'):
+        config(bulk_viscosity="strong")
 
 
 # ---------------------------------------------------------------- bulk viscosity
