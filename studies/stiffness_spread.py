@@ -2,7 +2,7 @@
 
 Two hoppers, each discharged at several Young's moduli E and dampings: pairs of the grid
 viscosity b and the bulk viscosity b_1 (``numerics.grid_viscosity`` and ``bulk_viscosity``, 0
-by default: ``docs/physics_and_numerics.md`` §4):
+and 0.06 by default: ``docs/physics_and_numerics.md`` §4); each run sets both:
 
 * the funnel-flow hopper (the reference with a 60 deg cone and phi_w = 25 deg) for its first
   ``funnel_time`` s of discharge: the mass discharged, whose spread over E measures how much
