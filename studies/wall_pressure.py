@@ -91,6 +91,8 @@ QUICK = {"half_angles": (30.0,), "bin_diameter": 0.2, "fill_height": 0.1, "bin_h
          "cell_size": 0.01, "cell_sizes": (0.01, 0.0075), "youngs_moduli": (2.0e6, 20.0e6),
          "end_time": 0.5, "case_plots": False}
 STAGES = ("filling", "early_discharge", "mid_discharge")
+#: the stages compared between cell sizes and moduli: the windowed stages and the envelope
+SERIES_STAGES = STAGES + ("discharge_envelope",)
 COMMON_BIN = 0.045                   # m of wall: 6, 9, 12, 18 bins of 3 cells at 7.5-2.5 mm
 
 
@@ -377,13 +379,12 @@ def series_analysis(rows: list) -> tuple:
             loaded[row["case"]] = (row, load_case(row))
         except FileNotFoundError:
             continue
-    profiles = {case: {stage: common_profile(res, stage)
-                       for stage in ("filling", "discharge_envelope")}
+    profiles = {case: {stage: common_profile(res, stage) for stage in SERIES_STAGES}
                 for case, (row, res) in loaded.items()}
     table, numbers = [], {}
     grid = sorted((r for r, _ in loaded.values() if r.get("series") == "grid"
                    or _in_series(r, rows, "grid")), key=lambda r: -r["cell_size_m"])
-    for stage in ("filling", "discharge_envelope"):
+    for stage in SERIES_STAGES:
         curves = [(r, profiles[r["case"]][stage]) for r in grid
                   if profiles[r["case"]][stage] is not None]
         if len(curves) >= 2:
@@ -399,7 +400,7 @@ def series_analysis(rows: list) -> tuple:
             numbers[f"l2_changes_decrease[{stage}]"] = bool(np.all(np.diff(changes) < 0))
             numbers[f"l2_last_change_pct[{stage}]"] = changes[-1]
     stiff = [r for r, _ in loaded.values() if _in_series(r, rows, "stiffness")]
-    for stage in ("filling", "discharge_envelope"):
+    for stage in SERIES_STAGES:
         curves = [(r, profiles[r["case"]][stage]) for r in stiff
                   if profiles[r["case"]][stage] is not None]
         spread = 0.0
@@ -591,7 +592,7 @@ def write_outputs(out, rows, profiles, comparison, switch, numbers, options, set
             f"{sw['sim_ratio_discharge_to_filling']:.2f} x the filled peak there; Walker's "
             f"F_e sigma_vt = {sw['walker_hopper_Pa']:.0f} Pa ({sw['diff_peak_vs_walker_pct']:+.0f}"
             f" %), F_e/K = {sw['walker_ratio_Fe_over_K']:.2f}.")
-    for stage in ("filling", "discharge_envelope"):
+    for stage in SERIES_STAGES:
         pairs = [t for t in series_table if t["series"] == "grid" and t["stage"] == stage]
         if pairs:
             findings.append(
@@ -653,17 +654,40 @@ def write_outputs(out, rows, profiles, comparison, switch, numbers, options, set
     settings["regions"] = ("bin: 5-85 % of the equivalent fill depth; cone: 20-80 % of the "
                            "slant length; switch window: the quarter of the slant length below "
                            "the transition to 2 cells above it")
-    head = [f"{sw['case']} {sw['stage'].replace('_', ' ')}: switch peak "
-            f"{sw['peak_sim_Pa'] / 1e3:.2f} kPa vs Walker {sw['walker_hopper_Pa'] / 1e3:.2f} kPa "
-            f"({sw['diff_peak_vs_walker_pct']:+.0f} %)" for sw in switch]
-    fill = [f"{c['case']} filled, {c['region']}: {c['diff_pct']:+.0f} % from {c['theory']}"
-            for c in comparison if c["stage"] == "filling"
-            and c["theory"].startswith(("Janssen", "Walker"))]
-    conv = [f"filled L2 change 3.75->2.5 mm {numbers[k]:.1f} %"
-            for k in numbers if k == "l2_change_pct[filling|3.75->2.5 mm]"]
     _sweep.write_study_json(out, NAME, TITLE, setting, settings,
                             {k: v for k, v in numbers.items()}, findings, figures, tables,
-                            rows, argv, headline="; ".join(fill + head + conv) + ".")
+                            rows, argv, headline=headline(numbers, comparison, switch, rows))
+
+
+STAGE_WORDS = {"filling": "filled", "early_discharge": "90 % left",
+               "mid_discharge": "50 % left", "discharge_envelope": "envelope"}
+
+
+def headline(numbers: dict, comparison: list, switch: list, rows: list) -> str:
+    """One line: the last L2 change under refinement and the E spread per stage, the
+    equilibrium at rest, and the first grid case's filled means and early switch peak against
+    the theories."""
+    parts = []
+    last = [f"{STAGE_WORDS[st]} {numbers[f'l2_last_change_pct[{st}]']:.1f} %"
+            for st in SERIES_STAGES if f"l2_last_change_pct[{st}]" in numbers]
+    if last:
+        parts.append("last L2 change under refinement: " + ", ".join(last))
+    spread = [f"{STAGE_WORDS[st]} {numbers[f'E_spread_pct[{st}]']:.1f} %"
+              for st in SERIES_STAGES if f"E_spread_pct[{st}]" in numbers]
+    if spread:
+        parts.append("E spread: " + ", ".join(spread))
+    if math.isfinite(numbers.get("fill_equilibrium_residual_max_pct", math.nan)):
+        parts.append(f"reactions at rest within "
+                     f"{numbers['fill_equilibrium_residual_max_pct']:.2f} % of the weight")
+    reference = next((r["case"] for r in rows if _in_series(r, rows, "stiffness")
+                      and _in_series(r, rows, "grid")), rows[0]["case"] if rows else None)
+    parts += [f"{c['case']} filled {c['region']} {c['diff_pct']:+.0f} % from {c['theory']}"
+              for c in comparison if c["case"] == reference and c["stage"] == "filling"
+              and c["theory"].startswith(("Janssen", "Walker"))]
+    parts += [f"switch peak {sw['peak_sim_Pa'] / 1e3:.2f} kPa vs Walker "
+              f"{sw['walker_hopper_Pa'] / 1e3:.2f} kPa ({sw['diff_peak_vs_walker_pct']:+.0f} %)"
+              for sw in switch if sw["case"] == reference and sw["stage"] == "early_discharge"]
+    return "; ".join(parts) + "."
 
 
 def main(argv=None) -> int:
