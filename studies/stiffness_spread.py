@@ -258,7 +258,24 @@ def write_outputs(out, rows, spread, numbers, envelopes, options, setting, argv=
                          round(s["spread_pct"], 2)] for s in spread]}]
     settings = {k: (list(v) if isinstance(v, tuple) else v) for k, v in options.items()}
     _sweep.write_study_json(out, NAME, TITLE, setting, settings, numbers, findings, figures,
-                            tables, rows, argv)
+                            tables, rows, argv, headline=headline(numbers, options["dampings"]))
+
+
+def headline(numbers: dict, dampings) -> str:
+    """Per damping: the funnel's spread over E and the reference hopper's L2 between the
+    moduli at 90 % left and for the envelope."""
+    parts = []
+    for damping in dampings:
+        key = damping_label(damping)
+        said = []
+        if f"funnel_mass_spread_pct[{key}]" in numbers:
+            said.append(f"funnel {numbers[f'funnel_mass_spread_pct[{key}]']:.1f} %")
+        for stage, word in (("early_discharge", "90 % left"), ("discharge_envelope", "envelope")):
+            if (name := f"reference_wall_l2_pct[{key}|{stage}]") in numbers:
+                said.append(f"{word} {numbers[name]:.1f} %")
+        if said:
+            parts.append(f"{damping_text(damping)}: " + ", ".join(said))
+    return "Spread over E: " + "; ".join(parts) + "." if parts else "No runs."
 
 
 def main(argv=None) -> int:
