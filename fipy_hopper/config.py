@@ -447,6 +447,11 @@ class RunConfig:
     of such windows per bin; ``"auto"`` (the default) is 0.1 s, or the whole discharge when
     ``end_time`` is shorter (:attr:`load_window_s`).
 
+    ``opening_time`` (s): the outlet opens from the axis outwards over this time, as an iris
+    whose radius grows as ``R_0 (t - t_open) / opening_time``: a plate node is let go when the
+    radius passes it.  0 (the default) removes the whole plate at once.  The discharge's time
+    counts from the start of the opening; the at-rest rule waits for its end.
+
     Times are at most 1e6 s; ``end_time <= max_time``; ``output_interval`` and
     ``load_window`` may not exceed the discharge (``end_time``, or ``max_time`` for
     ``"empty"``): the steady rate needs samples; ``output_interval >= 0.1 ms``,
@@ -461,6 +466,7 @@ class RunConfig:
     field_interval: float = 0.25
     markers_per_side: int = 2
     load_window: Union[float, str] = "auto"
+    opening_time: float = 0.0
 
     def __post_init__(self):
         if isinstance(self.end_time, str):
@@ -477,6 +483,7 @@ class RunConfig:
         _check_range("run.field_interval", self.field_interval, FIELD_INTERVAL_MIN, TIME_MAX,
                      unit=" s")
         _check_int("run.markers_per_side", self.markers_per_side, 0, 6)
+        _check_range("run.opening_time", self.opening_time, 0, TIME_MAX, unit=" s")
         if isinstance(self.load_window, str):
             if self.load_window != "auto":
                 raise ConfigError(f"run.load_window = {_show(self.load_window)}: expected a time "
@@ -498,6 +505,11 @@ class RunConfig:
                 f"run.output_interval = {self.output_interval:g} s is longer than the discharge, "
                 f"{what} = {self.discharge_time:g} s: too few samples for a rate; allowed "
                 f"range is [{OUTPUT_INTERVAL_MIN:g}, {self.discharge_time:g}] s")
+        if self.opening_time > self.discharge_time:
+            raise ConfigError(
+                f"run.opening_time = {self.opening_time:g} s is longer than the discharge, "
+                f"{what} = {self.discharge_time:g} s: the outlet would never be open; allowed "
+                f"range is [0, {self.discharge_time:g}] s")
         if self.load_window != "auto" and self.load_window > self.discharge_time:
             raise ConfigError(
                 f"run.load_window = {self.load_window:g} s is longer than the discharge, "
@@ -554,6 +566,10 @@ class HopperConfig:
         if self.numerics.formulation == "lagrangian" and not self.hopper.axisymmetric:
             raise ConfigError('numerics.formulation = "lagrangian" models conical hoppers only; '
                               'a wedge (hopper.shape = "wedge") runs with "eulerian"')
+        if self.numerics.formulation == "lagrangian" and self.run.opening_time > 0.0:
+            raise ConfigError(f"run.opening_time = {self.run.opening_time:g} s applies to "
+                              'numerics.formulation = "eulerian" only; allowed range with '
+                              '"lagrangian" is [0, 0] s')
         for key, value in (("grid_viscosity", self.numerics.grid_viscosity),
                            ("bulk_viscosity", self.bulk_viscosity)):
             if self.numerics.formulation == "lagrangian" and value > 0.0:

@@ -99,6 +99,7 @@ class State:
     flux_time: float = 0.0          # time accumulated for the next transport
     face_flux_sum: np.ndarray = None  # (n_faces,) integrated normal velocity * dt
     plate_closed: bool = True
+    opened_at: float = -1.0         # s: when the outlet began to open (-1: not yet)
     last_outlet_mass: float = 0.0   # kg that crossed the outlet in the last transport
     last_transport_dt: float = 0.0
     loose: np.ndarray = None        # (nz, nr) loose volumetric strain (0 = dense), see step()
@@ -320,9 +321,28 @@ class HopperModel:
         return GRAVITY
 
     def open_outlet(self, state: State) -> None:
-        """Remove the outlet plate: discharge starts."""
-        state.plate_closed = False
+        """Open the outlet: discharge starts.  The plate goes at once, or over
+        ``run.opening_time`` from the axis outwards (:meth:`plate_opening_radius`)."""
         state.stage = "discharge"
+        state.opened_at = state.t
+        state.plate_closed = self.cfg.run.opening_time > 0.0
+
+    def plate_opening_radius(self, state: State) -> float:
+        """Radius (m) inside which the plate has let go at ``state.t``: ``R_0 (t - t_open) /
+        opening_time`` while the outlet opens, -1 before (the whole plate holds)."""
+        return stepping.opening_radius(state.t, self._opening(state))
+
+    def _opening(self, state: State) -> np.ndarray:
+        """``[t_open, opening_time, R_0]`` of :func:`stepping.opening_radius` (``t_open`` -1
+        unless the outlet is opening)."""
+        opening = state.plate_closed and state.opened_at >= 0.0
+        return np.array([state.opened_at if opening else -1.0, self.cfg.run.opening_time,
+                         self.cfg.hopper.outlet_radius])
+
+    def _end_opening(self, state: State) -> None:
+        """The plate is gone once the opening time has passed."""
+        if self.plate_opening_radius(state) == np.inf:
+            state.plate_closed = False
 
     # ------------------------------------------------------------------ the run's protocol
     #: the formulation (fipy_hopper.protocol): a fixed grid the material moves through
@@ -438,7 +458,9 @@ class HopperModel:
                 setattr(state, key, value)
         if self.backend == "numpy":
             for n in range(max_steps):
-                if self._step_numpy(state):
+                due = self._step_numpy(state)
+                self._end_opening(state)
+                if due:
                     self.transport_step(state)
                     return n + 1
             return max_steps
@@ -461,10 +483,11 @@ class HopperModel:
             self._zface_aperture, self._rface_aperture, self._face_sign, self._open_face,
             self._prm, self.dt, GRAVITY, ramp, damping, self.light_mass, num.alpha_min,
             num.transport_cfl, num.max_transport_interval, row_nodes, node_i, node_ptr,
-            normal, mu, kind, entry, state.plate_closed, state.wall_impulse,
-            state.plate_impulse, state.momentum_budget, self._work, self.viscosity,
-            self.bulk_viscosity)
+            normal, mu, kind, entry, state.plate_closed, self._opening(state), g.r_nodes,
+            state.wall_impulse, state.plate_impulse, state.momentum_budget, self._work,
+            self.viscosity, self.bulk_viscosity)
         state.t, state.flux_time = float(clock[0]), float(clock[2])
+        self._end_opening(state)
         state.step += int(done)
         if due:
             self.transport_step(state)
@@ -542,7 +565,10 @@ class HopperModel:
         budget = state.momentum_budget
         budget[0] -= np.sum(np.where(heavy, m * self.gravity(state) * dt, 0.0))
         budget[2] -= np.sum(np.where(heavy, 0.0, m * state.v[1]))
-        momentum.contact_nodes(v, m, self.contact_groups, state.plate_closed,
+        r_open = self.plate_opening_radius(state)
+        node_i = self.contact_groups[2]
+        plate_on = state.plate_closed & (g.r_nodes[node_i] >= r_open)
+        momentum.contact_nodes(v, m, self.contact_groups, plate_on,
                                state.wall_impulse, state.plate_impulse)
         if damping > 0.0:              # after the contact: a wall, not the damping, holds
             held = v[1].copy()         # what rests on it
@@ -566,7 +592,8 @@ class HopperModel:
             return
         dt_T = state.flux_time
         u_mean = state.face_flux_sum / dt_T
-        transport = self.transport_closed if state.plate_closed else self.transport_open
+        closed = state.plate_closed and state.stage == "filling"
+        transport = self.transport_closed if closed else self.transport_open
         compiled = self.backend != "numpy"
         if compiled:
             stacked = self._stacked

@@ -327,7 +327,8 @@ def contact_nodes(v, mass, groups, plate_closed, wall_impulse, plate_impulse):
     all its walls (``stepping._contact_node``), in place: the velocity closest to the free one
     that presses into no wall (one wall: :func:`apply_wall_contact`'s contact, with friction;
     a corner pressed from both sides: rest), and each constraint's impulse ``m dv`` added to
-    ``wall_impulse`` / ``plate_impulse``."""
+    ``wall_impulse`` / ``plate_impulse``.  ``plate_closed``: whether the plate holds, for all
+    nodes (a bool) or per node of ``groups`` (an array: the outlet opening)."""
     _, node_j, node_i, node_ptr, normal, mu, kind, entry = groups
     n_nodes = len(node_j)
     if n_nodes == 0:
@@ -338,7 +339,8 @@ def contact_nodes(v, mass, groups, plate_closed, wall_impulse, plate_impulse):
     index = node_ptr[:-1, None] + slot[None, :]
     present = slot[None, :] < count[:, None]
     index = np.where(present, index, 0)
-    active = present & ((kind[index] == 0) | plate_closed)
+    plate_on = np.asarray(plate_closed, dtype=bool)
+    active = present & ((kind[index] == 0) | (plate_on[:, None] if plate_on.ndim else plate_on))
     n = normal[index]                                          # (Q, K, 2)
     vel = v[:, node_j, node_i].T                               # (Q, 2)
     vn = np.einsum("qkc,qc->qk", n, vel)

@@ -67,9 +67,10 @@ from .model import GRAVITY, HopperModel, InstabilityError, State
 from .protocol import halt_reason
 
 #: The flow has stopped (stop reason ``"at_rest"``) when, later than ``AT_REST_AFTER`` s after
-#: the opening, every sample of the last ``AT_REST_WINDOW`` s had a discharge rate below
-#: ``AT_REST_RATE`` of the initial mass per second: a heel on a shallow cone, an arch over the
-#: outlet, a rathole (named by :class:`fipy_hopper.diagnostics.OutcomeRule`).
+#: the outlet is fully open (``run.opening_time`` after the opening began), every sample of
+#: the last ``AT_REST_WINDOW`` s had a discharge rate below ``AT_REST_RATE`` of the initial
+#: mass per second: a heel on a shallow cone, an arch over the outlet, a rathole (named by
+#: :class:`fipy_hopper.diagnostics.OutcomeRule`).
 AT_REST_AFTER, AT_REST_WINDOW, AT_REST_RATE = 0.5, 0.25, 1e-3
 #: Stages whose wall loads are measured from the moment this fraction of the mass is left
 #: (the default :class:`StageMark` s).
@@ -381,7 +382,7 @@ class Simulation:
             t_dis = st.t - self.t_open
             mass = m.mass_in_hopper(st)
             self._discharge_windows(mass, m0)
-            resting = t_dis > AT_REST_AFTER and self._at_rest()
+            resting = t_dis > AT_REST_AFTER + run.opening_time and self._at_rest()
             self._rest_samples = len(rec.rate) if resting else 0
             reason = ""
             for rule in self.stop_rules:

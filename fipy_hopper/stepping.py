@@ -302,16 +302,30 @@ def _contact_node(v, j, i, mass, k0, k1, normal, mu, kind, entry, plate_closed,
         contact_impulse[entry[k], 1] += m * dz
 
 
+@numba.njit(cache=True, error_model="numpy")
+def opening_radius(t, opening):
+    """Radius (m) inside which the outlet plate has let go at time ``t`` (s) of an opening
+    ``opening = [t_open, duration, R_0]``: ``R_0 (t - t_open) / duration`` while it opens,
+    infinite once ``t >= t_open + duration``, -1 when ``t_open < 0`` (not opening)."""
+    t_open, duration, outlet_radius = opening[0], opening[1], opening[2]
+    if t_open < 0.0:
+        return -1.0
+    if t >= t_open + duration:
+        return np.inf
+    return outlet_radius * (t - t_open) / duration
+
+
 @_jit_parallel
 def _node_update(j0, j1, v, mass, contrib, gravity, dt, damping, light_mass, row_nodes,
-                 node_i, node_ptr, normal, mu, kind, entry, plate_closed, contact_impulse,
-                 plate_impulse, row_budget):
+                 node_i, node_ptr, normal, mu, kind, entry, plate_closed, r_open, node_r,
+                 contact_impulse, plate_impulse, row_budget):
     """Velocities of the nodes of rows ``j0 <= j < j1`` from the corner forces (summed in the
     scatter's order: NE of the cell below left, NW below, SE left, SW own); then, node by
     node, the contact with the walls and the plate (:func:`_contact_node`; the nodes of row
     ``j`` are ``row_nodes[j]:row_nodes[j + 1]``, node ``q`` at column ``node_i[q]`` with the
-    constraints ``node_ptr[q]:node_ptr[q + 1]``), the mass-proportional damping (after the
-    contact, so that a wall, not the damping, holds what rests on it) and the axis.
+    constraints ``node_ptr[q]:node_ptr[q + 1]``; the plate holds a node only while
+    ``plate_closed`` and its radius ``node_r[i] >= r_open``), the mass-proportional damping
+    (after the contact, so that a wall, not the damping, holds what rests on it) and the axis.
 
     Measured on the way, without changing a velocity: the impulse ``m dv`` (kg m/s per radian)
     of every wall and plate constraint (:func:`_contact_node`), and each row's vertical
@@ -349,8 +363,9 @@ def _node_update(j0, j1, v, mass, contrib, gravity, dt, damping, light_mass, row
                 v[0, j, i] = 0.0
                 v[1, j, i] = 0.0
         for q in range(row_nodes[j], row_nodes[j + 1]):
-            _contact_node(v, j, node_i[q], mass, node_ptr[q], node_ptr[q + 1], normal, mu,
-                          kind, entry, plate_closed, contact_impulse, plate_impulse)
+            i = node_i[q]
+            _contact_node(v, j, i, mass, node_ptr[q], node_ptr[q + 1], normal, mu, kind, entry,
+                          plate_closed and node_r[i] >= r_open, contact_impulse, plate_impulse)
         if damping > 0.0:
             for i in range(nr1):
                 vz = v[1, j, i]
@@ -559,8 +574,8 @@ def material_steps(max_steps, clock, v, mass, alpha, sigma, loose, eps_p, face_f
                    dt, g_full,
                    ramp_time, damping, light_mass, alpha_min, transport_cfl,
                    max_transport_interval, row_nodes, node_i, node_ptr, normal, mu, kind,
-                   entry, plate_closed, contact_impulse, plate_impulse, budget, work,
-                   viscosity, bulk_viscosity):
+                   entry, plate_closed, opening, node_r, contact_impulse, plate_impulse, budget,
+                   work, viscosity, bulk_viscosity):
     """Up to ``max_steps`` material steps, in place.
 
     The symmetry is data: ``r_c`` is the radius of the hoop terms (the cell-centre radius;
@@ -570,7 +585,9 @@ def material_steps(max_steps, clock, v, mass, alpha, sigma, loose, eps_p, face_f
     ``clock = [t, step, flux_time]`` (s, -, s) is advanced; gravity is ``g_full`` ramped over
     ``ramp_time`` s (0: none).  The measurements of :func:`_node_update` accumulate in
     ``contact_impulse``, ``plate_impulse`` and ``budget[0:3]`` (vertical impulses of gravity,
-    damping and stopped light nodes; kg m/s per radian).  ``work = (carry runs (n, 3), load
+    damping and stopped light nodes; kg m/s per radian).  While ``plate_closed`` the outlet
+    opens as ``opening`` says (:func:`opening_radius`, each step) over the node radii
+    ``node_r``.  ``work = (carry runs (n, 3), load
     runs (n, 3), block pointers (n + 1,), corner forces (8, nz, nr), row speeds (nz + 1,),
     row budgets (nz + 1, 3))``, sized by the model.  ``viscosity`` and ``bulk_viscosity``: the
     grid viscosity ``eta`` and the bulk viscosity ``eta_b`` (Pa s; 0: none) of
@@ -589,8 +606,9 @@ def material_steps(max_steps, clock, v, mass, alpha, sigma, loose, eps_p, face_f
         _cell_forces(carry_runs, n_carry, alpha, sigma, v, open_volume, r_c, h, hg_base,
                      contrib, viscosity, bulk_viscosity, alpha_min)
         _node_update(j0, j1, v, mass, contrib, gravity, dt, damping, light_mass, row_nodes,
-                     node_i, node_ptr, normal, mu, kind, entry, plate_closed, contact_impulse,
-                     plate_impulse, row_budget)
+                     node_i, node_ptr, normal, mu, kind, entry, plate_closed,
+                     opening_radius(t, opening), node_r, contact_impulse, plate_impulse,
+                     row_budget)
         for j in range(j0, j1):           # in row order: the sums do not depend on threads
             budget[0] += row_budget[j, 0]
             budget[1] += row_budget[j, 1]

@@ -102,7 +102,8 @@ PLAUSIBLE = {
                             near(1e-3, 1.0)[1] | st.sampled_from(["", "AUTO", "all"])),
             "max_time": near(0.1, 120.0), "empty_fraction": near(0.001, 0.5),
             "wall_time_limit": near(0.0, 1e4), "output_interval": near(1e-3, 1.0),
-            "field_interval": near(1e-2, 5.0), "markers_per_side": near(0, 6, integer=True)},
+            "field_interval": near(1e-2, 5.0), "markers_per_side": near(0, 6, integer=True),
+            "opening_time": near(0.0, 1.0)},
 }
 
 
