@@ -592,7 +592,7 @@ class HopperModel:
             return
         dt_T = state.flux_time
         u_mean = state.face_flux_sum / dt_T
-        closed = state.plate_closed and state.stage == "filling"
+        closed = state.plate_closed and state.opened_at < 0.0     # open from the opening on
         transport = self.transport_closed if closed else self.transport_open
         compiled = self.backend != "numpy"
         if compiled:
