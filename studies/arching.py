@@ -52,12 +52,13 @@ g))^n`` per geometry (least squares in log space; 1 for a rate-independent conti
 dimensional analysis), and the E check: one case bisected at E = 2 and 20 MPa.
 
 The rathole case: a funnel-flow hopper (60 deg cone, phi_w = 25 deg, default 0.48 m bin,
-0.16 m outlet, 0.3 m fill) with ``sigma_c / (rho g)`` = 0.12 m, so that Jenike's critical
+0.18 m outlet, 0.3 m fill) with ``sigma_c / (rho g)`` = 0.12 m, so that Jenike's critical
 rathole diameter ``G(phi) sigma_c / (rho g)`` (:func:`fipy_hopper.theory.
 jenike_rathole_diameter`, 0.283 m) is larger than the outlet: Jenike expects a stable
-rathole.  The cohesion sits between two measured limits of this hopper: at 0.1 m the flow
-channel keeps widening (still flowing at 3 s, with 35.9 % left on 7.5 mm cells and 37.5 % on
-5 mm cells), from 0.135 m the outlet arches (7.5 mm cells).  Run until empty or at rest (capped at
+rathole.  The outlet sits between two measured limits of this hopper, opened over ten column
+periods at 5 mm: at 0.16 m the outlet arches, at 0.2 m a narrower rathole stands with a third
+of the mass, and at 0.22 m the bin empties down to dead zones on the cone (opened at once,
+0.16 m left a rathole).  Run until empty or at rest (capped at
 ``rathole_max_time``, 6 s) beside the same hopper without cohesion; reported: the outcome, the
 mass left, when the flow stopped, and the empty channel of the final state
 (:func:`fipy_hopper.diagnostics.empty_channel`) against Jenike's diameter.
@@ -121,7 +122,7 @@ DEFAULTS = {
     "rathole_half_angle": 60.0,     # deg
     "rathole_wall_friction": 25.0,  # deg
     "rathole_bin_diameter": 0.48,   # m
-    "rathole_outlet": 0.16,         # m
+    "rathole_outlet": 0.18,         # m
     "rathole_fill_height": 0.3,     # m above the transition
     "rathole_head": 0.12,           # sigma_c / (rho g) (m)
     "rathole_max_time": 6.0,        # s
