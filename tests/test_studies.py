@@ -217,6 +217,11 @@ def test_wall_pressure_profiles_theories_and_switch(wall):
     numbers = study_json(wall)["numbers"]
     assert "E_spread_pct[filling]" in numbers and "l2_change_pct[filling|10->7.5 mm]" in numbers
     assert numbers["fill_equilibrium_residual_max_pct"] < 0.5
+    # the spread below and above the transition: a pair's whole-wall L2 is a weighted mean of
+    # its two parts', so the largest over the pairs lies within the parts' largest
+    for key in [k for k in numbers if k.startswith("E_spread_pct[") and "|" not in k]:
+        cone, above = numbers[key[:-1] + "|cone]"], numbers[key[:-1] + "|bin]"]
+        assert 0.0 < numbers[key] <= max(cone, above) * (1 + 1e-12)
     assert_png(wall / "convergence.png")
 
 
