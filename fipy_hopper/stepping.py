@@ -31,7 +31,9 @@ nothing.  In discharge about half of the grid is empty or behind the wall.
 Work is organised in *runs*, ``(j, i0, i1)``: the cells ``i0 <= i < i1`` of row ``j`` (no
 integer division per cell, contiguous inner loops).  The loops over runs, node rows and
 blocks are ``prange`` loops (numba threads; the caller sets their number with
-``numba.set_num_threads``; one thread runs them in order).  Each sum has a fixed order, no two
+``numba.set_num_threads`` and passes it: the runs of the forces and the blocks of the stress
+update, which go up the hopper, are dealt to the threads in turn, so that each has its share
+of short and long rows and of the plastic cone; one thread runs them in order).  Each sum has a fixed order, no two
 threads write the same place and a return does not depend on which points share its block, so
 the results do not depend on the number of threads.
 """
@@ -58,17 +60,28 @@ _jit_parallel = numba.njit(cache=True, error_model="numpy", parallel=True)
 
 
 @_jit
-def _runs(alpha, alpha_min, sigma, loose, v, contrib, carry_runs, load_runs, block_ptr):
+def _runs(alpha, alpha_min, sigma, loose, v, contrib, carry_runs, load_runs, block_ptr,
+          threads=1):
     """Runs of carrying (``alpha != 0``) and of loaded cells, the loaded runs cut into blocks
-    of at most ``BLOCK`` cells (``block_ptr``: first run of each block, and the end).  Zeroes
+    of at most ``BLOCK`` cells (``block_ptr``: first run of each block, and the end), as
+    many as a multiple of the number of threads and of nearly equal size, so that the
+    threads' shares of the stress update are even (:func:`_stress_update`).  Zeroes
     stress and loose strain where not loaded, corner forces where nothing is carried and the
     velocity of node rows outside the material.  Returns ``(carry runs, load runs, blocks,
     first node row, end node row)``."""
     nz, nr = alpha.shape
+    loaded = 0
+    for j in range(nz):
+        for i in range(nr):
+            if alpha[j, i] >= alpha_min:
+                loaded += 1
+    blocks = -(-loaded // BLOCK)                     # ceil(loaded / BLOCK) blocks at least,
+    blocks = -(-blocks // threads) * threads         # ... a multiple of the threads,
+    block = max(-(-loaded // max(blocks, 1)), 1)     # ... of nearly equal size
     n_carry = 0
     n_load = 0
     n_blocks = 0
-    in_block = BLOCK
+    in_block = block
     j_lo, j_hi = nz + 1, -1
     for j in range(nz):
         start_c = -1
@@ -98,11 +111,11 @@ def _runs(alpha, alpha_min, sigma, loose, v, contrib, carry_runs, load_runs, blo
                 start_l = i
             elif not loads and start_l >= 0:
                 while start_l < i:         # cut at block boundaries
-                    if in_block == BLOCK:
+                    if in_block == block:
                         block_ptr[n_blocks] = n_load
                         n_blocks += 1
                         in_block = 0
-                    end = min(i, start_l + BLOCK - in_block)
+                    end = min(i, start_l + block - in_block)
                     load_runs[n_load, 0], load_runs[n_load, 1] = j, start_l
                     load_runs[n_load, 2] = end
                     n_load += 1
@@ -122,7 +135,7 @@ def _runs(alpha, alpha_min, sigma, loose, v, contrib, carry_runs, load_runs, blo
 
 @_jit_parallel
 def _cell_forces(carry_runs, n_carry, alpha, sigma, v, open_volume, r_c, h, hg_base, contrib,
-                 viscosity, bulk_viscosity, alpha_min):
+                 viscosity, bulk_viscosity, alpha_min, threads=1):
     """Corner forces ``-f_int + f_hg`` of the carrying cells into ``contrib`` (8, nz, nr):
     (r, z) at SW, SE, NE, NW, as ``momentum.internal_force`` and ``hourglass_force`` sum them.
     With ``viscosity`` ``eta > 0`` or ``bulk_viscosity`` ``eta_b > 0`` (Pa s) the stress of a
@@ -131,51 +144,52 @@ def _cell_forces(carry_runs, n_carry, alpha, sigma, v, open_volume, r_c, h, hg_b
     g = 1.0 / (2.0 * h)
     two_eta = 2.0 * viscosity
     viscous = viscosity > 0.0 or bulk_viscosity > 0.0
-    for run in prange(n_carry):
-        j, i0, i1 = carry_runs[run, 0], carry_runs[run, 1], carry_runs[run, 2]
-        for i in range(i0, i1):
-            a = alpha[j, i]
-            w = open_volume[j, i]
-            t_rr = sigma[j, i, 0]
-            t_zz = sigma[j, i, 1]
-            t_tt = sigma[j, i, 2]
-            t_rz = sigma[j, i, 3]
-            if viscous and a >= alpha_min:
-                vr_sw, vr_se = v[0, j, i], v[0, j, i + 1]
-                vr_ne, vr_nw = v[0, j + 1, i + 1], v[0, j + 1, i]
-                vz_sw, vz_se = v[1, j, i], v[1, j, i + 1]
-                vz_ne, vz_nw = v[1, j + 1, i + 1], v[1, j + 1, i]
-                d_rr = g * (vr_se + vr_ne - vr_sw - vr_nw)
-                d_zz = g * (vz_nw + vz_ne - vz_sw - vz_se)
-                d_tt = 0.25 * (vr_sw + vr_se + vr_ne + vr_nw) / r_c[i]
-                if viscosity > 0.0:
-                    dvr_dz = g * (vr_nw + vr_ne - vr_sw - vr_se)
-                    dvz_dr = g * (vz_se + vz_ne - vz_sw - vz_nw)
-                    t_rr = t_rr + two_eta * d_rr
-                    t_zz = t_zz + two_eta * d_zz
-                    t_tt = t_tt + two_eta * d_tt
-                    t_rz = t_rz + two_eta * (0.5 * (dvr_dz + dvz_dr))
-                if bulk_viscosity > 0.0:
-                    p_b = bulk_viscosity * ((d_rr + d_zz) + d_tt)
-                    t_rr = t_rr + p_b
-                    t_zz = t_zz + p_b
-                    t_tt = t_tt + p_b
-            s_rr = (a * t_rr) * w
-            s_zz = (a * t_zz) * w
-            s_tt = (a * t_tt) * w
-            s_rz = (a * t_rz) * w
-            hoop = s_tt / (4.0 * r_c[i])
-            c = hg_base[j, i] * a
-            mode_r = v[0, j, i] - v[0, j, i + 1] + v[0, j + 1, i + 1] - v[0, j + 1, i]
-            mode_z = v[1, j, i] - v[1, j, i + 1] + v[1, j + 1, i + 1] - v[1, j + 1, i]
-            contrib[0, j, i] = -(g * (-s_rr - s_rz) + hoop) - c * mode_r
-            contrib[1, j, i] = -(g * (-s_rz - s_zz)) - c * mode_z
-            contrib[2, j, i] = -(g * (s_rr - s_rz) + hoop) + c * mode_r
-            contrib[3, j, i] = -(g * (s_rz - s_zz)) + c * mode_z
-            contrib[4, j, i] = -(g * (s_rr + s_rz) + hoop) - c * mode_r
-            contrib[5, j, i] = -(g * (s_rz + s_zz)) - c * mode_z
-            contrib[6, j, i] = -(g * (-s_rr + s_rz) + hoop) + c * mode_r
-            contrib[7, j, i] = -(g * (-s_rz + s_zz)) + c * mode_z
+    for t in prange(threads):       # thread t: runs t, t + T, ... (short and long rows alike)
+        for run in range(t, n_carry, threads):
+            j, i0, i1 = carry_runs[run, 0], carry_runs[run, 1], carry_runs[run, 2]
+            for i in range(i0, i1):
+                a = alpha[j, i]
+                w = open_volume[j, i]
+                t_rr = sigma[j, i, 0]
+                t_zz = sigma[j, i, 1]
+                t_tt = sigma[j, i, 2]
+                t_rz = sigma[j, i, 3]
+                if viscous and a >= alpha_min:
+                    vr_sw, vr_se = v[0, j, i], v[0, j, i + 1]
+                    vr_ne, vr_nw = v[0, j + 1, i + 1], v[0, j + 1, i]
+                    vz_sw, vz_se = v[1, j, i], v[1, j, i + 1]
+                    vz_ne, vz_nw = v[1, j + 1, i + 1], v[1, j + 1, i]
+                    d_rr = g * (vr_se + vr_ne - vr_sw - vr_nw)
+                    d_zz = g * (vz_nw + vz_ne - vz_sw - vz_se)
+                    d_tt = 0.25 * (vr_sw + vr_se + vr_ne + vr_nw) / r_c[i]
+                    if viscosity > 0.0:
+                        dvr_dz = g * (vr_nw + vr_ne - vr_sw - vr_se)
+                        dvz_dr = g * (vz_se + vz_ne - vz_sw - vz_nw)
+                        t_rr = t_rr + two_eta * d_rr
+                        t_zz = t_zz + two_eta * d_zz
+                        t_tt = t_tt + two_eta * d_tt
+                        t_rz = t_rz + two_eta * (0.5 * (dvr_dz + dvz_dr))
+                    if bulk_viscosity > 0.0:
+                        p_b = bulk_viscosity * ((d_rr + d_zz) + d_tt)
+                        t_rr = t_rr + p_b
+                        t_zz = t_zz + p_b
+                        t_tt = t_tt + p_b
+                s_rr = (a * t_rr) * w
+                s_zz = (a * t_zz) * w
+                s_tt = (a * t_tt) * w
+                s_rz = (a * t_rz) * w
+                hoop = s_tt / (4.0 * r_c[i])
+                c = hg_base[j, i] * a
+                mode_r = v[0, j, i] - v[0, j, i + 1] + v[0, j + 1, i + 1] - v[0, j + 1, i]
+                mode_z = v[1, j, i] - v[1, j, i + 1] + v[1, j + 1, i + 1] - v[1, j + 1, i]
+                contrib[0, j, i] = -(g * (-s_rr - s_rz) + hoop) - c * mode_r
+                contrib[1, j, i] = -(g * (-s_rz - s_zz)) - c * mode_z
+                contrib[2, j, i] = -(g * (s_rr - s_rz) + hoop) + c * mode_r
+                contrib[3, j, i] = -(g * (s_rz - s_zz)) + c * mode_z
+                contrib[4, j, i] = -(g * (s_rr + s_rz) + hoop) - c * mode_r
+                contrib[5, j, i] = -(g * (s_rz + s_zz)) - c * mode_z
+                contrib[6, j, i] = -(g * (-s_rr + s_rz) + hoop) + c * mode_r
+                contrib[7, j, i] = -(g * (-s_rz + s_zz)) + c * mode_z
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
@@ -529,12 +543,16 @@ def _stress_block(r0, r1, load_runs, v, sigma, loose, eps_p, r_c, r_nodes, strai
 
 @_jit_parallel
 def _stress_update(block_ptr, n_blocks, load_runs, v, sigma, loose, eps_p, r_c, r_nodes,
-                   strain_dims, h, dt, kappa, zface_aperture, rface_aperture, prm, cst):
-    """:func:`_stress_block` for every block (threads share out the blocks)."""
-    for b in prange(n_blocks):
-        _stress_block(block_ptr[b], block_ptr[b + 1], load_runs, v, sigma, loose, eps_p, r_c,
-                      r_nodes, strain_dims, h, dt, kappa, zface_aperture, rface_aperture, prm,
-                      cst)
+                   strain_dims, h, dt, kappa, zface_aperture, rface_aperture, prm, cst,
+                   threads=1):
+    """:func:`_stress_block` for every block; thread ``t`` of ``T`` takes the blocks ``t, t +
+    T, ...``: the blocks go up the hopper, so each thread has its share of the cone (where the
+    plastic returns are) and of the bin."""
+    for t in prange(threads):
+        for b in range(t, n_blocks, threads):
+            _stress_block(block_ptr[b], block_ptr[b + 1], load_runs, v, sigma, loose, eps_p,
+                          r_c, r_nodes, strain_dims, h, dt, kappa, zface_aperture,
+                          rface_aperture, prm, cst)
 
 
 @_jit_parallel
@@ -575,7 +593,7 @@ def material_steps(max_steps, clock, v, mass, alpha, sigma, loose, eps_p, face_f
                    ramp_time, damping, light_mass, alpha_min, transport_cfl,
                    max_transport_interval, row_nodes, node_i, node_ptr, normal, mu, kind,
                    entry, plate_closed, opening, node_r, contact_impulse, plate_impulse, budget,
-                   work, viscosity, bulk_viscosity):
+                   work, viscosity, bulk_viscosity, threads):
     """Up to ``max_steps`` material steps, in place.
 
     The symmetry is data: ``r_c`` is the radius of the hoop terms (the cell-centre radius;
@@ -591,20 +609,22 @@ def material_steps(max_steps, clock, v, mass, alpha, sigma, loose, eps_p, face_f
     runs (n, 3), block pointers (n + 1,), corner forces (8, nz, nr), row speeds (nz + 1,),
     row budgets (nz + 1, 3))``, sized by the model.  ``viscosity`` and ``bulk_viscosity``: the
     grid viscosity ``eta`` and the bulk viscosity ``eta_b`` (Pa s; 0: none) of
-    :func:`_cell_forces`.  Returns ``(steps done, transport due)``:
+    :func:`_cell_forces`.  ``threads``: the number of numba threads (``numba.
+    get_num_threads()``; the work is shared out by it, the results do not depend on it).
+    Returns ``(steps done, transport due)``:
     the loop stops after the step at which a transport is due (the caller transports; alpha is
     constant until then).
     """
     carry_runs, load_runs, block_ptr, contrib, row_speed, row_budget = work
     cst = fast._fast_constants(prm)
     n_carry, n_load, n_blocks, j0, j1 = _runs(alpha, alpha_min, sigma, loose, v, contrib,
-                                              carry_runs, load_runs, block_ptr)
+                                              carry_runs, load_runs, block_ptr, threads)
     jf = max(j0 - 1, 0)         # the r-faces below the lowest node row with material move too
     for n in range(max_steps):
         t = clock[0]
         gravity = g_full * min(1.0, t / ramp_time) if ramp_time > 0.0 else g_full
         _cell_forces(carry_runs, n_carry, alpha, sigma, v, open_volume, r_c, h, hg_base,
-                     contrib, viscosity, bulk_viscosity, alpha_min)
+                     contrib, viscosity, bulk_viscosity, alpha_min, threads)
         _node_update(j0, j1, v, mass, contrib, gravity, dt, damping, light_mass, row_nodes,
                      node_i, node_ptr, normal, mu, kind, entry, plate_closed,
                      opening_radius(t, opening), node_r, contact_impulse, plate_impulse,
@@ -614,7 +634,8 @@ def material_steps(max_steps, clock, v, mass, alpha, sigma, loose, eps_p, face_f
             budget[1] += row_budget[j, 1]
             budget[2] += row_budget[j, 2]
         _stress_update(block_ptr, n_blocks, load_runs, v, sigma, loose, eps_p, r_c, r_nodes,
-                       strain_dims, h, dt, kappa, zface_aperture, rface_aperture, prm, cst)
+                       strain_dims, h, dt, kappa, zface_aperture, rface_aperture, prm, cst,
+                       threads)
         _faces(jf, j1, v, dt, face_sign, open_face, face_flux_sum, displacement, with_markers,
                row_speed)
         clock[2] += dt

@@ -64,9 +64,10 @@ def material_call(model, state, prm=None, part="all"):
     carry_runs, load_runs, block_ptr, contrib, row_speed, row_budget = model._work
     wall, plate = state.wall_impulse.copy(), state.plate_impulse.copy()
     groups = model.contact_groups
+    threads = numba.get_num_threads()
     n_carry, n_load, n_blocks, j0, j1 = stepping._runs(
         state.alpha, num.alpha_min, state.sigma, state.loose, state.v, contrib, carry_runs,
-        load_runs, block_ptr)
+        load_runs, block_ptr, threads)
     prm = model._prm if prm is None else prm
     cst = return_fast._fast_constants(prm)
     mass = model.node_mass(state)
@@ -77,7 +78,7 @@ def material_call(model, state, prm=None, part="all"):
                                                 model.open_volume, model.r_c, g.h,
                                                 model.hourglass_base, contrib,
                                                 model.viscosity, model.bulk_viscosity,
-                                                model.cfg.numerics.alpha_min),
+                                                model.cfg.numerics.alpha_min, threads),
         "nodes": lambda: stepping._node_update(j0, j1, v, mass, contrib, GRAVITY, model.dt,
                                                0.0, model.light_mass, groups[0], *groups[2:],
                                                False, -1.0, g.r_nodes, wall, plate,
@@ -86,7 +87,8 @@ def material_call(model, state, prm=None, part="all"):
                                                   loose, eps_p, model.r_c, model.flux_radius,
                                                   model.strain_dims, g.h, model.dt, g.kappa,
                                                   model._zface_aperture,
-                                                  model._rface_aperture, prm, cst),
+                                                  model._rface_aperture, prm, cst,
+                                                  threads),
         "faces": lambda: stepping._faces(max(j0 - 1, 0), j1, v, model.dt, model._face_sign,
                                          model._open_face, flux, disp, True, row_speed),
     }
