@@ -485,7 +485,7 @@ class HopperModel:
             num.transport_cfl, num.max_transport_interval, row_nodes, node_i, node_ptr,
             normal, mu, kind, entry, state.plate_closed, self._opening(state), g.r_nodes,
             state.wall_impulse, state.plate_impulse, state.momentum_budget, self._work,
-            self.viscosity, self.bulk_viscosity, numba.get_num_threads())
+            self.viscosity, self.bulk_viscosity, self.threads)
         state.t, state.flux_time = float(clock[0]), float(clock[2])
         self._end_opening(state)
         state.step += int(done)

@@ -33,9 +33,9 @@ integer division per cell, contiguous inner loops).  The loops over runs, node r
 blocks are ``prange`` loops (numba threads; the caller sets their number with
 ``numba.set_num_threads`` and passes it: the runs of the forces and the blocks of the stress
 update, which go up the hopper, are dealt to the threads in turn, so that each has its share
-of short and long rows and of the plastic cone; one thread runs them in order).  Each sum has a fixed order, no two
-threads write the same place and a return does not depend on which points share its block, so
-the results do not depend on the number of threads.
+of short and long rows and of the plastic cone; one thread runs them in order).  Each sum has
+a fixed order, no two threads write the same place and a return does not depend on which
+points share its block, so the results do not depend on the number of threads.
 """
 
 from __future__ import annotations
