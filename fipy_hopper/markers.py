@@ -144,8 +144,25 @@ def advance(markers, displacement, grid, geom) -> np.ndarray:
                      np.asarray(grid.r_nodes, float), np.asarray(grid.z_nodes, float),
                      geom.outlet_radius, geom.bin_radius, geom.cone_height, tan_cone, vertices,
                      normals, WALL_GAP * grid.h, WALL_PASSES, r_new, z_new)
-    keep = z_new >= grid.z_nodes[0]
-    return np.column_stack([r_new[keep], z_new[keep], markers[keep, 2]])
+    return _kept_markers(markers, r_new, z_new, float(grid.z_nodes[0]))
+
+
+@njit(cache=True)
+def _kept_markers(markers, r_new, z_new, z_min):
+    """The moved markers ``(r_new, z_new, layer)`` (n, 3) whose ``z_new >= z_min``, in order."""
+    n = 0
+    for k in range(markers.shape[0]):
+        if z_new[k] >= z_min:
+            n += 1
+    out = np.empty((n, 3))
+    q = 0
+    for k in range(markers.shape[0]):
+        if z_new[k] >= z_min:
+            out[q, 0] = r_new[k]
+            out[q, 1] = z_new[k]
+            out[q, 2] = markers[k, 2]
+            q += 1
+    return out
 
 
 @functools.lru_cache(maxsize=16)

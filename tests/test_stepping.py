@@ -168,6 +168,27 @@ def test_compiled_marker_advance_equals_reference(small_cfg, discharging):
                              geom.bin_radius, geom.cone_height, np.tan(geom.half_angle),
                              vertices, normals, 0.0, 0, r_mid, z_mid)
     assert np.count_nonzero(geometry.in_solid(r_mid, z_mid, geom)) >= 5
+    # markers that leave through the bottom are dropped, the others keep their order
+    down = np.zeros_like(disp)
+    down[1] = -3.0 * model.grid.h
+    fast = markers.advance(pts, down, model.grid, small_cfg.hopper)
+    ref = markers.advance_reference(pts, down, model.grid, small_cfg.hopper)
+    assert np.array_equal(fast, ref)
+    assert 0 < len(fast) < len(pts)
+
+
+@pytest.mark.parametrize("filled", [(), (0,), (5,), (2, 7), (0, 11), (11,)])
+def test_material_rows_brackets_the_nonzero_rows(filled):
+    """``material_rows``: the rows with nonzero alpha plus three each side, clipped to the grid;
+    (0, 0) for an empty grid; as its plain numpy definition."""
+    alpha = np.zeros((12, 5))
+    for j in filled:
+        alpha[j, j % 5] = 1e-30 if j == 7 else 0.5
+    rows = material_rows(alpha)
+    nonzero = np.flatnonzero(np.any(alpha != 0.0, axis=1))
+    expected = ((0, 0) if nonzero.size == 0 else
+                (max(nonzero[0] - 3, 0), min(nonzero[-1] + 4, 12)))
+    assert rows == expected
 
 
 def test_stress_rotates_with_the_material_jaumann(small_cfg):

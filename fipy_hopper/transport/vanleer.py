@@ -230,72 +230,88 @@ def _face_flux(flux, dt, p1, p2, normal_grad_1, normal_grad_2, distance, volume_
 @njit(cache=True, error_model="numpy", parallel=True)
 def _grid_step_kernel(phi, flux_h, flux_v, dt, volume, gradient_volume, kappa_volume,
                       projection_h, projection_v, ratio_h, ratio_v, distance_h, distance_v,
-                      reach_h, reach_v, outflow_coeff, phi_new, face_flux):
-    """Compiled step (2) on the index grid; fields ``phi`` (nF, nz, nr).
+                      reach_h, reach_v, outflow_coeff, j0, j1, phi_new, face_flux):
+    """Compiled step (2) on the cell rows ``j0 <= j < j1`` of the index grid, as on a grid of
+    their own; fields ``phi`` (nF, nz, nr).
 
-    Writes ``phi_new`` (nF, nz, nr) and ``dt F phi_f`` on interior faces into ``face_flux``
-    (nF, nFaces; exterior entries zero); the fields are shared out among numba's threads.  Per
-    field: arithmetic face values, Gauss gradient (only the two faces whose normal has the
-    component contribute; the other two add FiPy's exact zeros), limited face fluxes,
-    divergence and the diagonal solve.  ``error_model="numpy"`` lets LLVM vectorise the
-    divisions (no Python zero-division checks; no interior face has zero area).
+    Writes ``phi_new`` (nF, nz, nr; rows outside the range keep ``phi``) and ``dt F phi_f`` on
+    the interior faces of the range into ``face_flux`` (nF, nFaces; every other entry zero: the
+    end faces of the range are closed by the grid's boundary rule); the fields are shared out
+    among numba's threads.  Per field: arithmetic face values, Gauss gradient (only the two
+    faces whose normal has the component contribute; the other two add FiPy's exact zeros),
+    limited face fluxes, divergence and the diagonal solve.  ``error_model="numpy"`` lets LLVM
+    vectorise the divisions (no Python zero-division checks; no interior face has zero area).
     """
     n_fields, nz, nr = phi.shape
     n_h = (nz + 1) * nr
+    m = j1 - j0
     for k in prange(n_fields):              # the fields are independent: shared out to threads
         p = phi[k]
         ff = face_flux[k]
-        face_h = np.empty((nz + 1, nr))
-        face_v = np.empty((nz, nr + 1))
-        grad_r = np.empty((nz, nr))
-        grad_z = np.empty((nz, nr))
+        pn = phi_new[k]
+        for f in range(ff.shape[0]):
+            ff[f] = 0.0
+        for j in range(nz):
+            if j < j0 or j >= j1:
+                for i in range(nr):
+                    pn[j, i] = p[j, i]
+        if m <= 0:
+            continue
+        face_h = np.empty((m + 1, nr))       # local row jj is grid row j0 + jj
+        face_v = np.empty((m, nr + 1))
+        grad_r = np.empty((m, nr))
+        grad_z = np.empty((m, nr))
         for i in range(nr):
-            face_h[0, i] = p[0, i]
-            face_h[nz, i] = p[nz - 1, i]
-        for j in range(1, nz):
+            face_h[0, i] = p[j0, i]
+            face_h[m, i] = p[j1 - 1, i]
+        for jj in range(1, m):
+            j = j0 + jj
             for i in range(nr):
                 p1 = p[j - 1, i]
-                face_h[j, i] = (p[j, i] - p1) * ratio_h[j, i] + p1
-        for j in range(nz):
-            face_v[j, 0] = p[j, 0]
-            face_v[j, nr] = p[j, nr - 1]
+                face_h[jj, i] = (p[j, i] - p1) * ratio_h[j, i] + p1
+        for jj in range(m):
+            j = j0 + jj
+            face_v[jj, 0] = p[j, 0]
+            face_v[jj, nr] = p[j, nr - 1]
             for i in range(1, nr):
                 p1 = p[j, i - 1]
-                face_v[j, i] = (p[j, i] - p1) * ratio_v[j, i] + p1
-        for j in range(nz):
+                face_v[jj, i] = (p[j, i] - p1) * ratio_v[j, i] + p1
+        for jj in range(m):
+            j = j0 + jj
             for i in range(nr):
-                grad_r[j, i] = (projection_v[j, i + 1] * face_v[j, i + 1]
-                                - projection_v[j, i] * face_v[j, i]) / gradient_volume[j, i]
-                grad_z[j, i] = (-(projection_h[j, i] * face_h[j, i])
-                                + projection_h[j + 1, i] * face_h[j + 1, i]) / gradient_volume[j, i]
+                grad_r[jj, i] = (projection_v[j, i + 1] * face_v[jj, i + 1]
+                                 - projection_v[j, i] * face_v[jj, i]) / gradient_volume[j, i]
+                grad_z[jj, i] = (-(projection_h[j, i] * face_h[jj, i])
+                                 + projection_h[j + 1, i] * face_h[jj + 1, i]) \
+                    / gradient_volume[j, i]
         # F phi_f on z-normal faces (index j nr + i), then r-normal faces (n_h + j (nr+1) + i)
-        for i in range(nr):
-            ff[i] = 0.0
-            ff[nz * nr + i] = 0.0
-        for j in range(1, nz):
+        for jj in range(1, m):
+            j = j0 + jj
             for i in range(nr):
                 ff[j * nr + i] = _face_flux(
-                    flux_h[j, i], dt, p[j - 1, i], p[j, i], grad_z[j - 1, i], -grad_z[j, i],
+                    flux_h[j, i], dt, p[j - 1, i], p[j, i], grad_z[jj - 1, i], -grad_z[jj, i],
                     distance_h[j, i], volume[j - 1, i], volume[j, i], reach_h[0, j, i],
                     reach_h[1, j, i])
-        for j in range(nz):
+        for jj in range(m):
+            j = j0 + jj
             row = n_h + j * (nr + 1)
-            ff[row] = 0.0
-            ff[row + nr] = 0.0
             for i in range(1, nr):
                 ff[row + i] = _face_flux(
-                    flux_v[j, i], dt, p[j, i - 1], p[j, i], grad_r[j, i - 1], -grad_r[j, i],
+                    flux_v[j, i], dt, p[j, i - 1], p[j, i], grad_r[jj, i - 1], -grad_r[jj, i],
                     distance_v[j, i], volume[j, i - 1], volume[j, i], reach_v[0, j, i],
                     reach_v[1, j, i])
-        for j in range(nz):
+        for j in range(j0, j1):
             row = n_h + j * (nr + 1)
             for i in range(nr):
                 net_out = (ff[(j + 1) * nr + i] - ff[j * nr + i]
                            + ff[row + i + 1] - ff[row + i])
                 transient = kappa_volume[j, i] / dt
-                phi_new[k, j, i] = ((transient * p[j, i] - net_out)
-                                    / (transient + outflow_coeff[j, i]))
-        for f in range(ff.shape[0]):
+                pn[j, i] = ((transient * p[j, i] - net_out)
+                            / (transient + outflow_coeff[j, i]))
+        for j in range(j0 + 1, j1):
+            for i in range(nr):
+                ff[j * nr + i] *= dt
+        for f in range(n_h + j0 * (nr + 1), n_h + j1 * (nr + 1)):
             ff[f] *= dt
 
 
@@ -312,7 +328,8 @@ def vanleer_step_grid(geom, grid, phi, u_n, dt, out=None, rows=None):
     they would in the whole grid, and the cells next to them see the same (zero) face values
     and gradients, so the numbers are those of the whole-grid step.
     """
-    nr, nz, n_h = grid.nr, grid.nz, grid.nr * (grid.nz + 1)
+    nr, nz = grid.nr, grid.nz
+    n_h = nr * (nz + 1)
     phi = np.ascontiguousarray(phi, dtype=float)
     n_fields = phi.shape[0]
     if out is None:
@@ -328,58 +345,38 @@ def vanleer_step_grid(geom, grid, phi, u_n, dt, out=None, rows=None):
     outflow_coeff = np.zeros(geom.n_cells)
     np.add.at(outflow_coeff, out_cells, volume_flux[out_faces])
     j0, j1 = (0, nz) if rows is None else (int(rows[0]), int(rows[1]))
-    flux_h = volume_flux[:n_h].reshape(nz + 1, nr)
-    flux_v = volume_flux[n_h:].reshape(nz, nr + 1)
-    cells = phi.reshape(n_fields, nz, nr)
-    if (j0, j1) == (0, nz):
-        _grid_step_kernel(cells, flux_h, flux_v, float(dt), grid.cell_volume,
-                          grid.gradient_volume, grid.kappa_volume, grid.projection_h,
-                          grid.projection_v, grid.ratio_h, grid.ratio_v, grid.distance_h,
-                          grid.distance_v, grid.reach_h, grid.reach_v,
-                          outflow_coeff.reshape(nz, nr), phi_new.reshape(n_fields, nz, nr),
-                          face_flux)
-    else:
-        phi_new[:] = phi
-        face_flux[:] = 0.0
-        if j1 > j0:
-            _rows_step(grid, cells, flux_h, flux_v, float(dt), outflow_coeff.reshape(nz, nr),
-                       phi_new.reshape(n_fields, nz, nr), face_flux, j0, j1)
+    _grid_step_kernel(phi.reshape(n_fields, nz, nr), volume_flux[:n_h].reshape(nz + 1, nr),
+                      volume_flux[n_h:].reshape(nz, nr + 1), float(dt), grid.cell_volume,
+                      grid.gradient_volume, grid.kappa_volume, grid.projection_h,
+                      grid.projection_v, grid.ratio_h, grid.ratio_v, grid.distance_h,
+                      grid.distance_v, grid.reach_h, grid.reach_v,
+                      outflow_coeff.reshape(nz, nr), j0, j1,
+                      phi_new.reshape(n_fields, nz, nr), face_flux)
     face_flux[:, out_faces] = dt * volume_flux[out_faces] * phi_new[:, out_cells]
     return phi_new, face_flux
-
-
-def _rows_step(grid, cells, flux_h, flux_v, dt, outflow_coeff, phi_new, face_flux, j0, j1):
-    """``_grid_step_kernel`` on the cell rows ``j0 <= j < j1`` as a grid of their own; the
-    results are written into the whole-grid ``phi_new`` (nF, nz, nr) and ``face_flux``."""
-    nr, nz = grid.nr, grid.nz
-    n_fields, m = cells.shape[0], j1 - j0
-    n_h, m_h = nr * (nz + 1), nr * (m + 1)
-
-    def part(a, lo, hi, axis=0):          # rows lo:hi along ``axis``, contiguous
-        index = [slice(None)] * a.ndim
-        index[axis] = slice(lo, hi)
-        return np.ascontiguousarray(a[tuple(index)])
-
-    sub_new = np.empty((n_fields, m, nr))
-    sub_flux = np.empty((n_fields, m_h + m * (nr + 1)))
-    _grid_step_kernel(part(cells, j0, j1, 1), part(flux_h, j0, j1 + 1),
-                      part(flux_v, j0, j1), dt, part(grid.cell_volume, j0, j1),
-                      part(grid.gradient_volume, j0, j1), part(grid.kappa_volume, j0, j1),
-                      part(grid.projection_h, j0, j1 + 1), part(grid.projection_v, j0, j1),
-                      part(grid.ratio_h, j0, j1 + 1), part(grid.ratio_v, j0, j1),
-                      part(grid.distance_h, j0, j1 + 1), part(grid.distance_v, j0, j1),
-                      part(grid.reach_h, j0, j1 + 1, 1), part(grid.reach_v, j0, j1, 1),
-                      part(outflow_coeff, j0, j1), sub_new, sub_flux)
-    phi_new[:, j0:j1] = sub_new
-    # interior z-faces of the part (its end faces carry nothing) and its r-faces
-    face_flux[:, (j0 + 1) * nr:j1 * nr] = sub_flux[:, nr:m * nr]
-    face_flux[:, n_h + j0 * (nr + 1):n_h + j1 * (nr + 1)] = sub_flux[:, m_h:]
 
 
 def material_rows(alpha, margin=3):
     """Cell rows ``(j0, j1)`` that hold every nonzero ``alpha`` (nz, nr) with ``margin`` empty
     rows beyond each end (clipped to the grid); ``(0, 0)`` when there is none."""
-    rows = np.flatnonzero(np.any(alpha != 0.0, axis=1))
-    if rows.size == 0:
+    lowest, highest = _nonzero_rows(np.ascontiguousarray(alpha, dtype=float))
+    if lowest < 0:
         return 0, 0
-    return max(int(rows[0]) - margin, 0), min(int(rows[-1]) + margin + 1, alpha.shape[0])
+    return max(int(lowest) - margin, 0), min(int(highest) + margin + 1, alpha.shape[0])
+
+
+@njit(cache=True)
+def _nonzero_rows(alpha):
+    """The lowest and the highest row of ``alpha`` (nz, nr) with a nonzero entry (-1, -1: none);
+    a compiled scan that stops at the first nonzero entry of a row."""
+    nz, nr = alpha.shape
+    lowest = -1
+    highest = -1
+    for j in range(nz):
+        for i in range(nr):
+            if alpha[j, i] != 0.0:
+                if lowest < 0:
+                    lowest = j
+                highest = j
+                break
+    return lowest, highest
