@@ -25,12 +25,14 @@ import contextlib
 import csv
 import datetime
 import errno
+import functools
 import io as _io
 import json
 import math
 import os
 import platform
 import re
+import subprocess
 import sys
 import tempfile
 import warnings
@@ -52,7 +54,7 @@ __all__ = [
     "validate_checkpoint", "checkpoint_template", "checkpoint_size_limit", "check_run_files",
     "Manifest", "FieldWriter", "atomic_path",
     "atomic_write_text", "write_json", "write_timeseries", "write_wall_pressure", "read_csv",
-    "environment_versions", "grid_points_and_quads", "cell_fields", "marker_file",
+    "environment_versions", "code_commit", "grid_points_and_quads", "cell_fields", "marker_file",
     "write_markers", "read_markers",
     "TIMESERIES_COLUMNS", "WALL_PRESSURE_COLUMNS",
 ]
@@ -479,8 +481,32 @@ def _read_pid(fd: int) -> str:
 
 
 # ---------------------------------------------------------------- manifest
+@functools.lru_cache(maxsize=8)
+def code_commit(also: tuple = ()) -> str:
+    """The git commit (short hash) of the checkout this package was imported from, followed by
+    " (with uncommitted changes)" when the package's files, or the paths ``also`` (relative to
+    the package's folder), differ from it; "" when the package is not a tracked file of a git
+    checkout (an installed copy) or git is not available.  Asked once per process."""
+    here = Path(__file__).resolve().parent
+
+    def git(*args):
+        return subprocess.run(["git", *args], cwd=here, capture_output=True, text=True,
+                              timeout=10)
+
+    try:
+        tracked = git("ls-files", "--error-unmatch", Path(__file__).name)
+        head = git("rev-parse", "--short", "HEAD")
+        dirty = git("status", "--porcelain", "--", ".", *also)
+    except (OSError, subprocess.SubprocessError):
+        return ""
+    if tracked.returncode != 0 or head.returncode != 0:
+        return ""
+    return head.stdout.strip() + (" (with uncommitted changes)" if dirty.stdout.strip() else "")
+
+
 def environment_versions() -> dict:
-    """Versions of Python, the platform, fipy_hopper and its dependencies."""
+    """Versions of Python, the platform, fipy_hopper (and the git commit of its code,
+    :func:`code_commit`) and its dependencies."""
     from importlib import metadata
 
     from . import __version__
@@ -490,7 +516,7 @@ def environment_versions() -> dict:
             deps[name] = metadata.version(name)
         except metadata.PackageNotFoundError:
             continue
-    return {"package": "fipy_hopper", "version": __version__,
+    return {"package": "fipy_hopper", "version": __version__, "code_commit": code_commit(),
             "python": sys.version.split()[0], "platform": platform.platform(),
             "dependencies": deps}
 
@@ -532,6 +558,7 @@ class Manifest:
         versions = environment_versions()
         session = {"start_time": _now(), "end_time": None, "wall_time_s": None,
                    "command": command, "version": versions["version"],
+                   "code_commit": versions["code_commit"],
                    "dependencies": versions["dependencies"]}
         if resumed_from_step is not None:
             session.update(resumed_from_step=resumed_from_step, resumed_from_t_s=resumed_from_t)

@@ -221,6 +221,8 @@ def _finished_row(path: Path) -> dict:
     bounds = _read_json(path / ALPHA_BOUNDS)
     if bounds:
         row.update(alpha_min=bounds["alpha_min"], alpha_max=bounds["alpha_max"])
+    manifest = _read_json(path / "manifest.json") or {}
+    row["code_commit"] = manifest.get("code_commit", "")
     row["run_dir"] = str(path)
     return row
 
@@ -414,7 +416,7 @@ def write_study_json(out, study: str, title: str, setting: str, settings: dict,
             "fipy_hopper_version": fipy_hopper.__version__, "commit": _git_commit(),
             "command": " ".join(["python", f"studies/{study}.py",
                                  *(sys.argv[1:] if argv is None else argv)]),
-            "cases": len(rows),
+            "cases": len(rows), "run_commits": run_commits(rows),
             "cases_failed": sum(1 for r in rows if r.get("error")),
             "case_wall_time_total_s": float(sum(w for w in wall if math.isfinite(w))),
             "headline": headline or (findings[0] if findings else ""),
@@ -426,25 +428,24 @@ def write_study_json(out, study: str, title: str, setting: str, settings: dict,
 
 
 def _git_commit() -> str:
-    """The commit of the code that wrote the study (short hash, and whether the working tree
-    had uncommitted changes), or "" outside a git checkout."""
-    import subprocess
+    """The commit of the code that wrote the study (short hash, and whether the package, the
+    studies' scripts or their configurations had uncommitted changes), or "" outside a git
+    checkout (:func:`fipy_hopper.io.code_commit`)."""
+    from fipy_hopper.io import code_commit
 
-    here = Path(__file__).resolve().parent
-    try:
-        head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=here,
-                              capture_output=True, text=True, timeout=10)
-        # the code: the package, the studies' scripts and configurations (not their outputs,
-        # REPORT.md and its figures, which the report itself rewrites)
-        dirty = subprocess.run(["git", "status", "--porcelain", "--", "../fipy_hopper",
-                                "*.py", "configs"], cwd=here, capture_output=True, text=True,
-                               timeout=10)
-    except (OSError, subprocess.SubprocessError):
-        return ""
-    if head.returncode != 0:
-        return ""
-    return head.stdout.strip() + (" (with uncommitted changes to the package or the studies)"
-                                  if dirty.stdout.strip() else "")
+    # the studies' scripts and configurations (not their outputs, REPORT.md and its
+    # figures, which the report itself rewrites), relative to the package's folder
+    return code_commit(also=("../studies/*.py", "../studies/configs"))
+
+
+def run_commits(rows) -> dict:
+    """How many of ``rows`` were run by each commit of the code (their manifests'
+    ``code_commit``; "not recorded" for runs from before the manifests carried it)."""
+    counts = {}
+    for r in rows:
+        key = r.get("code_commit") or "not recorded"
+        counts[key] = counts.get(key, 0) + 1
+    return counts
 
 
 def setting_label(quick: bool, options: dict, cosmetic=("case_plots", "thumbnails")) -> str:

@@ -97,6 +97,18 @@ def _git_commit() -> str:
     return _sweep._git_commit() or "unknown"
 
 
+def _runs_made_by(data: dict) -> str:
+    """" Its runs were made by git X (n cases), ..." when a case was run (or reused from a run)
+    by other code than the study's own commit; "" when every case ran at that commit or the
+    study does not say (a study.json from before it recorded its runs' commits)."""
+    commits = data.get("run_commits") or {}
+    if not commits or set(commits) == {data.get("commit")}:
+        return ""
+    parts = [f"{'git ' + c if c != 'not recorded' else 'code not recorded'} ({n} case"
+             f"{'s' if n != 1 else ''})" for c, n in commits.items()]
+    return " Its runs were made by " + ", ".join(parts) + "."
+
+
 def study_section(name: str, data: dict, folder: Path, figures: Figures) -> list:
     lines = [f"## {data.get('title', name)}", ""]
     setting = data.get("setting", "?")
@@ -105,7 +117,8 @@ def study_section(name: str, data: dict, folder: Path, figures: Figures) -> list
             f" ({data.get('cases_failed', 0)} failed), {minutes:.1f} min of run wall time summed "
             f"over the cases, written {data.get('created', '?')} by fipy_hopper "
             f"{data.get('fipy_hopper_version', '?')}"
-            + (f", git {data['commit']}" if data.get("commit") else "") + ".")
+            + (f", git {data['commit']}" if data.get("commit") else "") + "."
+            + _runs_made_by(data))
     lines += [meta, "", f"Command: `{data.get('command', '')}`", ""]
     if setting == "quick":
         lines += ["> **Quick setting**: tiny hoppers on coarse grids, the test-suite size. These "
