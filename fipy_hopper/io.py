@@ -3,7 +3,8 @@
 A run directory describes itself::
 
     config.toml          the resolved configuration (every key, defaults included)
-    manifest.json        package and dependency versions, start/end time, wall time, stop reason
+    manifest.json        package and dependency versions, code commit, start/end time, wall time,
+                         stop reason
     summary.json         the run's headline numbers (see :meth:`Simulation.summary`)
     timeseries.csv       t_s, mass_in_hopper_kg, discharged_kg, discharge_rate_kg_s, ...
     wall_pressure.csv    stage, t_s, s_m, r_m, z_m, p_n_Pa, tau_Pa

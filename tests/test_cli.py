@@ -25,7 +25,7 @@ except ModuleNotFoundError:  # Python 3.10
     import tomli as tomllib
 
 import fipy_hopper as fh
-from fipy_hopper import theory
+from fipy_hopper import io, theory
 from fipy_hopper.cli import main
 from fipy_hopper.config import HopperConfig
 from fipy_hopper.io import read_csv
@@ -98,6 +98,26 @@ def test_resolved_config_and_manifest(run_dir):
     assert manifest["start_time"] <= manifest["end_time"]
     assert manifest["wall_time_s"] > 0
     assert manifest["status"] == "finished" and manifest["stop_reason"] == "end_time"
+    # the code that ran: the commit of the checkout the package came from ("" if installed)
+    assert manifest["code_commit"] == io.code_commit()
+    assert manifest["sessions"][0]["code_commit"] == manifest["code_commit"]
+
+
+def test_code_commit_names_the_checkout_of_the_package():
+    """In a git checkout the commit is git's own short hash of HEAD, marked when the
+    package's files differ from it; an installed copy (no checkout) gives ""."""
+    commit = io.code_commit()
+    package = Path(fh.__file__).resolve().parent
+    head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=package,
+                          capture_output=True, text=True)
+    tracked = subprocess.run(["git", "ls-files", "--error-unmatch", "__init__.py"],
+                             cwd=package, capture_output=True, text=True)
+    if head.returncode != 0 or tracked.returncode != 0:
+        assert commit == ""
+        return
+    dirty = subprocess.run(["git", "status", "--porcelain", "--", "."], cwd=package,
+                           capture_output=True, text=True).stdout.strip()
+    assert commit == head.stdout.strip() + (" (with uncommitted changes)" if dirty else "")
 
 
 def test_summary_json_contract(run_dir):

@@ -174,6 +174,30 @@ def test_case_status_reads_finished_resumable_and_new_cases(flow_map, tmp_path):
     assert _sweep.case_status(study["cases"][1], root) == "new"
 
 
+def test_a_study_names_the_code_that_made_its_runs(flow_map, tmp_path):
+    """Each case's row carries its run's ``code_commit`` (the manifest's), ``study.json``
+    counts them, and the report names them when they are not the study's own commit."""
+    import _sweep
+
+    from fipy_hopper import io
+
+    data = json.loads((flow_map / "study.json").read_text())
+    assert data["run_commits"] == {io.code_commit() or "not recorded": data["cases"]}
+    rows = [_sweep._finished_row(p.parent) for p in (flow_map / "cases").glob("*/summary.json")]
+    assert len(rows) == 2 and {r["code_commit"] for r in rows} == {io.code_commit()}
+    assert _sweep.run_commits([{"code_commit": "abc1234"}, {"code_commit": ""},
+                               {"code_commit": "abc1234"}]) == {"abc1234": 2,
+                                                                "not recorded": 1}
+    make_report = load("make_report")
+    same = {"commit": "abc1234", "run_commits": {"abc1234": 3}}
+    assert make_report._runs_made_by(same) == ""
+    older = {"commit": "abc1234", "run_commits": {"abc1234": 1, "0ld0001": 2,
+                                                  "not recorded": 1}}
+    assert make_report._runs_made_by(older) == (
+        " Its runs were made by git abc1234 (1 case), git 0ld0001 (2 cases), code not "
+        "recorded (1 case).")
+
+
 # ---------------------------------------------------------------- discharge rate
 def test_discharge_rate_exponent_and_beverloo_constant(discharge):
     fits = rows_of(discharge / "fits.csv")
