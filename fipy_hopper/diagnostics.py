@@ -105,6 +105,29 @@ def flow_mode_measures(model, state, rule: FlowModeRule = FlowModeRule()):
     return index, stagnant
 
 
+def bin_lateral_stress_ratio(model, state) -> float:
+    """The bin's lateral stress ratio ``K = sum(w sigma_rr) / sum(w sigma_zz)`` (-), ``w`` the
+    material volume ``alpha kappa V``, over the full cells (``alpha >= 0.99``) of the bin from
+    a quarter of its diameter above the transition to a quarter below the material's surface
+    (the highest cell of the bin with ``alpha >= 1/2``): about ``nu / (1 - nu)`` in a bin
+    filled at rest, larger where discharge switches the stress state.  NaN when the band holds
+    no cell (a bin emptied below it) or no compression."""
+    g, geom = model.grid, model.cfg.hopper
+    z_t, quarter = geom.cone_height, 0.25 * geom.bin_diameter
+    Z = np.broadcast_to(g.z_cells[:, None], state.alpha.shape)
+    in_bin = (Z > z_t) & (g.kappa > 0)
+    filled = in_bin & (state.alpha >= 0.5)
+    if not filled.any():
+        return math.nan
+    surface = float(Z[filled].max())
+    band = in_bin & (state.alpha >= 0.99) & (Z >= z_t + quarter) & (Z <= surface - quarter)
+    weights = (state.alpha * model.open_volume)[band]
+    vertical = float(np.sum(weights * state.sigma[..., 1][band]))
+    if not vertical < 0.0:
+        return math.nan
+    return float(np.sum(weights * state.sigma[..., 0][band])) / vertical
+
+
 def classify_flow_mode(index, stagnant, rule: FlowModeRule = FlowModeRule()) -> str:
     """``"mass"`` or ``"funnel"`` by :class:`FlowModeRule`."""
     if not np.isfinite(index):

@@ -932,6 +932,10 @@ class LagrangianModel:
         """Not measured: the mesh stops by distortion long before a channel could form."""
         return math.nan, math.nan
 
+    def bin_lateral_stress_ratio(self, state: LagrangianState) -> float:
+        """Not measured on the moving mesh (NaN)."""
+        return math.nan
+
     def summary_extras(self, state: LagrangianState) -> dict:
         """``formulation``, the stop by distortion (``distortion_kind``, ``distortion``,
         ``distortion_element``; empty when the mesh stayed valid) and the worst element at

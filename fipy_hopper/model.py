@@ -431,6 +431,10 @@ class HopperModel:
         from . import diagnostics
         return diagnostics.empty_channel(self, state, rule)
 
+    def bin_lateral_stress_ratio(self, state: State) -> float:
+        from . import diagnostics
+        return diagnostics.bin_lateral_stress_ratio(self, state)
+
     def summary_extras(self, state: State) -> dict:
         return {}
 

@@ -196,6 +196,7 @@ class RunRecord:
     rate: list = field(default_factory=list)             # kg/s over the last interval
     mass_flow_index: list = field(default_factory=list)
     stagnant_fraction: list = field(default_factory=list)
+    bin_lateral_stress_ratio: list = field(default_factory=list)   # -, in the bin's full cells
     # stage -> (t since the outlet opened, s, r, z, p_n, tau): the reaction estimate per bin
     wall: dict = field(default_factory=dict)
     # stage -> (p_n, tau) stress-sampled on the same bins (NaN where a bin held no material)
@@ -490,6 +491,7 @@ class Simulation:
         index, stagnant = m.flow_mode_measures(st, self.flow_rule)
         rec.mass_flow_index.append(index)
         rec.stagnant_fraction.append(stagnant)
+        rec.bin_lateral_stress_ratio.append(m.bin_lateral_stress_ratio(st))
 
     def _load_sample(self, stage: str):
         """A row of ``loads.csv``: the vertical balance since the previous row."""
@@ -663,6 +665,8 @@ class Simulation:
         self.envelope = arrays.pop("envelope", None)
         self.state = type(self.state)(**meta["state"], **arrays)
         self.record = RunRecord(**meta["record"], wall=wall, wall_stress=wall_stress)
+        ratios = self.record.bin_lateral_stress_ratio     # not recorded by older checkpoints
+        ratios[:0] = [math.nan] * (len(self.record.t) - len(ratios))
         self.t_open = meta["t_open"]
         self.next_sample = meta["next_sample"]
         self.next_load_sample = meta.get("next_load_sample", math.nan)

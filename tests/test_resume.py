@@ -189,3 +189,39 @@ def test_sigterm_then_resume_from_the_periodic_checkpoint(setup_dirs, capsys):
     assert sorted(p.name for p in (out / "fields").glob("fields_*.vtu")) == \
         [s["file"] for s in snaps]
     assert len(json.loads((out / "manifest.json").read_text())["sessions"]) == 2
+
+
+def test_a_checkpoint_without_the_bin_ratio_resumes_with_it_unknown_before(setup_dirs):
+    """A checkpoint written before the time series had ``bin_lateral_stress_ratio``: the run
+    resumes, the samples taken before the checkpoint get NaN in that column ("nan" in the
+    CSV), every other number equals the uninterrupted run's."""
+    import csv
+
+    folder, config, reference = setup_dirs
+    out = folder / "older"
+    condition = (lambda sim, st: st.stage == "discharge" and st.t - sim.t_open >= 0.071)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        with pytest.raises(KeyboardInterrupt):
+            api.run(config, out, setup=interrupt_when(condition, out), plots=False)
+    path = out / "checkpoint.npz"
+    with np.load(path) as data:
+        arrays = {k: data[k] for k in data.files}
+    meta = json.loads(str(arrays["__meta__"]))
+    written = len(meta["record"].pop("bin_lateral_stress_ratio"))
+    assert written > 0
+    arrays["__meta__"] = np.array(json.dumps(meta))
+    with open(path, "wb") as fh:
+        np.savez(fh, **arrays)
+    assert main(["run", str(config), "--out", str(out), "--resume", "--quiet"]) == 0
+
+    def rows(run):
+        with open(run / "timeseries.csv", newline="") as fh:
+            return list(csv.DictReader(fh))
+
+    resumed, uninterrupted = rows(out), rows(reference)
+    assert len(resumed) == len(uninterrupted)
+    for k, (a, b) in enumerate(zip(resumed, uninterrupted)):
+        ratio_a, ratio_b = a.pop("bin_lateral_stress_ratio"), b.pop("bin_lateral_stress_ratio")
+        assert a == b
+        assert ratio_a == ("nan" if k < written else ratio_b) and ratio_b != "nan"
