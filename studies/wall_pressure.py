@@ -421,11 +421,32 @@ def series_analysis(rows: list) -> tuple:
             # the wall below and above the transition (common bins by their centres)
             numbers[f"E_spread_pct[{stage}|cone]"] = 100 * spread["cone"]
             numbers[f"E_spread_pct[{stage}|bin]"] = 100 * spread["bin"]
+    for r in stiff:           # the bin's stress state at rest and in discharge (time series)
+        rest, flowing = bin_lateral_ratio(loaded[r["case"]][1])
+        label = f"{r['youngs_modulus_Pa'] / 1e6:g} MPa"
+        numbers[f"bin_k_rest[{label}]"] = rest
+        numbers[f"bin_k_discharge[{label}]"] = flowing
     residuals = [float(res.summary.get("fill_equilibrium_residual", math.nan))
                  for _, res in loaded.values()]
     numbers["fill_equilibrium_residual_max_pct"] = 100 * float(np.nanmax(residuals)) \
         if residuals else math.nan
     return table, numbers, profiles
+
+
+#: the part of the discharge (s after the opening) over which the bin's K is averaged
+BIN_K_WINDOW = (0.5, 1.5)
+
+
+def bin_lateral_ratio(res) -> tuple:
+    """The bin's lateral stress ratio (``timeseries.csv``'s ``bin_lateral_stress_ratio``): at
+    the opening (the filled state at rest) and its mean over :data:`BIN_K_WINDOW` of the
+    discharge; NaN for runs written before the time series carried it."""
+    series = res.timeseries
+    if "bin_lateral_stress_ratio" not in series:
+        return math.nan, math.nan
+    t, k = series["t_s"], series["bin_lateral_stress_ratio"]
+    window = (t >= BIN_K_WINDOW[0]) & (t <= BIN_K_WINDOW[1]) & np.isfinite(k)
+    return float(k[0]), (float(np.mean(k[window])) if window.any() else math.nan)
 
 
 def _in_series(row, rows, series) -> bool:
@@ -613,6 +634,16 @@ def write_outputs(out, rows, profiles, comparison, switch, numbers, options, set
                             f"{numbers[f'E_spread_pct[{stage}]']:.2f} % (the cone, below "
                             f"the transition, {numbers[f'E_spread_pct[{stage}|cone]']:.2f} %; "
                             f"the bin above it {numbers[f'E_spread_pct[{stage}|bin]']:.2f} %).")
+    moduli = [k[len("bin_k_rest["):-1] for k in numbers if k.startswith("bin_k_rest[")]
+    if moduli and all(math.isfinite(numbers[f"bin_k_discharge[{m}]"]) for m in moduli):
+        findings.append(
+            "The bin's lateral stress ratio (mean sigma_rr / sigma_zz of its full cells): at "
+            "rest " + " / ".join(f"{numbers[f'bin_k_rest[{m}]']:.2f}" for m in moduli)
+            + f", over {BIN_K_WINDOW[0]:g}-{BIN_K_WINDOW[1]:g} s of discharge "
+            + " / ".join(f"{numbers[f'bin_k_discharge[{m}]']:.2f}" for m in moduli)
+            + " at E = " + " / ".join(moduli) + ": the fill's elastic nu/(1 - nu) switches "
+            "towards isotropy when the bin flows, at a rate that depends on E; the bin's "
+            "discharge loads follow it.")
     if math.isfinite(numbers.get("fill_equilibrium_residual_max_pct", math.nan)):
         findings.append("At rest, the wall's and the plate's vertical reactions equal the "
                         "weight to within "

@@ -247,6 +247,12 @@ def test_wall_pressure_profiles_theories_and_switch(wall):
         cone, above = numbers[key[:-1] + "|cone]"], numbers[key[:-1] + "|bin]"]
         assert 0.0 < numbers[key] <= max(cone, above) * (1 + 1e-12)
     assert_png(wall / "convergence.png")
+    # the bin's K read from each stiffness case's time series (NaN where the quick setting's
+    # small bin has no band of full cells, or the discharge is shorter than the window)
+    moduli = [k for k in numbers if k.startswith("bin_k_rest[")]
+    assert len(moduli) == 3
+    for key in moduli + [k.replace("rest", "discharge") for k in moduli]:
+        assert numbers[key] is None or 0.0 < numbers[key] < 3.0, key
 
 
 # ---------------------------------------------------------------- convergence
