@@ -634,15 +634,17 @@ def write_outputs(out, rows, profiles, comparison, switch, numbers, options, set
                             f"{numbers[f'E_spread_pct[{stage}]']:.2f} % (the cone, below "
                             f"the transition, {numbers[f'E_spread_pct[{stage}|cone]']:.2f} %; "
                             f"the bin above it {numbers[f'E_spread_pct[{stage}|bin]']:.2f} %).")
-    moduli = [k[len("bin_k_rest["):-1] for k in numbers if k.startswith("bin_k_rest[")]
+    moduli = sorted((k[len("bin_k_rest["):-1] for k in numbers if k.startswith("bin_k_rest[")),
+                    key=lambda m: float(m.split()[0]))
     if moduli and all(math.isfinite(numbers[f"bin_k_discharge[{m}]"]) for m in moduli):
         findings.append(
-            "The bin's lateral stress ratio (mean sigma_rr / sigma_zz of its full cells): at "
-            "rest " + " / ".join(f"{numbers[f'bin_k_rest[{m}]']:.2f}" for m in moduli)
-            + f", over {BIN_K_WINDOW[0]:g}-{BIN_K_WINDOW[1]:g} s of discharge "
+            "The bin's lateral stress ratio (mean sigma_rr / sigma_zz of its full cells) at "
+            "E = " + " / ".join(moduli) + ": at rest "
+            + " / ".join(f"{numbers[f'bin_k_rest[{m}]']:.3f}" for m in moduli)
+            + " (the elastic fill's nu/(1 - nu)), averaged over "
+            f"{BIN_K_WINDOW[0]:g}-{BIN_K_WINDOW[1]:g} s of discharge "
             + " / ".join(f"{numbers[f'bin_k_discharge[{m}]']:.2f}" for m in moduli)
-            + " at E = " + " / ".join(moduli) + ": the fill's elastic nu/(1 - nu) switches "
-            "towards isotropy when the bin flows, at a rate that depends on E; the bin's "
+            + ": when the bin flows its stress turns towards isotropy, and the bin's "
             "discharge loads follow it.")
     if math.isfinite(numbers.get("fill_equilibrium_residual_max_pct", math.nan)):
         findings.append("At rest, the wall's and the plate's vertical reactions equal the "
