@@ -555,6 +555,27 @@ def _stress_update(block_ptr, n_blocks, load_runs, v, sigma, loose, eps_p, r_c, 
                           rface_aperture, prm, cst)
 
 
+@_jit
+def _moving_rows(j0, j1, mass, v, light_mass):
+    """The node rows of ``j0 <= j < j1`` from the lowest to the highest that has a node
+    heavier than ``light_mass`` or a node in motion; ``(j0, j0)`` if none.  The rows beyond
+    hold only light nodes at rest (round-off traces of material left on the wall), which no
+    step moves until the next transport (a light node gets no force, no gravity and no
+    contact impulse, :func:`_node_update`) and whose faces carry nothing, so leaving them out
+    of the node update and the faces changes nothing but the cost."""
+    lowest, highest = -1, -1
+    for j in range(j0, j1):
+        for i in range(mass.shape[1]):
+            if mass[j, i] > light_mass or v[0, j, i] != 0.0 or v[1, j, i] != 0.0:
+                if lowest < 0:
+                    lowest = j
+                highest = j
+                break
+    if lowest < 0:
+        return j0, j0
+    return lowest, highest + 1
+
+
 @_jit_parallel
 def _faces(j0, j1, v, dt, face_sign, open_face, face_flux_sum, displacement, with_markers,
            row_speed):
@@ -619,6 +640,7 @@ def material_steps(max_steps, clock, v, mass, alpha, sigma, loose, eps_p, face_f
     cst = fast._fast_constants(prm)
     n_carry, n_load, n_blocks, j0, j1 = _runs(alpha, alpha_min, sigma, loose, v, contrib,
                                               carry_runs, load_runs, block_ptr, threads)
+    j0, j1 = _moving_rows(j0, j1, mass, v, light_mass)
     jf = max(j0 - 1, 0)         # the r-faces below the lowest node row with material move too
     for n in range(max_steps):
         t = clock[0]
