@@ -127,7 +127,7 @@ def test_bins_lateral_stress_ratio_is_elastic_at_rest_and_switches_in_discharge(
     confined settling) the elastic ratio nu / (1 - nu) = 0.43 within 10 % (the fill is not
     purely one-dimensional: the wall's friction and the cone below); in mass-flow discharge
     the bin's stress switches towards isotropy, so K rises: by 30 % or more on average over
-    the last 0.3 s of this 1 cm run (measured: 0.42 at rest, a mean of 0.71 there, samples
+    the last 0.3 s of this 1 cm run (measured: 0.42 at rest, a mean of 0.72 there, samples
     fluctuating between 0.57 and 0.99 on this coarse grid)."""
     k = np.asarray(mass_flow.record.bin_lateral_stress_ratio)
     nu = mass_flow.model.cfg.material.poisson_ratio
