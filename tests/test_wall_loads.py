@@ -144,6 +144,33 @@ def test_bins_lateral_stress_ratio_is_elastic_at_rest_and_switches_in_discharge(
     assert math.isnan(diagnostics.bin_lateral_stress_ratio(model, state))
 
 
+def bin_switch(wall_friction_deg):
+    """The bin's K (the time series' ratio) at the opening and its mean over the last 0.3 s
+    of 0.6 s of discharge, on the reference hopper's bin (0.3 m wide and filled 0.3 m high,
+    so that the band is clear of the transition's converging flow) at 1 cm."""
+    cfg = config(hopper={"bin_diameter": 0.3, "bin_height": 0.35, "fill_height": 0.3},
+                 wall={"friction_angle_deg": wall_friction_deg},
+                 run={"end_time": 0.6, "output_interval": 0.02, "markers_per_side": 0})
+    sim = Simulation(HopperModel(cfg), progress=False)
+    sim.run()
+    k = np.asarray(sim.record.bin_lateral_stress_ratio)
+    late = np.asarray(sim.record.t) > 0.3
+    return k[0], float(np.mean(k[late]))
+
+
+def test_the_bins_switch_comes_from_the_wall_friction():
+    """In discharge the cells along a rough wall yield and their plastic flow squeezes the
+    elastic plug (``docs/validation.md``): with the wall's friction at 15 deg the bin's K
+    doubles (measured at 1 cm and E = 5 MPa: 0.43 at rest, a late mean of 0.96; 0.89 and 0.99
+    at E = 2 and 20 MPa), with a nearly frictionless wall (1 deg) it stays near the fill's
+    (0.44 and 0.49; 0.50 and 0.51): the bounds, 1.25 and 1.6 times the value at rest, lie
+    between the two."""
+    k0_smooth, late_smooth = bin_switch(1.0)
+    k0_rough, late_rough = bin_switch(15.0)
+    assert late_smooth < 1.25 * k0_smooth
+    assert late_rough > 1.6 * k0_rough
+
+
 def test_fill_only_run_stops_at_rest():
     """end_time = 0: the run stops when the fill is at rest, with its loads and no discharge."""
     sim = Simulation(HopperModel(config(run={"end_time": 0.0})), progress=False)
