@@ -287,6 +287,7 @@ class WallLoads:
         s_t = float(geometry.transition_arc_length(geom))
         on_cone = (seg == 1) | (seg == -1)
         self.entries = np.flatnonzero(seg != 0)          # not the free-fall tube
+        self.on_cone = on_cone[self.entries]
         self.s = s[self.entries]
         self.normal = normals[self.entries]
         self.tangent = np.stack([-self.normal[:, 1], self.normal[:, 0]], axis=1)
@@ -352,6 +353,67 @@ class WallLoads:
         p_n = -(self.weights @ normal) / self.bin_area
         tau = (self.weights @ shear) / self.bin_area
         return self.centres, self.r_w, self.z_w, p_n, tau
+
+    def hoop_force(self, p_n):
+        """Hoop force ``N_theta = p_n r / n_r`` (N/m, tension positive) of the bins' normal
+        pressures ``p_n`` (Pa); NaN on a flat floor and for a wedge (:meth:`membrane_forces`)."""
+        p_n = np.asarray(p_n, dtype=float)
+        n_r = self.sampler.nr
+        if not self.model.cfg.hopper.axisymmetric:
+            return np.full_like(p_n, np.nan)
+        curved = n_r > 0.0
+        return np.where(curved, p_n * self.r_w / np.where(curved, n_r, 1.0), np.nan)
+
+    def membrane_forces(self, start: dict, end: dict, p_n=None):
+        """The forces in the wall per unit length of its circumference (N/m; per metre of a
+        wedge's length), tension positive, from the wall's reaction over a window, as a
+        shell of revolution carries them (membrane theory):
+
+        * hoop ``N_theta = p_n r / n_r`` per bin (the normal pressure over the wall's second
+          radius of curvature, ``r / cos(theta)`` in the cone, ``R`` in the bin; NaN on a flat
+          floor and for a wedge, whose plates carry ``p_n`` in bending);
+        * meridional ``N_m``: the cone (the hopper) hangs from the transition, so at a bin
+          centre on it ``N_m = V / (c cos(theta))``, ``V`` the downward load (per radian) of
+          the material on the cone below that point, ``c = r`` (1 for a wedge); the bin's
+          wall stands on the transition, so above it ``N_m = -U / c``, ``U`` the downward
+          friction (per radian) on the wall above that point, a compression (NaN on a flat
+          floor, which is not hung);
+        * at the transition ``(N_m of the hopper there, the bin wall's axial compression
+          there)`` (N/m), from the sums over the contact entries of each wall: the hopper's
+          and the bin wall's shares of the wall's vertical reaction, so that
+          ``section factor * c_t * (cos(theta) N_hopper + N_bin) = wall vertical force``.
+
+        ``p_n``: the window's normal pressures (:meth:`profile`) if already at hand.  Loads
+        per bin are summed from the entries with :attr:`weights`, cone and bin entries apart,
+        and taken at the bin centres by the midpoint rule (half the own bin's).  Returns
+        ``(hoop, meridional, (hopper_tension_t, bin_compression_t))``.
+        """
+        geom = self.model.cfg.hopper
+        duration = end["t"] - start["t"]
+        if not duration > 0:
+            raise ValueError("a wall-load window needs a positive duration")
+        if p_n is None:
+            p_n = self.profile(start, end)[3]
+        # the wall's upward force on the material is the material's downward load on it
+        down = (end["wall"] - start["wall"])[self.entries, 1] / duration     # N/rad
+        cone, wall = self.on_cone, ~self.on_cone
+        cone_load = self.weights[:, cone] @ down[cone]
+        wall_load = self.weights[:, wall] @ down[wall]
+        s_t = float(geometry.transition_arc_length(geom))
+        r, n_r = self.r_w, self.sampler.nr
+        c = r if geom.axisymmetric else np.ones_like(r)
+        hung = geom.cone_height > 0
+        cos_t = math.cos(geom.half_angle) if hung else math.nan
+        on_cone = self.centres <= s_t
+        below = np.cumsum(cone_load) - 0.5 * cone_load
+        above = np.cumsum(wall_load[::-1])[::-1] - 0.5 * wall_load
+        meridional = np.where(on_cone, below / (c * cos_t), -above / c)
+        meridional[n_r <= 0.0] = np.nan
+        hoop = self.hoop_force(p_n)
+        c_t = geom.bin_radius if geom.axisymmetric else 1.0
+        at_transition = (float(np.sum(down[cone])) / (c_t * cos_t) if hung else math.nan,
+                         float(np.sum(down[wall])) / c_t)
+        return hoop, meridional, at_transition
 
     def balance(self, start: dict, end: dict) -> dict:
         """The vertical momentum balance of the whole grid over a window, as mean forces in N
@@ -435,7 +497,16 @@ def load_summary(sim) -> dict:
       and in the cone, with EN 1991-4's discharge factor ``en1991_discharge_factor_bin``;
     * ``switch_peak_Pa``, ``switch_peak_s_m``: the envelope's peak within a bin diameter of
       the transition, and ``walker_switch_pressure_Pa``, Walker's passive pressure just below
-      the transition for the Janssen vertical stress there (with the measured ``K``).
+      the transition for the Janssen vertical stress there (with the measured ``K``);
+    * the forces in the wall at the transition per unit length of circumference (N/m,
+      :meth:`WallLoads.membrane_forces`), at rest and the larger of the 90 % and 50 % stages:
+      ``hopper_meridional_tension_N_m`` / ``..._discharge_N_m`` (the hopper hangs from the
+      transition), ``bin_wall_axial_compression_N_m`` / ``..._discharge_N_m`` (the bin's
+      wall friction carried down to it), ``transition_ring_compression_N`` / ``..._discharge_N``
+      (the ring that takes the inward pull of the hopper's tension, ``N_m sin(theta) R``), and
+      ``janssen_wall_axial_compression_N_m``, Janssen's at the transition for the fill's
+      height with the measured ``K``.  NaN where they do not apply (no hopper: a flat floor;
+      the ring: a wedge).
     """
     from . import theory
 
@@ -447,7 +518,9 @@ def load_summary(sim) -> dict:
            "wall_k_bin": getattr(rec, "wall_k", nan), "overpressure_factor_bin_max": nan,
            "overpressure_factor_cone_max": nan,
            "en1991_discharge_factor_bin": theory.en1991_discharge_factors()[0],
-           "switch_peak_Pa": nan, "switch_peak_s_m": nan, "walker_switch_pressure_Pa": nan}
+           "switch_peak_Pa": nan, "switch_peak_s_m": nan, "walker_switch_pressure_Pa": nan,
+           **_transition_forces(rec, geom),
+           "janssen_wall_axial_compression_N_m": nan}
     rest = rec.rest_balance
     if rest and rest.get("weight", 0) > 0:
         out.update(fill_weight_N=rest["weight"], fill_wall_vertical_N=rest["wall"],
@@ -488,7 +561,36 @@ def load_summary(sim) -> dict:
                 out["walker_switch_pressure_Pa"] = float(theory.walker_switch_pressure(
                     sigma_vt, K, mat.friction_angle_deg, m.cfg.wall.friction_angle_deg,
                     geom.half_angle_deg).hopper)
+    mu = m.mu_wall
+    if mu > 0:
+        K = out["wall_k_bin"] if math.isfinite(out["wall_k_bin"]) else float(
+            theory.k_jaky(mat.friction_angle_deg))
+        axial = (theory.janssen_wall_axial_force if geom.axisymmetric
+                 else theory.janssen_plane_wall_axial_force)
+        out["janssen_wall_axial_compression_N_m"] = float(axial(
+            geom.fill_height, mat.density, geom.bin_diameter, K, mu))
     return out
+
+
+def _transition_forces(rec, geom) -> dict:
+    """The transition's forces of :func:`load_summary` from ``rec.wall_forces``."""
+    ring = (math.sin(geom.half_angle) * geom.bin_radius
+            if geom.axisymmetric and geom.cone_height > 0 else math.nan)
+    forces = getattr(rec, "wall_forces", {})
+
+    def at(stages):
+        values = [np.asarray(forces[s][2], float) for s in stages if s in forces]
+        if not values:
+            return math.nan, math.nan
+        return tuple(float(np.max([v[k] for v in values])) for k in range(2))
+
+    rest, flow = at(("filling",)), at(("early_discharge", "mid_discharge"))
+    return {"hopper_meridional_tension_N_m": rest[0],
+            "bin_wall_axial_compression_N_m": rest[1],
+            "transition_ring_compression_N": rest[0] * ring,
+            "hopper_meridional_tension_discharge_N_m": flow[0],
+            "bin_wall_axial_compression_discharge_N_m": flow[1],
+            "transition_ring_compression_discharge_N": flow[0] * ring}
 
 
 # ---------------------------------------------------------------- stress pattern

@@ -7,7 +7,7 @@ A run directory describes itself::
                          stop reason
     summary.json         the run's headline numbers (see :meth:`Simulation.summary`)
     timeseries.csv       t_s, mass_in_hopper_kg, discharged_kg, discharge_rate_kg_s, ...
-    wall_pressure.csv    stage, t_s, s_m, r_m, z_m, p_n_Pa, tau_Pa
+    wall_pressure.csv    stage, t_s, s_m, r_m, z_m, p_n_Pa, tau_Pa, ..., hoop and meridional forces
     fields/fields.pvd    the field snapshots over time for ParaView (a VTU series)
     fields/fields_NNNN.vtu, fields/snapshots.csv
     fields/markers_NNNN.vtu   the passive layer markers of snapshot NNNN (when the run has them)
@@ -67,7 +67,8 @@ TIMESERIES_COLUMNS = ("t_s", "mass_in_hopper_kg", "discharged_kg", "discharge_ra
                       "mass_flow_index", "stagnant_fraction", "bin_lateral_stress_ratio")
 #: Columns of ``wall_pressure.csv`` (public contract).
 WALL_PRESSURE_COLUMNS = ("stage", "t_s", "s_m", "r_m", "z_m", "p_n_Pa", "tau_Pa",
-                         "p_n_stress_Pa", "tau_stress_Pa", "window_s")
+                         "p_n_stress_Pa", "tau_stress_Pa", "window_s", "hoop_force_N_m",
+                         "meridional_force_N_m")
 #: Columns of ``loads.csv`` (public contract): the vertical momentum balance of the grid over
 #: each interval, as mean forces (N, 3D, upward positive; ``weight`` positive).
 LOADS_COLUMNS = ("stage", "t_s", "weight_N", "wall_vertical_N", "outlet_N", "damping_N",
@@ -252,17 +253,26 @@ def write_wall_pressure(path: PathLike, record) -> None:
     the wall's reaction averaged over the stage's window of ``window_s`` seconds;
     ``p_n_stress_Pa``, ``tau_stress_Pa`` the estimate from the stresses of the cells next to
     the wall (empty where a bin held no material); ``t_s`` the time since the outlet opened
-    at the end of the window (0 at rest).
+    at the end of the window (0 at rest).  ``hoop_force_N_m`` and ``meridional_force_N_m``:
+    the forces in the wall per unit length of its circumference (per metre of a wedge's
+    length), tension positive, the hopper hung from the transition and the bin's wall
+    standing on it (:meth:`fipy_hopper.diagnostics.WallLoads.membrane_forces`; the envelope
+    has no meridional force, a wedge and a flat floor no hoop force: empty).
     """
     rows = []
     stress = getattr(record, "wall_stress", {})
     window = getattr(record, "wall_window", {})
+    forces = getattr(record, "wall_forces", {})
     for stage, (t, s, r, z, p, tau) in record.wall.items():
-        p_s, tau_s = stress.get(stage, (np.full(len(s), np.nan), np.full(len(s), np.nan)))
+        empty = np.full(len(s), np.nan)
+        p_s, tau_s = stress.get(stage, (empty, empty))
+        hoop, meridional = forces.get(stage, (empty, empty))[:2]
+        hoop, meridional = np.broadcast_to(hoop, s.shape), np.broadcast_to(meridional, s.shape)
         for k in range(len(s)):
             rows.append([stage, _num(t), _num(s[k]), _num(r[k]), _num(z[k]), _num(p[k]),
                          _num(tau[k]), _num(p_s[k]), _num(tau_s[k]),
-                         _num(window.get(stage, math.nan))])
+                         _num(window.get(stage, math.nan)), _num(hoop[k]),
+                         _num(meridional[k])])
     _write_csv(path, WALL_PRESSURE_COLUMNS, rows)
 
 
@@ -917,6 +927,7 @@ _WALL_ARRAY = re.compile(r"wall__(?P<stage>[A-Za-z_]\w*?)__(?P<k>[0-4])")
 #: NaN allowed.  The wall samples ``wall__<stage>__<k>`` must also match the stages of the
 #: metadata.
 CHECKPOINT_AUXILIARY = (r"wall__\w+?__[0-4]", r"wallstress__\w+?__[01]",
+                        r"wallforces__\w+?__[0-2]",
                         r"reading__\w+?__(wall|plate|budget)", r"stresssum__\w+?__[0-2]",
                         r"envelope")
 _META_KEYS = ("state", "record", "wall_times", "t_open", "next_sample", "schedules")

@@ -202,6 +202,9 @@ class RunRecord:
     # stage -> (p_n, tau) stress-sampled on the same bins (NaN where a bin held no material)
     wall_stress: dict = field(default_factory=dict)
     wall_window: dict = field(default_factory=dict)      # stage -> window duration (s)
+    # stage -> (hoop, meridional per bin, [hopper tension, bin wall compression] at the
+    # transition), N/m (diagnostics.WallLoads.membrane_forces)
+    wall_forces: dict = field(default_factory=dict)
     loads: list = field(default_factory=list)            # rows of loads.csv (dicts)
     rest_balance: dict = field(default_factory=dict)     # the balance over the rest window
     envelope_windows: int = 0
@@ -556,6 +559,8 @@ class Simulation:
             tau_s = np.where(sums[2] > 0, sums[1] / count, np.nan)
         t_open = self.t_open if np.isfinite(self.t_open) else end["t"]
         self.record.wall[stage] = (end["t"] - t_open, s, r, z, p_n, tau)
+        hoop, meridional, at_transition = self.wall_loads.membrane_forces(start, end, p_n)
+        self.record.wall_forces[stage] = (hoop, meridional, np.asarray(at_transition))
         self.record.wall_stress[stage] = (p_s, tau_s)
         self.record.wall_window[stage] = end["t"] - start["t"]
 
@@ -574,6 +579,8 @@ class Simulation:
             self.record.wall["discharge_envelope"] = (
                 st.t - self.t_open, sampler.centres, sampler.r, sampler.z, self.envelope, nan)
             self.record.wall_stress["discharge_envelope"] = (nan, nan)
+            self.record.wall_forces["discharge_envelope"] = (     # no one state: no meridional
+                self.wall_loads.hoop_force(self.envelope), nan, np.full(2, np.nan))
             self.record.wall_window["discharge_envelope"] = self.load_window
 
     def _progress(self, text: str):
@@ -598,11 +605,14 @@ class Simulation:
         scalars = {k: v for k, v in st.__dict__.items() if not isinstance(v, np.ndarray)}
         rec = dict(self.record.__dict__)
         wall, wall_stress = rec.pop("wall"), rec.pop("wall_stress")
+        wall_forces = rec.pop("wall_forces")
         for stage, values in wall.items():
             for k, arr in enumerate(values[1:]):
                 arrays[f"wall__{stage}__{k}"] = np.asarray(arr)
             for k, arr in enumerate(wall_stress.get(stage, ())):
                 arrays[f"wallstress__{stage}__{k}"] = np.asarray(arr)
+            for k, arr in enumerate(wall_forces.get(stage, ())):
+                arrays[f"wallforces__{stage}__{k}"] = np.asarray(arr)
         readings = {}
         for name, reading in self._readings.items():
             readings[name] = {k: v for k, v in reading.items() if not isinstance(v, np.ndarray)}
@@ -646,12 +656,15 @@ class Simulation:
         from . import io as fio
 
         arrays, meta = fio.read_checkpoint(path, self.state, self.model.cfg)
-        wall, wall_stress = {}, {}
+        wall, wall_stress, wall_forces = {}, {}, {}
         for stage, t_stage in meta["wall_times"].items():
             wall[stage] = (t_stage,) + tuple(arrays.pop(f"wall__{stage}__{k}") for k in range(5))
             if f"wallstress__{stage}__0" in arrays:
                 wall_stress[stage] = tuple(arrays.pop(f"wallstress__{stage}__{k}")
                                            for k in range(2))
+            if f"wallforces__{stage}__0" in arrays:   # not written by older checkpoints
+                wall_forces[stage] = tuple(arrays.pop(f"wallforces__{stage}__{k}")
+                                           for k in range(3))
         self._readings = {}
         for name, scalars in meta.get("readings", {}).items():
             reading = dict(scalars)
@@ -664,7 +677,8 @@ class Simulation:
                                          for k in range(3)] if present else None)
         self.envelope = arrays.pop("envelope", None)
         self.state = type(self.state)(**meta["state"], **arrays)
-        self.record = RunRecord(**meta["record"], wall=wall, wall_stress=wall_stress)
+        self.record = RunRecord(**meta["record"], wall=wall, wall_stress=wall_stress,
+                                wall_forces=wall_forces)
         ratios = self.record.bin_lateral_stress_ratio     # not recorded by older checkpoints
         ratios[:0] = [math.nan] * (len(self.record.t) - len(ratios))
         self.t_open = meta["t_open"]

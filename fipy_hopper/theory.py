@@ -30,9 +30,10 @@ Flow mode
     :func:`jenike_flow_mode`.
 Vertical-walled section (Janssen)
     :func:`janssen_z0`, :func:`janssen_vertical_stress`, :func:`janssen_wall_pressure`,
-    :func:`janssen_wall_shear`, :func:`janssen_asymptotic_wall_pressure`; long rectangular
-    (plane) bins: :func:`janssen_plane_z0`, :func:`janssen_plane_vertical_stress`,
-    :func:`janssen_plane_wall_pressure`, :func:`janssen_plane_asymptotic_wall_pressure`.
+    :func:`janssen_wall_shear`, :func:`janssen_asymptotic_wall_pressure`,
+    :func:`janssen_wall_axial_force`; long rectangular (plane) bins: :func:`janssen_plane_z0`,
+    :func:`janssen_plane_vertical_stress`, :func:`janssen_plane_wall_pressure`,
+    :func:`janssen_plane_asymptotic_wall_pressure`, :func:`janssen_plane_wall_axial_force`.
 Lateral pressure ratios
     :func:`k_jaky`, :func:`k_en1991`, :func:`k_rankine_active`, :func:`k_walker_wall`.
 Hopper slice method (Walker 1966 / Walters 1973 with distribution factor D = 1)
@@ -97,10 +98,12 @@ __all__ = [
     "janssen_wall_pressure",
     "janssen_wall_shear",
     "janssen_asymptotic_wall_pressure",
+    "janssen_wall_axial_force",
     "janssen_plane_z0",
     "janssen_plane_vertical_stress",
     "janssen_plane_wall_pressure",
     "janssen_plane_asymptotic_wall_pressure",
+    "janssen_plane_wall_axial_force",
     "k_jaky",
     "k_en1991",
     "k_rankine_active",
@@ -611,6 +614,31 @@ def janssen_asymptotic_wall_pressure(rho_b, D, mu, g=G):
     return _out(rho_b * g * D / (4.0 * mu))
 
 
+def janssen_wall_axial_force(z, rho_b, D, K, mu, q0=0.0, g=G):
+    """Janssen vertical force in the wall per unit length of its perimeter (N/m, compression
+    positive) at depth z: the wall friction above z, ``n_z = int_0^z mu K sigma_v dz``.
+
+    From the equilibrium of the column above z, weight and surcharge ``(rho_b g z + q0) A``
+    = ``sigma_v A + n_z U``: ``n_z = (D/4) (rho_b g z + q0 - sigma_v(z))`` [D]; with
+    ``q0 = 0`` this is ``mu K rho_b g z0 (z - z0 (1 - exp(-z/z0)))``, the form of
+    EN 1991-4's characteristic vertical wall force ``n_zSk`` (section 5.2.1.1).  Arguments as
+    :func:`janssen_vertical_stress` (no angles).  Tends to ``z^2 rho_b g K mu / 2`` near the
+    surface and grows as ``rho_b g D/4`` per metre of depth below ``z0``.
+
+    Source: Janssen (1895).  Tag: [D].
+    """
+    z = _nonneg("z", z, " m")
+    rho_b = _positive("rho_b", rho_b, " kg/m^3")
+    q0 = _nonneg("q0", q0, " Pa")
+    g = _positive("g", g, " m/s^2")
+    D = _positive("D", D, " m")
+    z0 = _arr(janssen_z0(D, K, mu))
+    x = z / z0
+    # rho g z + q0 - sigma_v = rho g (z - z0 (1 - e^-x)) + q0 (1 - e^-x), without cancellation
+    excess = rho_b * g * z0 * (x + np.expm1(-x)) - q0 * np.expm1(-x)
+    return _out(D / 4.0 * excess)
+
+
 def janssen_plane_z0(B, K, mu):
     """Janssen characteristic depth of a long rectangular (plane) bin, ``z0 = B/(2 K mu)`` (m).
 
@@ -679,6 +707,26 @@ def janssen_plane_asymptotic_wall_pressure(rho_b, B, mu, g=G):
     mu = _positive("mu", mu)
     g = _positive("g", g, " m/s^2")
     return _out(rho_b * g * B / (2.0 * mu))
+
+
+def janssen_plane_wall_axial_force(z, rho_b, B, K, mu, q0=0.0, g=G):
+    """Janssen vertical force in each wall of a long rectangular (plane) bin per metre of its
+    length (N/m, compression positive) at depth z: ``n_z = (B/2) (rho_b g z + q0 - sigma_v)``,
+    the two walls' friction carrying what the vertical stress does not [D].  Arguments as
+    :func:`janssen_plane_vertical_stress` (no angles).
+
+    Source: Janssen (1895).  Tag: [D] (:func:`janssen_wall_axial_force` with ``D/4`` replaced
+    by ``B/2``).
+    """
+    z = _nonneg("z", z, " m")
+    rho_b = _positive("rho_b", rho_b, " kg/m^3")
+    q0 = _nonneg("q0", q0, " Pa")
+    g = _positive("g", g, " m/s^2")
+    B = _positive("B", B, " m")
+    z0 = _arr(janssen_plane_z0(B, K, mu))
+    x = z / z0
+    excess = rho_b * g * z0 * (x + np.expm1(-x)) - q0 * np.expm1(-x)
+    return _out(B / 2.0 * excess)
 
 
 # ---------------------------------------------------------------------------------------

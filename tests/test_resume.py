@@ -192,9 +192,12 @@ def test_sigterm_then_resume_from_the_periodic_checkpoint(setup_dirs, capsys):
 
 
 def test_a_checkpoint_without_the_bin_ratio_resumes_with_it_unknown_before(setup_dirs):
-    """A checkpoint written before the time series had ``bin_lateral_stress_ratio``: the run
-    resumes, the samples taken before the checkpoint get NaN in that column ("nan" in the
-    CSV), every other number equals the uninterrupted run's."""
+    """A checkpoint written before the time series had ``bin_lateral_stress_ratio`` and the
+    wall loads their forces in the wall: the run resumes, the samples taken before the
+    checkpoint get NaN in that column ("nan" in the CSV), the filled stage (recorded before
+    it) gets no forces in the wall (NaN in ``wall_pressure.csv`` and for the filled forces at
+    the transition in ``summary.json``), and every other number equals the uninterrupted
+    run's."""
     import csv
 
     folder, config, reference = setup_dirs
@@ -210,6 +213,10 @@ def test_a_checkpoint_without_the_bin_ratio_resumes_with_it_unknown_before(setup
     meta = json.loads(str(arrays["__meta__"]))
     written = len(meta["record"].pop("bin_lateral_stress_ratio"))
     assert written > 0
+    forces = [k for k in arrays if k.startswith("wallforces__")]
+    assert forces and all(k.startswith("wallforces__filling__") for k in forces)
+    for k in forces:
+        del arrays[k]
     arrays["__meta__"] = np.array(json.dumps(meta))
     with open(path, "wb") as fh:
         np.savez(fh, **arrays)
@@ -225,3 +232,24 @@ def test_a_checkpoint_without_the_bin_ratio_resumes_with_it_unknown_before(setup
         ratio_a, ratio_b = a.pop("bin_lateral_stress_ratio"), b.pop("bin_lateral_stress_ratio")
         assert a == b
         assert ratio_a == ("nan" if k < written else ratio_b) and ratio_b != "nan"
+
+    def wall_rows(run):
+        with open(run / "wall_pressure.csv", newline="") as fh:
+            return list(csv.DictReader(fh))
+
+    resumed, uninterrupted = wall_rows(out), wall_rows(reference)
+    assert len(resumed) == len(uninterrupted)
+    for a, b in zip(resumed, uninterrupted):
+        unknown = a["stage"] == "filling"
+        for key in ("hoop_force_N_m", "meridional_force_N_m"):
+            value_a, value_b = a.pop(key), b.pop(key)
+            assert value_a == ("nan" if unknown else value_b)
+            assert value_b != "nan" or key == "meridional_force_N_m"
+        assert a == b
+    summary_a = json.loads((out / "summary.json").read_text())
+    summary_b = json.loads((reference / "summary.json").read_text())
+    for key in ("hopper_meridional_tension_N_m", "bin_wall_axial_compression_N_m",
+                "transition_ring_compression_N", "wall_time_s"):
+        value_a, value_b = summary_a.pop(key), summary_b.pop(key)
+        assert key == "wall_time_s" or (value_a is None and value_b > 0)
+    assert summary_a == summary_b

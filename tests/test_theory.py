@@ -132,6 +132,12 @@ def test_janssen_asymptote_independent_of_K():
 
 
 # --- §d table "Choices of K" (phi = 30, phi_w = 20) ------------------------------------
+def test_janssen_wall_axial_force_worked_values():
+    # §d: D = 0.3 m (B = 0.3 m), K = 0.5, mu = 0.4, z = 1 m
+    assert_printed(th.janssen_wall_axial_force(1.0, RHO_B, 0.3, 0.5, 0.4), 718.5, 1)
+    assert_printed(th.janssen_plane_wall_axial_force(1.0, RHO_B, 0.3, 0.5, 0.4), 988.2, 1)
+
+
 def test_K_table():
     assert_printed(th.k_jaky(30.0), 0.50, 2)
     assert_printed(th.k_en1991(30.0), 0.55, 2)
@@ -413,6 +419,28 @@ def test_janssen_solves_slice_equilibrium():
     assert np.all(np.diff(pn) > 0)
     assert np.all(pn < th.janssen_asymptotic_wall_pressure(RHO_B, D, mu))
     np.testing.assert_allclose(th.janssen_wall_shear(z, RHO_B, D, K, mu), mu * pn, rtol=1e-14)
+
+
+@pytest.mark.parametrize("plane", [False, True])
+def test_janssen_wall_axial_force_integrates_the_wall_shear(plane):
+    # dn_z/dz = tau_w = mu K sigma_v (the friction per unit perimeter), n_z(0) = 0, near the
+    # surface rho g K mu z^2 / 2, and the column's balance with a surcharge
+    D, K, mu, q0 = 0.3, 0.45, 0.4, 800.0
+    axial = th.janssen_plane_wall_axial_force if plane else th.janssen_wall_axial_force
+    vertical = th.janssen_plane_vertical_stress if plane else th.janssen_vertical_stress
+    z = np.linspace(0.05, 2.0, 40)
+    dz = 1e-5
+    n = lambda zz: axial(zz, RHO_B, D, K, mu, q0=q0)  # noqa: E731
+    deriv = (n(z + dz) - n(z - dz)) / (2 * dz)
+    np.testing.assert_allclose(deriv, mu * K * vertical(z, RHO_B, D, K, mu, q0=q0), rtol=1e-6)
+    assert axial(0.0, RHO_B, D, K, mu) == 0.0
+    z_small = 1e-4
+    assert axial(z_small, RHO_B, D, K, mu) == pytest.approx(
+        RHO_B * th.G * K * mu * z_small ** 2 / 2, rel=1e-3)
+    ratio = D / 2 if plane else D / 4                           # A/U
+    np.testing.assert_allclose(
+        n(z), ratio * (RHO_B * th.G * z + q0 - vertical(z, RHO_B, D, K, mu, q0=q0)),
+        rtol=1e-9)
 
 
 def test_k_ratio_limits():
