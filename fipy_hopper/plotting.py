@@ -484,6 +484,90 @@ def wall_pressure(run):
     return fig
 
 
+def wall_forces(run):
+    """The forces in the wall per metre of circumference (N/m, or kN/m from 1 kN/m up; tension
+    positive) along the wall, from ``wall_pressure.csv``'s ``hoop_force_N_m`` and ``meridional_force_N_m``.
+
+    Left: the hoop force at rest, at the discharge stages and from the discharge envelope,
+    with Janssen's ``p_n R`` in the bin (``K = 1 - sin(phi)``).  Right: the meridional force:
+    the hopper's tension (hung from the transition) and the bin wall's compression (standing
+    on it), with Janssen's ``-n_z`` in the bin for the measured wall K (the fill's) and the
+    transition's totals of ``summary.json``.  A wedge's plates have no hoop force.  Returns
+    None when the table has no forces (a run directory written before they were).
+    """
+    run = Path(run)
+    table = read_csv(run / RunDirectory.WALL_PRESSURE)
+    if "meridional_force_N_m" not in table:
+        return None
+    cfg, summary = _config(run), _summary(run)
+    geom, mat = cfg.hopper, cfg.material
+    stages = np.asarray(table["stage"], dtype=str)
+    s_all = np.asarray(table["s_m"], dtype=float)
+    hoop = np.asarray(table["hoop_force_N_m"], dtype=float)
+    meridional = np.asarray(table["meridional_force_N_m"], dtype=float)
+    largest = np.nanmax(np.abs(np.concatenate([hoop, meridional, [0.0]])))
+    scale, unit = (1e3, "kN/m") if largest >= 1e3 else (1.0, "N/m")
+    hoop, meridional = hoop / scale, meridional / scale
+    fig = _figure(11.0, 4.2)
+    ax_h, ax_m = fig.subplots(1, 2)
+    for stage in dict.fromkeys(stages.tolist()):
+        sel = stages == stage
+        if stage == "discharge_envelope":
+            ax_h.plot(s_all[sel], hoop[sel], "-", color="C3", lw=2.0, alpha=0.6,
+                      label="from the discharge envelope")
+            continue
+        marker, colour, label = _STAGE_STYLE.get(stage, ("x", "C4", stage))
+        ax_h.plot(s_all[sel], hoop[sel], marker + "-", color=colour, ms=4, lw=0.8, label=label)
+        ax_m.plot(s_all[sel], meridional[sel], marker + "-", color=colour, ms=4, lw=0.8,
+                  label=label)
+    s_t = float(geometry.transition_arc_length(geom))
+    s_fill = float(geometry.arc_length(geom.fill_level, geom))
+    mu = math.tan(math.radians(cfg.wall.friction_angle_deg))
+    plane = not geom.axisymmetric
+    if mu > 0 and s_fill > s_t:
+        s_bin = np.linspace(s_t, s_fill, 120)
+        depth = s_fill - s_bin
+        if not plane:
+            K = float(theory.k_jaky(mat.friction_angle_deg))
+            p = theory.janssen_wall_pressure(depth, mat.density, geom.bin_diameter, K, mu)
+            ax_h.plot(s_bin, np.asarray(p) * geom.bin_radius / scale, "k-", lw=1.2,
+                      label="Janssen p_n R (K = 1 - sin phi)")
+        K_w = summary.get("wall_k_bin")
+        K_w = K_w if K_w is not None and np.isfinite(K_w) else float(
+            theory.k_jaky(mat.friction_angle_deg))
+        axial = theory.janssen_plane_wall_axial_force if plane else theory.janssen_wall_axial_force
+        n_z = axial(depth, mat.density, geom.bin_diameter, K_w, mu)
+        ax_m.plot(s_bin, -np.asarray(n_z) / scale, "k-", lw=1.2,
+                  label=f"Janssen -n_z (measured K = {K_w:.2f})")
+    for key, sign, marker, label in (
+            ("hopper_meridional_tension_N_m", 1.0, "^", "hopper tension at the transition"),
+            ("bin_wall_axial_compression_N_m", -1.0, "v", "bin wall compression there")):
+        value = summary.get(key)
+        if value is not None and np.isfinite(value):
+            ax_m.plot([s_t], [sign * value / scale], marker, color="k", ms=8, mfc="none",
+                      label=f"{label}, at rest")
+    for a in (ax_h, ax_m):
+        a.axvline(s_t, color="0.5", lw=0.8, ls=":")
+        a.set_xlabel("arc length along the wall from the outlet lip, s (m)")
+        a.set_xlim(left=0.0)
+    ax_m.axhline(0.0, color="0.6", lw=0.8)
+    per = "per metre of length" if plane else "per metre of circumference"
+    if np.isfinite(hoop).any():
+        ax_h.set_ylim(bottom=0.0)
+        ax_h.set_ylabel(f"hoop force N_theta ({unit}, {per})")
+        ax_h.legend(loc="best", fontsize=7)
+        ax_h.set_title("Hoop force (tension)", fontsize=10)
+    else:
+        ax_h.set_axis_off()
+        ax_h.text(0.5, 0.5, "plane walls: no hoop force", ha="center", va="center",
+                  transform=ax_h.transAxes)
+    ax_m.set_ylabel(f"meridional force N_m ({unit}, {per})")
+    ax_m.legend(loc="best", fontsize=7)
+    ax_m.set_title("Meridional force: hopper hung from the transition (+), bin wall on it (-)",
+                   fontsize=9)
+    return fig
+
+
 # ---------------------------------------------------------------- stress pattern
 def _stage_snapshots(entries):
     """The snapshot at rest (the last of the fill) and the one of the discharge nearest to
@@ -609,6 +693,9 @@ def plot_run(run) -> list:
         written.append(_save(discharge_curves(run), run / "discharge.png"))
     if (run / RunDirectory.WALL_PRESSURE).is_file():
         written.append(_save(wall_pressure(run), run / "wall_pressure.png"))
+        forces = wall_forces(run)
+        if forces is not None:
+            written.append(_save(forces, run / "wall_forces.png"))
     entries = snapshots(run)
     if entries and _config(run).numerics.formulation == "lagrangian":
         written.append(_save(lagrangian_mesh(run), run / "lagrangian_mesh.png"))

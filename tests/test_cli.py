@@ -76,7 +76,8 @@ def run_dir(tmp_path_factory):
 def test_run_directory_has_every_output(run_dir):
     for name in ("config.toml", "manifest.json", "summary.json", "timeseries.csv",
                  "wall_pressure.csv", "fields/fields.pvd", "fields/snapshots.csv",
-                 "flow_pattern.png", "discharge.png", "wall_pressure.png", "discharge.gif"):
+                 "flow_pattern.png", "discharge.png", "wall_pressure.png", "wall_forces.png",
+                 "discharge.gif"):
         assert (run_dir / name).is_file(), name
     assert not (run_dir / "checkpoint.npz").exists()       # removed when the run finished
     assert not list(run_dir.rglob(".*.tmp*"))               # no temporary files left
@@ -158,7 +159,7 @@ def test_pictures_are_non_empty_images(run_dir):
     from PIL import Image
 
     for name in ("flow_pattern.png", "discharge.png", "wall_pressure.png",
-                 "stress_pattern.png"):
+                 "wall_forces.png", "stress_pattern.png"):
         data = (run_dir / name).read_bytes()
         assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 10_000, name
         with Image.open(run_dir / name) as im:

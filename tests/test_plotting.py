@@ -1,4 +1,5 @@
-"""The closed forms of the wall-pressure picture of a cone (the wedge's are in test_wedge.py)."""
+"""The closed forms of the wall-pressure picture of a cone (the wedge's are in test_wedge.py),
+and the forces picture of a run directory written before the wall's forces were."""
 
 import math
 
@@ -71,3 +72,26 @@ def test_cone_picture_en1991_shallow_and_flat():
     flat = theory_wall_pressure(cone(half_angle_deg=88.0))
     assert "Walker, cone, filling" in flat
     assert not any(name.startswith("EN 1991-4") for name in flat)
+
+
+def test_forces_picture_is_skipped_for_a_table_without_forces(tmp_path):
+    """A run directory written before ``wall_pressure.csv`` had the wall's forces: no
+    ``wall_forces.png`` (and no error); with the columns, a figure of two panels."""
+    import csv
+
+    from fipy_hopper import io
+    from fipy_hopper.plotting import wall_forces
+
+    cfg = cone()
+    (tmp_path / "config.toml").write_text(cfg.to_toml())
+    (tmp_path / "summary.json").write_text("{}")
+    rows = [["filling", 0.0, 0.1 * k, 0.05, 0.1 * k, 100.0 * k, 10.0 * k, "", "", 0.01,
+             5.0 * k, 2.0 * k] for k in range(1, 5)]
+    for columns in (io.WALL_PRESSURE_COLUMNS[:10], io.WALL_PRESSURE_COLUMNS):
+        with open(tmp_path / "wall_pressure.csv", "w", newline="") as fh:
+            writer = csv.writer(fh)
+            writer.writerow(columns)
+            writer.writerows(row[:len(columns)] for row in rows)
+        fig = wall_forces(tmp_path)
+        assert (fig is None) == (len(columns) == 10)
+    assert len(fig.axes) == 2
