@@ -433,6 +433,44 @@ def series_analysis(rows: list) -> tuple:
     return table, numbers, profiles
 
 
+#: the transition's forces of a run's summary.json (N/m; the ring's in N)
+FORCES = (("hopper_meridional_tension_N_m", "hopper tension, at rest"),
+          ("bin_wall_axial_compression_N_m", "bin wall compression, at rest"),
+          ("transition_ring_compression_N", "ring compression, at rest"),
+          ("hopper_meridional_tension_discharge_N_m", "hopper tension, discharge"),
+          ("bin_wall_axial_compression_discharge_N_m", "bin wall compression, discharge"))
+
+
+def forces_analysis(rows: list) -> tuple:
+    """The forces in the wall at the transition (``summary.json``): per case with Janssen's
+    n_z beside the bin wall's compression at rest, their successive changes under refinement
+    and their spread over E (largest difference over the E = 5 MPa value): ``(table rows,
+    numbers)``.  Runs written before the summaries had them are left out."""
+    table, numbers = [], {}
+    have = [r for r in rows if _sweep.finite(r.get("bin_wall_axial_compression_N_m"))]
+    for row in have:
+        janssen = row.get("janssen_wall_axial_compression_N_m", math.nan)
+        table.append({"case": row["case"], **{key: row.get(key, math.nan) for key, _ in FORCES},
+                      "janssen_wall_axial_compression_N_m": janssen,
+                      "bin_wall_vs_janssen_pct": _sweep.pct(
+                          row["bin_wall_axial_compression_N_m"], janssen)})
+        numbers[f"bin_wall_vs_janssen_pct[{row['case']}]"] = table[-1]["bin_wall_vs_janssen_pct"]
+    grid = sorted((r for r in have if _in_series(r, rows, "grid")),
+                  key=lambda r: -r["cell_size_m"])
+    stiff = [r for r in have if _in_series(r, rows, "stiffness")]
+    for key, _ in FORCES:
+        values = [float(r.get(key, math.nan)) for r in grid]
+        if len(values) >= 2 and all(map(math.isfinite, values)):
+            numbers[f"force_changes_pct[{key}]"] = [
+                abs(_sweep.pct(b, a)) for a, b in zip(values[:-1], values[1:])]
+        values = {r["youngs_modulus_Pa"]: float(r.get(key, math.nan)) for r in stiff}
+        if len(values) >= 2 and all(map(math.isfinite, values.values())):
+            middle = values.get(5.0e6, sorted(values.values())[len(values) // 2])
+            numbers[f"force_E_spread_pct[{key}]"] = 100 * (max(values.values())
+                                                          - min(values.values())) / middle
+    return table, numbers
+
+
 #: the part of the discharge (s after the opening) over which the bin's K is averaged
 BIN_K_WINDOW = (0.5, 1.5)
 
@@ -650,6 +688,28 @@ def write_outputs(out, rows, profiles, comparison, switch, numbers, options, set
         findings.append("At rest, the wall's and the plate's vertical reactions equal the "
                         "weight to within "
                         f"{numbers['fill_equilibrium_residual_max_pct']:.3f} % in every case.")
+    forces, force_numbers = forces_analysis(rows)
+    numbers.update(force_numbers)
+    if forces:
+        _sweep.write_rows_csv(out / "forces.csv", forces)
+        findings.append(
+            "Forces in the wall at the transition, at rest (per metre of circumference): "
+            + "; ".join(f"{f['case']} hopper tension {f['hopper_meridional_tension_N_m']:.0f} "
+                        f"N/m, bin wall compression {f['bin_wall_axial_compression_N_m']:.1f} "
+                        f"N/m ({f['bin_wall_vs_janssen_pct']:+.1f} % from Janssen's n_z with "
+                        "the measured K)" for f in forces) + ".")
+        moving = [(label, numbers[f"force_changes_pct[{key}]"]) for key, label in FORCES
+                  if f"force_changes_pct[{key}]" in numbers]
+        if moving:
+            steps = "; ".join(f"{label} " + " / ".join(f"{c:.1f}" for c in ch) + " %"
+                              for label, ch in moving)
+            findings.append("Under refinement (the grid series, coarse to fine) the "
+                            f"transition's forces change by {steps}.")
+        spread = [(label, numbers[f"force_E_spread_pct[{key}]"]) for key, label in FORCES
+                  if f"force_E_spread_pct[{key}]" in numbers]
+        if spread:
+            findings.append("Over E = 2-20 MPa they spread by " + "; ".join(
+                f"{label} {v:.1f} %" for label, v in spread) + ".")
     if numbers["missing_stages"]:
         findings.append("Stages not reached: " + ", ".join(numbers["missing_stages"]) + ".")
     if numbers["failed"]:
@@ -683,6 +743,14 @@ def write_outputs(out, rows, profiles, comparison, switch, numbers, options, set
             "over that distance (" + "; ".join(
                 f"{e['region']} {e['diff_pct']:+.0f} %" for e in estimates
                 if e["case"] == estimates[0]["case"]) + f", {estimates[0]['case']}).")
+    if forces:
+        tables.append({"title": "Forces in the wall at the transition (N/m per metre of "
+                                "circumference; the ring's in N)",
+                       "columns": ["case"] + [label for _, label in FORCES]
+                       + ["Janssen n_z at rest", "bin wall vs Janssen %"],
+                       "rows": [[f["case"]] + [round(f[key], 1) for key, _ in FORCES]
+                                + [round(f["janssen_wall_axial_compression_N_m"], 1),
+                                   round(f["bin_wall_vs_janssen_pct"], 1)] for f in forces]})
     if series_table:
         tables.append({"title": "Convergence and stiffness (relative L2 over the whole wall, "
                                 "45 mm bins)",
