@@ -627,16 +627,20 @@ def janssen_wall_axial_force(z, rho_b, D, K, mu, q0=0.0, g=G):
 
     Source: Janssen (1895).  Tag: [D].
     """
+    D = _positive("D", D, " m")
+    return _wall_axial_force(z, rho_b, janssen_z0(D, K, mu), D / 4.0, q0, g)
+
+
+def _wall_axial_force(z, rho_b, z0, area_per_perimeter, q0, g):
+    """``(A/U) (rho_b g z + q0 - sigma_v(z))`` for Janssen's ``sigma_v`` of depth ``z0``."""
     z = _nonneg("z", z, " m")
     rho_b = _positive("rho_b", rho_b, " kg/m^3")
     q0 = _nonneg("q0", q0, " Pa")
     g = _positive("g", g, " m/s^2")
-    D = _positive("D", D, " m")
-    z0 = _arr(janssen_z0(D, K, mu))
-    x = z / z0
+    x = z / _arr(z0)
     # rho g z + q0 - sigma_v = rho g (z - z0 (1 - e^-x)) + q0 (1 - e^-x), without cancellation
-    excess = rho_b * g * z0 * (x + np.expm1(-x)) - q0 * np.expm1(-x)
-    return _out(D / 4.0 * excess)
+    excess = rho_b * g * _arr(z0) * (x + np.expm1(-x)) - q0 * np.expm1(-x)
+    return _out(area_per_perimeter * excess)
 
 
 def janssen_plane_z0(B, K, mu):
@@ -718,15 +722,8 @@ def janssen_plane_wall_axial_force(z, rho_b, B, K, mu, q0=0.0, g=G):
     Source: Janssen (1895).  Tag: [D] (:func:`janssen_wall_axial_force` with ``D/4`` replaced
     by ``B/2``).
     """
-    z = _nonneg("z", z, " m")
-    rho_b = _positive("rho_b", rho_b, " kg/m^3")
-    q0 = _nonneg("q0", q0, " Pa")
-    g = _positive("g", g, " m/s^2")
     B = _positive("B", B, " m")
-    z0 = _arr(janssen_plane_z0(B, K, mu))
-    x = z / z0
-    excess = rho_b * g * z0 * (x + np.expm1(-x)) - q0 * np.expm1(-x)
-    return _out(B / 2.0 * excess)
+    return _wall_axial_force(z, rho_b, janssen_plane_z0(B, K, mu), B / 2.0, q0, g)
 
 
 # ---------------------------------------------------------------------------------------
