@@ -635,6 +635,15 @@ def write_outputs(out, rows, profiles, comparison, switch, numbers, options, set
                 f"{row['case']}: major principal stress trajectories over the mobilised "
                 "friction, at rest (sigma1 near vertical: active) and in discharge (sigma1 "
                 "across the flow: passive, arched).")})
+            forces = Path(row["run_dir"]) / "wall_forces.png"
+            if forces.is_file():
+                name = f"wall_forces_{row['case']}.png"
+                shutil.copyfile(forces, out / name)
+                figures.append({"file": name, "caption": (
+                    f"{row['case']}: the forces in the wall per metre of circumference, the "
+                    "hoop force and the meridional force (the hopper hung from the "
+                    "transition, the bin's wall standing on it), against Janssen's p_n R and "
+                    "n_z.")})
     for row in rows:
         if row.get("error") and not Path(row.get("run_dir", "")).is_dir():
             continue
