@@ -364,7 +364,7 @@ class WallLoads:
         curved = n_r > 0.0
         return np.where(curved, p_n * self.r_w / np.where(curved, n_r, 1.0), np.nan)
 
-    def membrane_forces(self, start: dict, end: dict, p_n=None):
+    def membrane_forces(self, start: dict, end: dict, p_n):
         """The forces in the wall per unit length of its circumference (N/m; per metre of a
         wedge's length), tension positive, from the wall's reaction over a window, as a
         shell of revolution carries them (membrane theory):
@@ -383,7 +383,7 @@ class WallLoads:
           and the bin wall's shares of the wall's vertical reaction, so that
           ``section factor * c_t * (cos(theta) N_hopper + N_bin) = wall vertical force``.
 
-        ``p_n``: the window's normal pressures (:meth:`profile`) if already at hand.  Loads
+        ``p_n``: the window's normal pressures (:meth:`profile`).  Loads
         per bin are summed from the entries with :attr:`weights`, cone and bin entries apart,
         and taken at the bin centres by the midpoint rule (half the own bin's).  Returns
         ``(hoop, meridional, (hopper_tension_t, bin_compression_t))``.
@@ -392,8 +392,6 @@ class WallLoads:
         duration = end["t"] - start["t"]
         if not duration > 0:
             raise ValueError("a wall-load window needs a positive duration")
-        if p_n is None:
-            p_n = self.profile(start, end)[3]
         # the wall's upward force on the material is the material's downward load on it
         down = (end["wall"] - start["wall"])[self.entries, 1] / duration     # N/rad
         cone, wall = self.on_cone, ~self.on_cone
@@ -404,10 +402,9 @@ class WallLoads:
         c = r if geom.axisymmetric else np.ones_like(r)
         hung = geom.cone_height > 0
         cos_t = math.cos(geom.half_angle) if hung else math.nan
-        on_cone = self.centres <= s_t
         below = np.cumsum(cone_load) - 0.5 * cone_load
         above = np.cumsum(wall_load[::-1])[::-1] - 0.5 * wall_load
-        meridional = np.where(on_cone, below / (c * cos_t), -above / c)
+        meridional = np.where(self.centres <= s_t, below / (c * cos_t), -above / c)
         meridional[n_r <= 0.0] = np.nan
         hoop = self.hoop_force(p_n)
         c_t = geom.bin_radius if geom.axisymmetric else 1.0
@@ -531,6 +528,10 @@ def load_summary(sim) -> dict:
                  if math.isfinite(r.get("relative_residual", nan))]
     if residuals:
         out["load_balance_residual_max"] = float(max(residuals))
+    # Janssen's K: the one measured at the bin wall at rest, else Jaky's
+    K = out["wall_k_bin"] if math.isfinite(out["wall_k_bin"]) else float(
+        theory.k_jaky(mat.friction_angle_deg))
+    mu = m.mu_wall
     if "filling" in rec.wall and "discharge_envelope" in rec.wall:
         s, p_fill = rec.wall["filling"][1], rec.wall["filling"][4]
         envelope = rec.wall["discharge_envelope"][4]
@@ -550,9 +551,6 @@ def load_summary(sim) -> dict:
             k = np.flatnonzero(zone)[np.argmax(envelope[zone])]
             out["switch_peak_Pa"], out["switch_peak_s_m"] = float(envelope[k]), float(s[k])
         if geom.cone_height > 0:
-            K = out["wall_k_bin"] if math.isfinite(out["wall_k_bin"]) else float(
-                theory.k_jaky(mat.friction_angle_deg))
-            mu = m.mu_wall
             if mu > 0:
                 janssen = (theory.janssen_vertical_stress if geom.axisymmetric
                            else theory.janssen_plane_vertical_stress)
@@ -561,10 +559,7 @@ def load_summary(sim) -> dict:
                 out["walker_switch_pressure_Pa"] = float(theory.walker_switch_pressure(
                     sigma_vt, K, mat.friction_angle_deg, m.cfg.wall.friction_angle_deg,
                     geom.half_angle_deg).hopper)
-    mu = m.mu_wall
     if mu > 0:
-        K = out["wall_k_bin"] if math.isfinite(out["wall_k_bin"]) else float(
-            theory.k_jaky(mat.friction_angle_deg))
         axial = (theory.janssen_wall_axial_force if geom.axisymmetric
                  else theory.janssen_plane_wall_axial_force)
         out["janssen_wall_axial_compression_N_m"] = float(axial(

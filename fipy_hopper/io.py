@@ -267,7 +267,6 @@ def write_wall_pressure(path: PathLike, record) -> None:
         empty = np.full(len(s), np.nan)
         p_s, tau_s = stress.get(stage, (empty, empty))
         hoop, meridional = forces.get(stage, (empty, empty))[:2]
-        hoop, meridional = np.broadcast_to(hoop, s.shape), np.broadcast_to(meridional, s.shape)
         for k in range(len(s)):
             rows.append([stage, _num(t), _num(s[k]), _num(r[k]), _num(z[k]), _num(p[k]),
                          _num(tau[k]), _num(p_s[k]), _num(tau_s[k]),
