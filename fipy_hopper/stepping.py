@@ -514,7 +514,7 @@ def _stress_block(r0, r1, load_runs, v, sigma, loose, eps_p, r_c, r_nodes, strai
         S[0, m], S[1, m], S[2, m], S[3, m] = s1, s2, s3, f
         m += 1
     W = np.empty((fast._W_ROWS, m))
-    flags = np.empty((3, m), dtype=np.bool_)
+    flags = np.empty((fast._F_ROWS, m), dtype=np.bool_)
     fast._fast_block(m, S, W, flags, cst)
     for k in range(m):
         q = plastic[k]

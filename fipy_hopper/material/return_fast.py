@@ -34,8 +34,10 @@ _FAST_TIP = 1e-2 * _TIP_TOL  # ... and, for a > 0, a tip error estimate this far
 _W_PTR, _W_QTR, _W_CT, _W_ST, _W_F = 0, 1, 2, 3, 4  # p_tr, q_tr, trial direction, F_tr
 _W_TAU, _W_LO, _W_HI = 5, 6, 7  # iterate tau = tan(Theta - Theta_tr) and its bracket
 _W_N1, _W_N2, _W_N3 = 8, 9, 10  # the returned sorted principal stresses
-_W_ROWS = 11
-_F_VALID, _F_DONE, _F_OK = 0, 1, 2  # rows of the per-block flags
+_W_GATHERED = 11  # 11-17: the points still open, gathered (rows as _W_QTR ... _W_HI)
+_W_ROWS = 18
+_F_VALID, _F_DONE, _F_OK, _F_GATHERED = 0, 1, 2, 3  # rows of the per-block flags
+_F_ROWS = 4
 
 
 @_jit
@@ -194,47 +196,62 @@ def _fast_block(m, S, W, flags, cst):
         valid[j], done[j] = ok, not ok
     N1, N2, N3, ok = W[_W_N1], W[_W_N2], W[_W_N3], flags[_F_OK]
     if a == 0.0:
-        _fast_sweeps(m, q_tr, ct, st, f, tau, lo, hi, done, cst, False)
+        _fast_sweeps(m, q_tr, ct, st, f, tau, lo, hi, done, W, flags, cst, False)
         _fast_final(m, p_tr, q_tr, ct, st, f, tau, valid, done, N1, N2, N3, ok, cst, False)
     else:
-        _fast_sweeps(m, q_tr, ct, st, f, tau, lo, hi, done, cst, True)
+        _fast_sweeps(m, q_tr, ct, st, f, tau, lo, hi, done, W, flags, cst, True)
         _fast_final(m, p_tr, q_tr, ct, st, f, tau, valid, done, N1, N2, N3, ok, cst, True)
 
 
 @_jit
-def _fast_sweeps(m, q_tr, ct, st, f, tau, lo, hi, done, cst, hyperbolic):
+def _fast_sweeps(m, q_tr, ct, st, f, tau, lo, hi, done, W, flags, cst, hyperbolic):
     """The lockstep Halley sweeps of :func:`_fast_block` (the rows of its work arrays are passed
     one by one: LLVM vectorises the loop only when it can tell them apart; hyperbolic is compiled
     in as a constant).
 
     Each point iterates until it converges or has had _FAST_MAXIT sweeps, whatever the other
     points of the block do, so its result does not depend on which points share its block.
-    When after 6 sweeps only a few points (at most 1/64 of the block) are still open, they are
-    gathered and swept on their own (the same iterates, at a fraction of the cost).
+    Whenever at most half of the points swept are still open, they are gathered (into the rows
+    from _W_GATHERED of W and _F_GATHERED of flags; the points left behind go back to their
+    places in the block) and swept on their own: the same iterates, since a point's sweep is
+    its own arithmetic, at the cost of the points still open (most converge in three or four
+    sweeps, a few take more).
     """
+    g = _W_GATHERED
+    gq, gct, gst, gf = W[g], W[g + 1], W[g + 2], W[g + 3]
+    gtau, glo, ghi, gdone = W[g + 4], W[g + 5], W[g + 6], flags[_F_GATHERED]
+    rows = np.empty(m, dtype=np.int64)  # the block's index of each gathered point
+    n = m                               # the points swept: the block's, or the gathered n
     for sweep in range(_FAST_MAXIT):
-        n_open = _fast_sweep(m, sweep, q_tr, ct, st, f, tau, lo, hi, done, cst, hyperbolic)
-        if n_open == 0:
-            return
-        if sweep >= 5 and 64 * n_open <= m and sweep + 1 < _FAST_MAXIT:
+        if n == m:
+            n_open = _fast_sweep(m, sweep, q_tr, ct, st, f, tau, lo, hi, done, cst, hyperbolic)
+        else:
+            n_open = _fast_sweep(n, sweep, gq, gct, gst, gf, gtau, glo, ghi, gdone, cst,
+                                 hyperbolic)
+        if n_open == 0 or sweep + 1 == _FAST_MAXIT:
             break
-    else:
-        return
-    rows = np.empty(n_open, dtype=np.int64)
-    k = 0
-    for j in range(m):
-        if not done[j]:
-            rows[k] = j
-            k += 1
-    sq, sct, sst, sf = q_tr[rows], ct[rows], st[rows], f[rows]
-    stau, slo, shi, sdone = tau[rows], lo[rows], hi[rows], done[rows]
-    for later in range(sweep + 1, _FAST_MAXIT):
-        if _fast_sweep(n_open, later, sq, sct, sst, sf, stau, slo, shi, sdone, cst,
-                       hyperbolic) == 0:
-            break
-    for k in range(n_open):
-        j = rows[k]
-        tau[j], lo[j], hi[j], done[j] = stau[k], slo[k], shi[k], sdone[k]
+        if 2 * n_open <= n:
+            k = 0
+            for j in range(n):
+                if n == m:      # from the block
+                    if not done[j]:
+                        rows[k] = j
+                        gq[k], gct[k], gst[k], gf[k] = q_tr[j], ct[j], st[j], f[j]
+                        gtau[k], glo[k], ghi[k], gdone[k] = tau[j], lo[j], hi[j], False
+                        k += 1
+                elif gdone[j]:  # done: back to its place (k <= j: compacted in place)
+                    i = rows[j]
+                    tau[i], lo[i], hi[i], done[i] = gtau[j], glo[j], ghi[j], True
+                else:
+                    rows[k] = rows[j]
+                    gq[k], gct[k], gst[k], gf[k] = gq[j], gct[j], gst[j], gf[j]
+                    gtau[k], glo[k], ghi[k], gdone[k] = gtau[j], glo[j], ghi[j], False
+                    k += 1
+            n = k
+    if n < m:
+        for j in range(n):
+            i = rows[j]
+            tau[i], lo[i], hi[i], done[i] = gtau[j], glo[j], ghi[j], gdone[j]
 
 
 @_jit
@@ -370,7 +387,7 @@ def _update_kernel(sig, deps, prm, sig_out, dep_out, status):
     trial = np.empty((6, nb))  # rr, zz, tt, rz and the in-plane axes (cos 2w, sin 2w)
     S = np.empty((4, nb))
     W = np.empty((_W_ROWS, nb))
-    flags = np.empty((3, nb), dtype=np.bool_)
+    flags = np.empty((_F_ROWS, nb), dtype=np.bool_)
     for b0 in range(0, n, _BLOCK):
         m = _predict_block(sig, deps, b0, min(b0 + _BLOCK, n), prm, sig_out, dep_out, status, idx,
                            pos, trial, S)
