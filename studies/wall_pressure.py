@@ -47,7 +47,7 @@ Usage::
 
     python studies/wall_pressure.py [--out DIR] [--quick] [--serial | --scheduler ADDRESS]
                                     [--cell-sizes 0.0075 0.005 0.00375 0.0025]
-                                    [--half-angles 20 30]
+                                    [--half-angles 20 30] [--youngs-moduli 2e6 5e6 20e6]
 """
 
 from __future__ import annotations
@@ -818,13 +818,16 @@ def main(argv=None) -> int:
     parser.add_argument("--cell-sizes", type=float, nargs="+",
                         help="m, the grid series (default 0.0075 0.005 0.00375 0.0025)")
     parser.add_argument("--half-angles", type=float, nargs="+", help="deg (default 20 30)")
+    parser.add_argument("--youngs-moduli", type=float, nargs="+",
+                        help="Pa, the stiffness series at --cell-size (default 2e6 5e6 20e6)")
     parser.add_argument("--end-time", type=float, help="s of discharge (default: 0.65 of the "
                         "Beverloo x Rose-Tanaka emptying time)")
     args = parser.parse_args(argv)
     options = _sweep.study_options(args, ('cell_size', 'cell_sizes', 'half_angles',
-                                          'end_time'))
-    if "cell_sizes" in options:
-        options["cell_sizes"] = tuple(options["cell_sizes"])
+                                          'youngs_moduli', 'end_time'))
+    for key in ("cell_sizes", "youngs_moduli"):
+        if key in options:
+            options[key] = tuple(options[key])
     study = setup(quick=args.quick, **options)
     rows = _sweep.run_study(NAME, study, args)
     profiles, comparison, switch, numbers = analyse(rows, study["options"])

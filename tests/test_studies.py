@@ -255,6 +255,23 @@ def test_wall_pressure_profiles_theories_and_switch(wall):
         assert numbers[key] is None or 0.0 < numbers[key] < 3.0, key
 
 
+def test_wall_pressure_stiffness_series_from_the_command_line(wall, tmp_path):
+    """``--youngs-moduli`` sets the stiffness series; the finished cases are reused and only
+    the new modulus runs."""
+    out = tmp_path / "wall_pressure"
+    shutil.copytree(wall, out)
+    before = {p.name for p in (out / "cases").iterdir()}
+    assert load("wall_pressure").main(["--quick", "--serial", "--out", str(out),
+                                       "--youngs-moduli", "2e6", "20e6", "80e6"]) == 0
+    added = {p.name for p in (out / "cases").iterdir()} - before
+    assert added == {"theta30_wall15_h10_E80"}
+    numbers = study_json(out)["numbers"]
+    assert sorted(k for k in numbers if k.startswith("bin_k_rest[")) == [
+        "bin_k_rest[2 MPa]", "bin_k_rest[20 MPa]", "bin_k_rest[5 MPa]", "bin_k_rest[80 MPa]"]
+    pairs = {r["pair"] for r in rows_of(out / "convergence.csv") if r["series"] == "stiffness"}
+    assert "E 20 / 80 MPa" in pairs
+
+
 # ---------------------------------------------------------------- convergence
 def test_convergence_three_cell_sizes_and_three_moduli(convergence):
     rows = rows_of(convergence / "results.csv")
