@@ -252,6 +252,7 @@ class HopperModel:
         self._work = (np.empty((n, 3), np.int64), np.empty((n, 3), np.int64),
                       np.empty(n + 1, np.int64), np.zeros((8, g.nz, g.nr)), np.zeros(g.nz + 1),
                       np.zeros((g.nz + 1, 3)))
+        self._rate_trace = np.zeros((g.nz, g.nr))   # tr(D) of the loaded cells, 1/s
         self._open_face = self.open_faces.astype(float)
         self._stacked = np.empty((len(TRANSPORTED), n))
         self._carried = (np.empty((len(TRANSPORTED), n)),
@@ -489,7 +490,7 @@ class HopperModel:
             num.transport_cfl, num.max_transport_interval, row_nodes, node_i, node_ptr,
             normal, mu, kind, entry, state.plate_closed, self._opening(state), g.r_nodes,
             state.wall_impulse, state.plate_impulse, state.momentum_budget, self._work,
-            self.viscosity, self.bulk_viscosity, self.threads)
+            self.viscosity, self.bulk_viscosity, self._rate_trace, self.threads)
         state.t, state.flux_time = float(clock[0]), float(clock[2])
         self._end_opening(state)
         state.step += int(done)

@@ -8,7 +8,9 @@ same order, so that each number is the same to the last bit as that of the seque
 compiled kernels it replaces:
 
 1. nodal forces ``-f_int(alpha (sigma + 2 eta D + eta_b tr(D) I)) + f_hg`` (``eta``,
-   ``eta_b``: the grid and the bulk viscosity, 0 by default): each cell's corner forces, then
+   ``eta_b``: the grid and the bulk viscosity; ``tr(D)``, in every step of a call but its
+   first, as the previous step's strain pass computed it from the same velocities): each
+   cell's corner forces, then
    each node's sum of its four cells' in the order in which a cell-by-cell scatter adds them;
    velocity ``v += dt (f / m - g e_z)``, mass-proportional damping, light nodes at rest;
    then, node row by node row, the wall contacts in the order of the model's contact list,
@@ -135,12 +137,14 @@ def _runs(alpha, alpha_min, sigma, loose, v, contrib, carry_runs, load_runs, blo
 
 @_jit_parallel
 def _cell_forces(carry_runs, n_carry, alpha, sigma, v, open_volume, r_c, h, hg_base, contrib,
-                 viscosity, bulk_viscosity, alpha_min, threads=1):
+                 viscosity, bulk_viscosity, alpha_min, rate_trace, trace_fresh, threads=1):
     """Corner forces ``-f_int + f_hg`` of the carrying cells into ``contrib`` (8, nz, nr):
     (r, z) at SW, SE, NE, NW, as ``momentum.internal_force`` and ``hourglass_force`` sum them.
     With ``viscosity`` ``eta > 0`` or ``bulk_viscosity`` ``eta_b > 0`` (Pa s) the stress of a
     loaded cell (``alpha >= alpha_min``) is ``sigma + 2 eta D + eta_b tr(D) I``, ``D`` its
-    strain rate (``momentum.strain_rate``)."""
+    strain rate (``momentum.strain_rate``).  With ``trace_fresh`` (``v`` has not changed since
+    the strain pass of :func:`_strain_run` wrote ``rate_trace``, (nz, nr), 1/s) and no grid
+    viscosity, ``tr(D)`` is read from ``rate_trace``: the same number, computed once."""
     g = 1.0 / (2.0 * h)
     two_eta = 2.0 * viscosity
     viscous = viscosity > 0.0 or bulk_viscosity > 0.0
@@ -154,7 +158,12 @@ def _cell_forces(carry_runs, n_carry, alpha, sigma, v, open_volume, r_c, h, hg_b
                 t_zz = sigma[j, i, 1]
                 t_tt = sigma[j, i, 2]
                 t_rz = sigma[j, i, 3]
-                if viscous and a >= alpha_min:
+                if viscous and a >= alpha_min and trace_fresh and viscosity == 0.0:
+                    p_b = bulk_viscosity * rate_trace[j, i]
+                    t_rr = t_rr + p_b
+                    t_zz = t_zz + p_b
+                    t_tt = t_tt + p_b
+                elif viscous and a >= alpha_min:
                     vr_sw, vr_se = v[0, j, i], v[0, j, i + 1]
                     vr_ne, vr_nw = v[0, j + 1, i + 1], v[0, j + 1, i]
                     vz_sw, vz_se = v[1, j, i], v[1, j, i + 1]
@@ -394,11 +403,12 @@ def _node_update(j0, j1, v, mass, contrib, gravity, dt, damping, light_mass, row
 
 @_jit
 def _strain_run(j, i0, i1, out, v, sigma, loose, r_c, r_nodes, strain_dims, h, dt, kappa,
-                zface_aperture, rface_aperture, scratch):
+                zface_aperture, rface_aperture, scratch, rate_trace):
     """First pass over the run ``(j, i0, i1)`` into ``scratch[:, out:out + i1 - i0]``: the
     rotated stress (rows 0-3), the strain increment that loads the skeleton (rows 4-7) and the
     loose strain left (row 8), as ``momentum.strain_rate``, ``jaumann_rotate`` and
-    ``open_divergence`` and ``dense_loose.close_loose_volume``."""
+    ``open_divergence`` and ``dense_loose.close_loose_volume``; and the trace of the strain
+    rate into ``rate_trace[j, i]`` (1/s, for the bulk viscosity of the next step's forces)."""
     g = 1.0 / (2.0 * h)
     for i in range(i0, i1):
         q = out + i - i0
@@ -415,6 +425,7 @@ def _strain_run(j, i0, i1, out, v, sigma, loose, r_c, r_nodes, strain_dims, h, d
         dvz_dr = g * (vz_se + vz_ne - vz_sw - vz_nw)
         dvz_dz = g * (vz_nw + vz_ne - vz_sw - vz_se)
         hoop = 0.25 * (vr_sw + vr_se + vr_ne + vr_nw) / r_c[i]
+        rate_trace[j, i] = (dvr_dr + dvz_dz) + hoop
         d0 = dvr_dr * dt
         d1 = dvz_dz * dt
         d2 = hoop * dt
@@ -454,7 +465,7 @@ def _strain_run(j, i0, i1, out, v, sigma, loose, r_c, r_nodes, strain_dims, h, d
 
 @_jit
 def _stress_block(r0, r1, load_runs, v, sigma, loose, eps_p, r_c, r_nodes, strain_dims, h, dt,
-                  kappa, zface_aperture, rface_aperture, prm, cst):
+                  kappa, zface_aperture, rface_aperture, prm, cst, rate_trace):
     """Stress update of the loaded cells of the runs ``r0 <= run < r1`` (one block), in place:
     :func:`_strain_run`, then the elastic predictor, the return and the plastic and loose
     strains as ``material.return_fast._update_kernel``, ``separation_strain`` and
@@ -470,7 +481,7 @@ def _stress_block(r0, r1, load_runs, v, sigma, loose, eps_p, r_c, r_nodes, strai
     for run in range(r0, r1):
         j, i0, i1 = load_runs[run, 0], load_runs[run, 1], load_runs[run, 2]
         _strain_run(j, i0, i1, q, v, sigma, loose, r_c, r_nodes, strain_dims, h, dt, kappa,
-                    zface_aperture, rface_aperture, scratch)
+                    zface_aperture, rface_aperture, scratch, rate_trace)
         for i in range(i0, i1):
             cell_j[q] = j
             cell_i[q] = i
@@ -544,7 +555,7 @@ def _stress_block(r0, r1, load_runs, v, sigma, loose, eps_p, r_c, r_nodes, strai
 @_jit_parallel
 def _stress_update(block_ptr, n_blocks, load_runs, v, sigma, loose, eps_p, r_c, r_nodes,
                    strain_dims, h, dt, kappa, zface_aperture, rface_aperture, prm, cst,
-                   threads=1):
+                   rate_trace, threads=1):
     """:func:`_stress_block` for every block; thread ``t`` of ``T`` takes the blocks ``t, t +
     T, ...``: the blocks go up the hopper, so each thread has its share of the cone (where the
     plastic returns are) and of the bin."""
@@ -552,7 +563,7 @@ def _stress_update(block_ptr, n_blocks, load_runs, v, sigma, loose, eps_p, r_c, 
         for b in range(t, n_blocks, threads):
             _stress_block(block_ptr[b], block_ptr[b + 1], load_runs, v, sigma, loose, eps_p,
                           r_c, r_nodes, strain_dims, h, dt, kappa, zface_aperture,
-                          rface_aperture, prm, cst)
+                          rface_aperture, prm, cst, rate_trace)
 
 
 @_jit
@@ -614,7 +625,7 @@ def material_steps(max_steps, clock, v, mass, alpha, sigma, loose, eps_p, face_f
                    ramp_time, damping, light_mass, alpha_min, transport_cfl,
                    max_transport_interval, row_nodes, node_i, node_ptr, normal, mu, kind,
                    entry, plate_closed, opening, node_r, contact_impulse, plate_impulse, budget,
-                   work, viscosity, bulk_viscosity, threads):
+                   work, viscosity, bulk_viscosity, rate_trace, threads):
     """Up to ``max_steps`` material steps, in place.
 
     The symmetry is data: ``r_c`` is the radius of the hoop terms (the cell-centre radius;
@@ -630,7 +641,9 @@ def material_steps(max_steps, clock, v, mass, alpha, sigma, loose, eps_p, face_f
     runs (n, 3), block pointers (n + 1,), corner forces (8, nz, nr), row speeds (nz + 1,),
     row budgets (nz + 1, 3))``, sized by the model.  ``viscosity`` and ``bulk_viscosity``: the
     grid viscosity ``eta`` and the bulk viscosity ``eta_b`` (Pa s; 0: none) of
-    :func:`_cell_forces`.  ``threads``: the number of numba threads (``numba.
+    :func:`_cell_forces`; ``rate_trace`` (nz, nr): the trace of each loaded cell's strain rate
+    from the strain pass, which the next step's bulk viscosity reads (any contents: the
+    first step of a call computes it).  ``threads``: the number of numba threads (``numba.
     get_num_threads()``; the work is shared out by it, the results do not depend on it).
     Returns ``(steps done, transport due)``:
     the loop stops after the step at which a transport is due (the caller transports; alpha is
@@ -646,7 +659,7 @@ def material_steps(max_steps, clock, v, mass, alpha, sigma, loose, eps_p, face_f
         t = clock[0]
         gravity = g_full * min(1.0, t / ramp_time) if ramp_time > 0.0 else g_full
         _cell_forces(carry_runs, n_carry, alpha, sigma, v, open_volume, r_c, h, hg_base,
-                     contrib, viscosity, bulk_viscosity, alpha_min, threads)
+                     contrib, viscosity, bulk_viscosity, alpha_min, rate_trace, n > 0, threads)
         _node_update(j0, j1, v, mass, contrib, gravity, dt, damping, light_mass, row_nodes,
                      node_i, node_ptr, normal, mu, kind, entry, plate_closed,
                      opening_radius(t, opening), node_r, contact_impulse, plate_impulse,
@@ -657,7 +670,7 @@ def material_steps(max_steps, clock, v, mass, alpha, sigma, loose, eps_p, face_f
             budget[2] += row_budget[j, 2]
         _stress_update(block_ptr, n_blocks, load_runs, v, sigma, loose, eps_p, r_c, r_nodes,
                        strain_dims, h, dt, kappa, zface_aperture, rface_aperture, prm, cst,
-                       threads)
+                       rate_trace, threads)
         _faces(jf, j1, v, dt, face_sign, open_face, face_flux_sum, displacement, with_markers,
                row_speed)
         clock[2] += dt

@@ -52,7 +52,8 @@ def corner_forces(model, state, sigma, viscosity, bulk_viscosity=0.0):
     out = np.zeros_like(contrib)
     stepping._cell_forces(carry_runs, n_carry, state.alpha, sig, state.v, model.open_volume,
                           model.r_c, model.grid.h, model.hourglass_base, out, viscosity,
-                          bulk_viscosity, model.cfg.numerics.alpha_min)
+                          bulk_viscosity, model.cfg.numerics.alpha_min, np.zeros_like(state.alpha),
+                          False)
     return out
 
 

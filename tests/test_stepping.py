@@ -216,7 +216,7 @@ def test_stress_rotates_with_the_material_jaumann(small_cfg):
                             model.flux_radius, model.strain_dims, g.h, model.dt, g.kappa,
                             model._zface_aperture,
                             model._rface_aperture, model._prm,
-                            return_fast._fast_constants(model._prm))
+                            return_fast._fast_constants(model._prm), np.zeros_like(alpha))
     cells = np.flatnonzero(g.kappa[j] == 1.0)
     assert cells.size >= 3
     w = omega * model.dt

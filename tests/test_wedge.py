@@ -218,7 +218,8 @@ def test_no_strain_along_the_wedge_in_cut_cells():
                                     state.loose, state.eps_p, model.r_c, model.flux_radius,
                                     model.strain_dims, g.h, model.dt, g.kappa,
                                     model._zface_aperture, model._rface_aperture, model._prm,
-                                    return_fast._fast_constants(model._prm))
+                                    return_fast._fast_constants(model._prm),
+                                    np.zeros_like(state.alpha))
         else:
             model.material = cfg.material.law().__class__(
                 E=5e6, nu=0.3, rho=RHO, phi=30.0, psi=0.0, c=1e30)

@@ -6,11 +6,13 @@ the jet, the markers) and then times, on copies of that state:
 
 * ``step``: ``HopperModel.advance`` over 200 steps, transports included (per step);
 * the phases of the compiled material step (:mod:`fipy_hopper.stepping`), one step each:
-  ``forces`` (internal and hourglass forces of the cells), ``nodes`` (nodal velocities, wall
-  contact, plate, axis), ``strain_predictor`` (strain increment, Jaumann rotation, open
-  divergence, loose closure and elastic predictor: the stress update with every point kept
-  elastic), ``stress_update`` (the same with the Mohr-Coulomb returns: the return costs the
-  difference), ``faces`` (face fluxes, marker displacement, transport rule);
+  ``forces`` (internal and hourglass forces of the cells; the bulk viscosity's tr(D) as the
+  previous step's strain pass left it, as in every step of a call but its first), ``nodes``
+  (nodal velocities, wall contact, plate, axis), ``strain_predictor`` (strain increment,
+  Jaumann rotation, open divergence, loose closure and elastic predictor: the stress update
+  with every point kept elastic), ``stress_update`` (the same with the Mohr-Coulomb returns:
+  the return costs the difference), ``faces`` (face fluxes, marker displacement, transport
+  rule);
 * per transport: ``transport`` (fields, redistribution, momentum, markers), ``markers``
   (marker advance alone);
 * per sample: ``diagnostics`` (flow-mode measures and the wall-pressure profile) and
@@ -73,12 +75,18 @@ def material_call(model, state, prm=None, part="all"):
     mass = model.node_mass(state)
     sigma, loose, eps_p = state.sigma.copy(), state.loose.copy(), state.eps_p.copy()
     v, flux, disp = state.v.copy(), state.face_flux_sum.copy(), state.displacement.copy()
+    trace = np.zeros_like(state.alpha)      # tr(D) as the strain pass leaves it for the forces
+    stepping._stress_update(block_ptr, n_blocks, load_runs, v, sigma.copy(), loose.copy(),
+                            eps_p.copy(), model.r_c, model.flux_radius, model.strain_dims, g.h,
+                            model.dt, g.kappa, model._zface_aperture, model._rface_aperture, prm,
+                            cst, trace, threads)
     calls = {
         "forces": lambda: stepping._cell_forces(carry_runs, n_carry, state.alpha, sigma, v,
                                                 model.open_volume, model.r_c, g.h,
                                                 model.hourglass_base, contrib,
                                                 model.viscosity, model.bulk_viscosity,
-                                                model.cfg.numerics.alpha_min, threads),
+                                                model.cfg.numerics.alpha_min, trace, True,
+                                                threads),
         "nodes": lambda: stepping._node_update(j0, j1, v, mass, contrib, GRAVITY, model.dt,
                                                0.0, model.light_mass, groups[0], *groups[2:],
                                                False, -1.0, g.r_nodes, wall, plate,
@@ -88,7 +96,7 @@ def material_call(model, state, prm=None, part="all"):
                                                   model.strain_dims, g.h, model.dt, g.kappa,
                                                   model._zface_aperture,
                                                   model._rface_aperture, prm, cst,
-                                                  threads),
+                                                  trace, threads),
         "faces": lambda: stepping._faces(max(j0 - 1, 0), j1, v, model.dt, model._face_sign,
                                          model._open_face, flux, disp, True, row_speed),
     }
