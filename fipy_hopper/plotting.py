@@ -486,7 +486,8 @@ def wall_pressure(run):
 
 def wall_forces(run):
     """The forces in the wall per metre of circumference (N/m, or kN/m from 1 kN/m up; tension
-    positive) along the wall, from ``wall_pressure.csv``'s ``hoop_force_N_m`` and ``meridional_force_N_m``.
+    positive) along the wall, from ``wall_pressure.csv``'s ``hoop_force_N_m`` and
+    ``meridional_force_N_m``.
 
     Left: the hoop force at rest, at the discharge stages and from the discharge envelope,
     with Janssen's ``p_n R`` in the bin (``K = 1 - sin(phi)``).  Right: the meridional force:

@@ -158,28 +158,27 @@ def _cell_forces(carry_runs, n_carry, alpha, sigma, v, open_volume, r_c, h, hg_b
                 t_zz = sigma[j, i, 1]
                 t_tt = sigma[j, i, 2]
                 t_rz = sigma[j, i, 3]
-                if viscous and a >= alpha_min and trace_fresh and viscosity == 0.0:
-                    p_b = bulk_viscosity * rate_trace[j, i]
-                    t_rr = t_rr + p_b
-                    t_zz = t_zz + p_b
-                    t_tt = t_tt + p_b
-                elif viscous and a >= alpha_min:
-                    vr_sw, vr_se = v[0, j, i], v[0, j, i + 1]
-                    vr_ne, vr_nw = v[0, j + 1, i + 1], v[0, j + 1, i]
-                    vz_sw, vz_se = v[1, j, i], v[1, j, i + 1]
-                    vz_ne, vz_nw = v[1, j + 1, i + 1], v[1, j + 1, i]
-                    d_rr = g * (vr_se + vr_ne - vr_sw - vr_nw)
-                    d_zz = g * (vz_nw + vz_ne - vz_sw - vz_se)
-                    d_tt = 0.25 * (vr_sw + vr_se + vr_ne + vr_nw) / r_c[i]
-                    if viscosity > 0.0:
-                        dvr_dz = g * (vr_nw + vr_ne - vr_sw - vr_se)
-                        dvz_dr = g * (vz_se + vz_ne - vz_sw - vz_nw)
-                        t_rr = t_rr + two_eta * d_rr
-                        t_zz = t_zz + two_eta * d_zz
-                        t_tt = t_tt + two_eta * d_tt
-                        t_rz = t_rz + two_eta * (0.5 * (dvr_dz + dvz_dr))
+                if viscous and a >= alpha_min:
+                    if trace_fresh and viscosity == 0.0:
+                        trace = rate_trace[j, i]
+                    else:
+                        vr_sw, vr_se = v[0, j, i], v[0, j, i + 1]
+                        vr_ne, vr_nw = v[0, j + 1, i + 1], v[0, j + 1, i]
+                        vz_sw, vz_se = v[1, j, i], v[1, j, i + 1]
+                        vz_ne, vz_nw = v[1, j + 1, i + 1], v[1, j + 1, i]
+                        d_rr = g * (vr_se + vr_ne - vr_sw - vr_nw)
+                        d_zz = g * (vz_nw + vz_ne - vz_sw - vz_se)
+                        d_tt = 0.25 * (vr_sw + vr_se + vr_ne + vr_nw) / r_c[i]
+                        trace = (d_rr + d_zz) + d_tt
+                        if viscosity > 0.0:
+                            dvr_dz = g * (vr_nw + vr_ne - vr_sw - vr_se)
+                            dvz_dr = g * (vz_se + vz_ne - vz_sw - vz_nw)
+                            t_rr = t_rr + two_eta * d_rr
+                            t_zz = t_zz + two_eta * d_zz
+                            t_tt = t_tt + two_eta * d_tt
+                            t_rz = t_rz + two_eta * (0.5 * (dvr_dz + dvz_dr))
                     if bulk_viscosity > 0.0:
-                        p_b = bulk_viscosity * ((d_rr + d_zz) + d_tt)
+                        p_b = bulk_viscosity * trace
                         t_rr = t_rr + p_b
                         t_zz = t_zz + p_b
                         t_tt = t_tt + p_b
