@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from fipy import CylindricalGrid2D, Grid2D
 
-from fipy_hopper.transport import (FiPyTransport, Transport, max_stable_dt,
+from fipy_hopper.transport import (FiPyTransport, Transport, max_stable_dt, redistribution,
                                    open_neighbour_pairs, outgoing_volume_flux,
                                    redistribute_overshoot)
 
@@ -611,3 +611,37 @@ def test_redistribution_scratch_is_reused_and_its_log_grows():
     assert np.array_equal(again, first) and work.log[2].size > moved.moved
     for name in ("donor", "offsets", "receiver", "fraction", "face_flux"):
         assert np.array_equal(getattr(moved_again, name), getattr(moved, name))
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_first_level_of_the_search_is_found_in_the_order_of_a_search_from_every_seed(seed):
+    """``_level_one`` lists the cells a breadth-first search from every seed (taken in index
+    order) reaches in one hop, in the order it reaches them, without visiting the seeds: the
+    order decides the order of the hop transfers, hence their round-off."""
+    _, geom, _ = compacted_case(seed, n=24)
+    rng = np.random.default_rng(seed)
+    n = geom.n_cells
+    pairs, _ = open_neighbour_pairs(geom)       # shuffled: edges not in order of neighbour
+    graph = redistribution.NeighbourGraph(pairs[:, rng.permutation(pairs.shape[1])], n)
+    is_open = geom.kappa * geom.cell_volume > 0.0
+    hops = np.where(is_open & (rng.random(n) < 0.5), 0, -1).astype(np.int64)
+    seed_next_door = np.array([np.any(hops[graph.neighbour[graph.indptr[i]:graph.indptr[i + 1]]]
+                                      == 0) for i in range(n)])
+    others = np.flatnonzero(is_open & (hops == -1))
+    in_need = others[rng.random(others.size) < 0.3]
+    full_cells = np.setdiff1d(others, in_need)
+    hops[in_need[~seed_next_door[in_need]]] = -2          # boxed in: no seed next door
+    # the search as written out: every seed in index order, its edges in order
+    expected, seen = [], hops.copy()
+    for x in np.flatnonzero(hops == 0):
+        for y in graph.neighbour[graph.indptr[x]:graph.indptr[x + 1]]:
+            if seen[y] < 0 and is_open[y]:
+                seen[y] = 1
+                expected.append(y)
+    queue = np.full(n, -1, dtype=np.int64)
+    work = hops.copy()
+    found = redistribution._level_one(work, in_need, in_need.size, full_cells,
+                                      full_cells.size, graph.indptr, graph.neighbour, queue)
+    assert found == len(expected) > 20
+    assert np.array_equal(queue[:found], expected)
+    assert np.array_equal(work, seen)

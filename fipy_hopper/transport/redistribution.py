@@ -235,6 +235,42 @@ def _out_of_bounds(alpha, kappa_volume, alpha_max, tol):
 
 
 @njit(cache=True)
+def _level_one(hops, wanting, n_wanting, full_cells, n_full, indptr, neighbour, queue):
+    """Level 1 of the breadth-first search from every seed (``hops == 0``) taken in index
+    order: the open cells without room (``wanting[:n_wanting]``, ``full_cells[:n_full]``)
+    with ``hops == -1`` next to a seed, written to ``queue`` in the order that search finds
+    them (by the edge from their lowest-numbered seed: the CSR edges are sorted by source),
+    their ``hops`` set to 1.  Returns their number.  The seeds, most of the open cells, are
+    not visited."""
+    tail = 0
+    edge_of = np.empty(n_wanting + n_full, dtype=np.int64)
+    for t in range(n_wanting + n_full):
+        y = wanting[t] if t < n_wanting else full_cells[t - n_wanting]
+        if hops[y] != -1:
+            continue
+        seed = -1
+        for e in range(indptr[y], indptr[y + 1]):
+            x = neighbour[e]
+            if hops[x] == 0 and (seed < 0 or x < seed):
+                seed = x
+        if seed < 0:
+            continue
+        for e in range(indptr[seed], indptr[seed + 1]):
+            if neighbour[e] == y:
+                edge_of[tail] = e
+                break
+        queue[tail] = y
+        tail += 1
+    order = np.argsort(edge_of[:tail])
+    found = queue[:tail].copy()
+    for q in range(tail):
+        y = found[order[q]]
+        queue[q] = y
+        hops[y] = 1
+    return tail
+
+
+@njit(cache=True)
 def _relieve_kernel(upper, c, full, slack, significant, is_open, fields, kappa_volume,
                     touched, indptr, neighbour, edge_pair, edge_sign, pair_flux, work,
                     index_work, base, log_donor, log_offsets, log_receiver, log_fraction,
@@ -246,8 +282,11 @@ def _relieve_kernel(upper, c, full, slack, significant, is_open, fields, kappa_v
     Returns ``(n_groups, n_transfers, out, under)``: ``out`` whether the pass ran, ``under``
     whether any open cell was below ``-slack`` at the start.  ``work`` (4, nCells) floats
     (must be zero on entry, left so) and ``index_work`` (4, nCells) ints are scratch.  One
-    scan of all cells per call; the rest only visits the cells concerned, and the
-    breadth-first search stops at the farthest boxed cell's level.
+    scan of all cells per call; the rest only visits the cells concerned.  The breadth-first
+    search from every seed (in index order) starts at its level 1, the cells without room
+    next to a seed, put in the order that search would find them (by the edge from their
+    lowest seed), so the seeds themselves, most of the open cells, are never visited; it
+    stops at the farthest boxed cell's level.
     """
     n = c.size
     n_fields = fields.shape[0]
@@ -261,7 +300,8 @@ def _relieve_kernel(upper, c, full, slack, significant, is_open, fields, kappa_v
     out = False
     under = False
     n_wanting = 0
-    tail = 0
+    n_seeds = 0
+    n_full = 0             # open cells neither in need nor with significant room (receiving)
     for i in range(n):
         hops[i] = -1
         if not is_open[i]:
@@ -284,8 +324,10 @@ def _relieve_kernel(upper, c, full, slack, significant, is_open, fields, kappa_v
             n_wanting += 1
         elif room > significant[i]:
             hops[i] = 0
-            queue[tail] = i
-            tail += 1
+            n_seeds += 1
+        else:
+            receiving[n_full] = i
+            n_full += 1
     if not out:
         return n_groups, n_transfers, out, under
 
@@ -305,7 +347,9 @@ def _relieve_kernel(upper, c, full, slack, significant, is_open, fields, kappa_v
     # ---- boxed-in need: hop by hop towards the nearest significant room, level by level
     # from the farthest (the queue of the breadth-first search is sorted by level)
     hop_start = n_transfers
-    if n_boxed > 0 and tail > 0:
+    if n_boxed > 0 and n_seeds > 0:
+        tail = _level_one(hops, wanting, n_wanting, receiving, n_full, indptr, neighbour,
+                          queue)
         head = 0
         found = 0
         top = 0
