@@ -694,7 +694,7 @@ class HopperModel:
             state.displacement[:] = 0.0
         state.face_flux_sum[:] = 0.0
         state.flux_time = 0.0
-        if not np.all(np.isfinite(state.v)) or not np.all(np.isfinite(state.sigma)):
+        if not stepping.all_finite(state.v) or not stepping.all_finite(state.sigma):
             bad = np.argwhere(~np.isfinite(state.sigma).all(axis=-1))
             raise InstabilityError(f"non-finite field at step {state.step}, t = {state.t:.6g} s,"
                                    f" cell(s) {bad[:3].tolist()}")

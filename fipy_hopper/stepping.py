@@ -686,6 +686,15 @@ def material_steps(max_steps, clock, v, mass, alpha, sigma, loose, eps_p, face_f
 
 
 @_jit
+def all_finite(a):
+    """``np.all(np.isfinite(a))`` without the temporary: stops at the first NaN or inf."""
+    for x in a.ravel():
+        if not math.isfinite(x):
+            return False
+    return True
+
+
+@_jit
 def pack_fields(alpha, sigma, eps_p, layer, loose, out):
     """The transported fields ``(alpha, alpha sigma_rr, alpha sigma_zz, alpha sigma_tt,
     alpha sigma_rz, alpha eps_p, alpha layer, alpha e_l)`` of (nz, nr) cells into ``out``

@@ -263,3 +263,18 @@ def test_a_call_with_traces_on_the_wall_equals_the_numpy_reference(small_cfg, di
     np.testing.assert_allclose(st.v, st2.v, rtol=0, atol=1e-12)
     np.testing.assert_allclose(st.sigma, st2.sigma, rtol=1e-9, atol=1e-6)
     np.testing.assert_array_equal(st.alpha, st2.alpha)
+
+
+def test_all_finite_finds_every_nan_and_inf():
+    """The compiled check after each transport: ``np.all(np.isfinite(a))`` for NaN, +inf and
+    -inf anywhere in arrays of the fields' shapes, contiguous or not."""
+    rng = np.random.default_rng(3)
+    for shape in [(2, 9, 7), (8, 6, 4), (5,)]:
+        a = rng.normal(size=shape)
+        assert stepping.all_finite(a) and stepping.all_finite(a[..., ::2])
+        for bad in (np.nan, np.inf, -np.inf):
+            for flat in (0, a.size // 2, a.size - 1):
+                b = a.copy()
+                b.flat[flat] = bad
+                assert not stepping.all_finite(b)
+                assert stepping.all_finite(b[..., ::2]) == bool(np.all(np.isfinite(b[..., ::2])))
