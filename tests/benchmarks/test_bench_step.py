@@ -61,7 +61,9 @@ def discharging(cell_size, disabled):
 
 def material_call(model, state, prm=None, part="all"):
     """One material step of ``state`` split into the kernels of ``stepping.material_steps``;
-    returns a function that runs ``part`` once (the other parts are not run)."""
+    returns a function that runs ``part`` once (the other parts are not run), the number of
+    loaded cells and a function that puts back every array the parts change (velocities,
+    stresses, impulses, fluxes), so that each timed call starts from the same state."""
     g, num = model.grid, model.cfg.numerics
     carry_runs, load_runs, block_ptr, contrib, row_speed, row_budget = model._work
     wall, plate = state.wall_impulse.copy(), state.plate_impulse.copy()
@@ -100,7 +102,13 @@ def material_call(model, state, prm=None, part="all"):
         "faces": lambda: stepping._faces(max(j0 - 1, 0), j1, v, model.dt, model._face_sign,
                                          model._open_face, flux, disp, True, row_speed),
     }
-    return calls[part], int(np.sum(load_runs[:n_load, 2] - load_runs[:n_load, 1]))
+    changed = (v, sigma, loose, eps_p, flux, disp, wall, plate, trace)
+    saved = [a.copy() for a in changed]
+
+    def restore():
+        for a, b in zip(changed, saved):
+            a[...] = b
+    return calls[part], int(np.sum(load_runs[:n_load, 2] - load_runs[:n_load, 1])), restore
 
 
 @pytest.mark.parametrize("phase", PHASES)
@@ -127,15 +135,14 @@ def test_bench_discharge_step(benchmark, cell_size, phase, tmp_path):
         run(st)               # (``discharged`` counts the outlet plane, inside the domain)
         before = model.total_mass(state) + state.lost
         assert abs(model.total_mass(st) + st.lost - before) < 1e-12 * before
-    elif phase in ("forces", "nodes", "faces"):
-        call, info["loaded_cells"] = material_call(model, state, part=phase)
-        benchmark(call)
-    elif phase in ("strain_predictor", "stress_update"):
-        prm = model._prm.copy()
+    elif phase in ("forces", "nodes", "faces", "strain_predictor", "stress_update"):
+        prm, part = model._prm.copy(), phase
+        if phase in ("strain_predictor", "stress_update"):
+            part = "stress"
         if phase == "strain_predictor":
             prm[9] = 1e30          # a cohesion no stress reaches: every point stays elastic
-        call, info["loaded_cells"] = material_call(model, state, prm=prm, part="stress")
-        benchmark(call)
+        call, info["loaded_cells"], restore = material_call(model, state, prm=prm, part=part)
+        benchmark.pedantic(call, setup=restore, rounds=1 if benchmark.disabled else 300)
     elif phase == "transport":
         def setup():
             st = state.copy()
