@@ -136,9 +136,8 @@ def test_bench_discharge_step(benchmark, cell_size, phase, tmp_path):
         before = model.total_mass(state) + state.lost
         assert abs(model.total_mass(st) + st.lost - before) < 1e-12 * before
     elif phase in ("forces", "nodes", "faces", "strain_predictor", "stress_update"):
-        prm, part = model._prm.copy(), phase
-        if phase in ("strain_predictor", "stress_update"):
-            part = "stress"
+        prm = model._prm.copy()
+        part = "stress" if phase in ("strain_predictor", "stress_update") else phase
         if phase == "strain_predictor":
             prm[9] = 1e30          # a cohesion no stress reaches: every point stays elastic
         call, info["loaded_cells"], restore = material_call(model, state, prm=prm, part=part)
