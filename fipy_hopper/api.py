@@ -21,6 +21,7 @@ import sys
 import time
 import traceback
 import warnings
+from contextlib import nullcontext
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Optional, Union
@@ -120,7 +121,8 @@ def expected_quantities(cfg: HopperConfig) -> dict:
 def run(config_or_path, out, force: bool = False, resume: bool = False, quiet: bool = True,
         checkpoint_interval: float = 60.0, plots: bool = True,
         setup: Optional[Callable] = None, command: Optional[str] = None,
-        config_source: Optional[str] = None, threads: Optional[int] = None) -> dict:
+        config_source: Optional[str] = None, threads: Optional[int] = None,
+        profile: bool = False) -> dict:
     """Run a hopper into the directory ``out`` and return its summary (``summary.json``).
 
     Parameters
@@ -139,6 +141,9 @@ def run(config_or_path, out, force: bool = False, resume: bool = False, quiet: b
         file, when called from the command line).
     threads : numba threads of the compiled steps (default: one per core); the results do not
         depend on it.
+    profile : time the phases of the run (:mod:`fipy_hopper.profiling`) and write them to
+        ``profile.json``; the results do not depend on it.  A resumed run's profile covers
+        the session since the resumption.
 
     Raises :class:`ConfigError` or :class:`~fipy_hopper.io.RunDirectoryError` before anything
     runs; :class:`~fipy_hopper.model.InstabilityError` (and any other error) after writing
@@ -156,6 +161,9 @@ def run(config_or_path, out, force: bool = False, resume: bool = False, quiet: b
         raise ConfigError('resume: a numerics.formulation = "lagrangian" run is not '
                           'checkpointed (it stops when its mesh distorts, within seconds of '
                           'discharge); run it again')
+    if lagrangian and profile:
+        raise ConfigError('profile: the phases are those of the Eulerian model\'s compiled '
+                          'step; numerics.formulation = "lagrangian" has none to time')
     if lagrangian:
         checkpoint_interval = 0
     rundir = fio.RunDirectory(out, force=force, resume=resume)
@@ -177,7 +185,17 @@ def run(config_or_path, out, force: bool = False, resume: bool = False, quiet: b
     from .model import InstabilityError
     from .simulation import Simulation
 
-    model = make_model(cfg, threads=threads)
+    phases = None
+    if profile:
+        from .profiling import PhaseProfile
+        phases = PhaseProfile()
+
+    def timed(part):
+        return nullcontext() if phases is None else phases.timed(part)
+
+    with timed("set-up"):
+        model = make_model(cfg, threads=threads)
+    model.profile = phases
     progress = (not quiet) and sys.stderr.isatty()
     sim = Simulation(model, progress=progress)
     strength = (cfg.material.cohesion, cfg.material.friction_angle_deg)
@@ -185,16 +203,18 @@ def run(config_or_path, out, force: bool = False, resume: bool = False, quiet: b
               else fio.MeshFieldWriter(rundir.fields, model, *strength))
 
     def snapshot(sim_, state):
-        fields(sim_, state)
-        _write_tables(rundir, sim_.record, cfg.hopper.axisymmetric)
+        with timed("snapshots and checkpoints"):
+            fields(sim_, state)
+            _write_tables(rundir, sim_.record, cfg.hopper.axisymmetric)
 
     interval = cfg.run.field_interval
     sim.add_callback(snapshot, interval, stages=("filling",))
     sim.add_callback(snapshot, interval, stages=("discharge",))
     if checkpoint_interval and checkpoint_interval > 0:
         def checkpoint(sim_, state):
-            sim_.checkpoint(rundir.checkpoint)
-            manifest.checkpoint_written(state.t, state.step)
+            with timed("snapshots and checkpoints"):
+                sim_.checkpoint(rundir.checkpoint)
+                manifest.checkpoint_written(state.t, state.step)
         sim.add_wall_time_callback(checkpoint, checkpoint_interval)
     if setup is not None:
         setup(sim)
@@ -239,9 +259,12 @@ def run(config_or_path, out, force: bool = False, resume: bool = False, quiet: b
     if plots and status != "interrupted":
         try:
             from . import plotting
-            plotting.plot_run(rundir.path)
+            with timed("pictures"):
+                plotting.plot_run(rundir.path)
         except Exception as exc:  # pictures are a convenience; the data are written
             warnings.warn(f"the pictures could not be drawn: {exc}", RuntimeWarning)
+    if phases is not None:
+        fio.write_json(rundir / rundir.PROFILE, phases.report())
     rundir.close()                           # release the run directory's lock
     if error is not None:
         raise error

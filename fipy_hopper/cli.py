@@ -3,7 +3,9 @@
 ::
 
     fipy-hopper run CONFIG.toml --out DIR [--force] [--resume] [--quiet] [--checkpoint-interval S]
+                    [--threads N] [--profile]
     fipy-hopper demo [--out DIR] [--force] [--resume] [--quiet] [--checkpoint-interval S]
+                     [--threads N] [--profile]
     fipy-hopper plot DIR
     fipy-hopper validate CONFIG.toml
 
@@ -18,6 +20,7 @@ checkpoint has been written).
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import shlex
 import signal
@@ -66,6 +69,10 @@ def _parser() -> argparse.ArgumentParser:
         q.add_argument("--threads", metavar="N", type=int, default=None,
                        help="threads of the compiled steps (default: one per core; the "
                        "results do not depend on it; use 1 when other runs share the cores)")
+        q.add_argument("--profile", action="store_true",
+                       help="time the phases of the run (compiled step, transport, output, "
+                       "pictures) into DIR/profile.json and print them; the results do not "
+                       "depend on it")
 
     q = sub.add_parser("run", help="run a hopper described by a TOML configuration",
                        description="Run the hopper of CONFIG.toml: fill, discharge, and write "
@@ -217,7 +224,8 @@ def _run(args, config, source=None) -> int:
         with _sigterm_as_interrupt():
             summary = api.run(config, args.out, force=args.force, resume=args.resume,
                               quiet=args.quiet, checkpoint_interval=args.checkpoint_interval,
-                              command=command, config_source=source, threads=args.threads)
+                              command=command, config_source=source, threads=args.threads,
+                              profile=args.profile)
     except (ConfigError, RunDirectoryError) as exc:
         return _error(exc, EXIT_BAD_INPUT)
     except KeyboardInterrupt:
@@ -229,6 +237,11 @@ def _run(args, config, source=None) -> int:
         where = f"; the traceback is in {log}" if log.is_file() else ""
         return _error(f"{kind}: {exc} (everything measured so far is in {args.out}{where})",
                       EXIT_FAILED)
+    if args.profile and not args.quiet:
+        from .profiling import format_report
+        report = json.loads((Path(args.out) / RunDirectory.PROFILE).read_text())
+        print(f"where the time went ({Path(args.out) / RunDirectory.PROFILE}):")
+        print(format_report(report))
     if not args.quiet:
         _print_summary(summary, args.out)
         if summary.get("stop_reason") == "wall_time_limit":

@@ -306,6 +306,7 @@ class RunDirectory:
     CONFIG = "config.toml"
     MANIFEST = "manifest.json"
     SUMMARY = "summary.json"
+    PROFILE = "profile.json"
     TIMESERIES = "timeseries.csv"
     WALL_PRESSURE = "wall_pressure.csv"
     LOADS = "loads.csv"
@@ -344,6 +345,8 @@ class RunDirectory:
                     "(only an interrupted run can be resumed)")
             self._lock()
             self._remove_temporaries()
+            with contextlib.suppress(FileNotFoundError):   # the profile of an earlier session
+                (self.path / self.PROFILE).unlink()
         else:
             if self._contents() and not force:
                 self._refuse_if_in_use()
@@ -463,8 +466,8 @@ class RunDirectory:
         return self.path / self.CHECKPOINT
 
     def _remove_outputs(self) -> None:
-        names = (self.CONFIG, self.MANIFEST, self.SUMMARY, self.TIMESERIES, self.WALL_PRESSURE,
-                 self.LOADS, self.CHECKPOINT, self.ERROR_LOG) + self.FIGURES
+        names = (self.CONFIG, self.MANIFEST, self.SUMMARY, self.PROFILE, self.TIMESERIES,
+                 self.WALL_PRESSURE, self.LOADS, self.CHECKPOINT, self.ERROR_LOG) + self.FIGURES
         for name in names:
             with contextlib.suppress(FileNotFoundError):
                 (self.path / name).unlink()

@@ -45,6 +45,8 @@ Masses are reported for the full 3D hopper (``2 pi`` times the per-radian values
 from __future__ import annotations
 
 import math
+import time
+from contextlib import nullcontext
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -151,6 +153,9 @@ class HopperModel:
         #: the carried fields and the markers change): measurements that read the state and
         #: never change it, e.g. the bounds of alpha over a run
         self.after_transport: list = []
+        #: a :class:`fipy_hopper.profiling.PhaseProfile` that the steps add their time to, or
+        #: None (the default: nothing is timed)
+        self.profile = None
         self.grid = grid if grid is not None else build_grid(cfg)
         #: the constitutive law (fipy_hopper.material.law): its time step, its internal
         #: variables (transported) and its stress update
@@ -259,6 +264,7 @@ class HopperModel:
                          np.empty((len(TRANSPORTED), len(g.face_aperture))))
         self._prm = self.material.kernel_parameters()
         self._no_displacement = np.zeros((2, 1, 1))
+        self._no_cycles = np.zeros(0, dtype=np.int64)      # material_steps: no phase timing
         self.threads = int(threads) if threads else numba.config.NUMBA_NUM_THREADS
 
     # ------------------------------------------------------------------ state
@@ -480,6 +486,8 @@ class HopperModel:
         row_nodes, _, node_i, node_ptr, normal, mu, kind, entry = self.contact_groups
         if numba.get_num_threads() != self.threads:
             numba.set_num_threads(self.threads)
+        profile = self.profile
+        started = time.perf_counter() if profile is not None else 0.0
         done, due = stepping.material_steps(
             int(max_steps), clock, state.v, self.node_mass(state), state.alpha, state.sigma,
             state.loose, state.eps_p, state.face_flux_sum, displacement, with_markers,
@@ -490,7 +498,11 @@ class HopperModel:
             num.transport_cfl, num.max_transport_interval, row_nodes, node_i, node_ptr,
             normal, mu, kind, entry, state.plate_closed, self._opening(state), g.r_nodes,
             state.wall_impulse, state.plate_impulse, state.momentum_budget, self._work,
-            self.viscosity, self.bulk_viscosity, self._rate_trace, self.threads)
+            self.viscosity, self.bulk_viscosity, self._rate_trace, self.threads,
+            self._no_cycles if profile is None else profile.cycles)
+        if profile is not None:
+            profile.seconds["compiled steps"] += time.perf_counter() - started
+            profile.steps += int(done)
         state.t, state.flux_time = float(clock[0]), float(clock[2])
         self._end_opening(state)
         state.step += int(done)
@@ -600,6 +612,48 @@ class HopperModel:
         closed = state.plate_closed and state.opened_at < 0.0     # open from the opening on
         transport = self.transport_closed if closed else self.transport_open
         compiled = self.backend != "numpy"
+        timed = self._timed
+        with timed("transport: advection"):
+            new, face_flux = self._advect(state, transport, u_mean, dt_T, compiled)
+        with timed("transport: redistribution"):
+            # compaction above alpha = 1 (and round-off below 0) is moved to face neighbours
+            # with room, conservatively; the alpha-weighted fields move with the same fractions
+            moved = transport.redistribute_fields(new, room_min=REDISTRIBUTION_ROOM_MIN)
+            alpha_flux = face_flux[0] + (moved.face_flux if moved.face_flux is not None
+                                         else 0.0)
+            if moved.residual_excess > 0.0 or moved.residual_deficit > 0.0:
+                # boxed-in excess that filling the micro-voids shell by shell did not place
+                # within the sweeps goes on to cells with real room
+                more = transport.redistribute_fields(new,
+                                                     room_min=REDISTRIBUTION_ROOM_MIN_FALLBACK)
+                if more.face_flux is not None:
+                    alpha_flux = alpha_flux + more.face_flux
+        with timed("transport: fields and momentum"):
+            self._carried_fields_and_momentum(state, new, alpha_flux, dt_T, compiled)
+        if state.markers is not None:
+            with timed("transport: markers"):
+                state.markers = self._advance_markers(state.markers, state.displacement, g,
+                                                      self.cfg.hopper)
+                state.displacement[:] = 0.0
+        if self.profile is not None:
+            self.profile.transports += 1
+        state.face_flux_sum[:] = 0.0
+        state.flux_time = 0.0
+        if not stepping.all_finite(state.v) or not stepping.all_finite(state.sigma):
+            bad = np.argwhere(~np.isfinite(state.sigma).all(axis=-1))
+            raise InstabilityError(f"non-finite field at step {state.step}, t = {state.t:.6g} s,"
+                                   f" cell(s) {bad[:3].tolist()}")
+        for hook in self.after_transport:
+            hook(state)
+
+    def _timed(self, part: str):
+        """A context that adds its wall time to ``part`` of the profile, if there is one."""
+        return nullcontext() if self.profile is None else self.profile.timed(part)
+
+    def _advect(self, state: State, transport, u_mean: np.ndarray, dt_T: float,
+                compiled: bool) -> tuple:
+        """The carried fields (``TRANSPORTED``, stacked) after the van Leer step over
+        ``dt_T`` with the mean face velocities ``u_mean``, and their face transfers."""
         if compiled:
             stacked = self._stacked
             stepping.pack_fields(state.alpha, state.sigma, state.eps_p, state.layer,
@@ -615,16 +669,15 @@ class HopperModel:
                       "loose": alpha * state.loose}
             stacked = np.stack([np.ascontiguousarray(fields[k]).ravel() for k in TRANSPORTED])
             new, face_flux = transport.step_stacked(stacked, u_mean, dt_T)
-        # compaction above alpha = 1 (and round-off below 0) is moved to face neighbours with
-        # room, conservatively; the alpha-weighted fields move with the same fractions
-        moved = transport.redistribute_fields(new, room_min=REDISTRIBUTION_ROOM_MIN)
-        alpha_flux = face_flux[0] + (moved.face_flux if moved.face_flux is not None else 0.0)
-        if moved.residual_excess > 0.0 or moved.residual_deficit > 0.0:
-            # boxed-in excess that filling the micro-voids shell by shell did not place
-            # within the sweeps goes on to cells with real room
-            more = transport.redistribute_fields(new, room_min=REDISTRIBUTION_ROOM_MIN_FALLBACK)
-            if more.face_flux is not None:
-                alpha_flux = alpha_flux + more.face_flux
+        return new, face_flux
+
+    def _carried_fields_and_momentum(self, state: State, new: np.ndarray,
+                                     alpha_flux: np.ndarray, dt_T: float,
+                                     compiled: bool) -> None:
+        """The cell fields of ``state`` from the carried ones ``new``, the outlet and outflow
+        bookkeeping of the face transfers ``alpha_flux`` (m^3 per rad) of the transport over
+        ``dt_T`` (s), and the nodal momentum carried on the dual grid."""
+        g = self.grid
         shape = state.alpha.shape
         if compiled:
             new_alpha, sigma = np.empty(shape), np.empty(shape + (4,))
@@ -688,18 +741,6 @@ class HopperModel:
         state.layer = layer
         state.loose = loose
         self._mass, self._mass_of = mass_new, new_alpha
-        if state.markers is not None:
-            state.markers = self._advance_markers(state.markers, state.displacement, g,
-                                            self.cfg.hopper)
-            state.displacement[:] = 0.0
-        state.face_flux_sum[:] = 0.0
-        state.flux_time = 0.0
-        if not stepping.all_finite(state.v) or not stepping.all_finite(state.sigma):
-            bad = np.argwhere(~np.isfinite(state.sigma).all(axis=-1))
-            raise InstabilityError(f"non-finite field at step {state.step}, t = {state.t:.6g} s,"
-                                   f" cell(s) {bad[:3].tolist()}")
-        for hook in self.after_transport:
-            hook(state)
 
 
 def _contact_list(passes):

@@ -43,10 +43,14 @@ points share its block, so the results do not depend on the number of threads.
 from __future__ import annotations
 
 import math
+import platform
 
 import numba
 import numpy as np
+from llvmlite import ir
 from numba import prange
+from numba.core import types
+from numba.extending import intrinsic
 
 from .material import mohr_coulomb as mc
 from .material import return_fast as fast
@@ -59,6 +63,30 @@ _PLASTIC, _APEX = mc.PLASTIC, mc.APEX
 
 _jit = numba.njit(cache=True, error_model="numpy")
 _jit_parallel = numba.njit(cache=True, error_model="numpy", parallel=True)
+
+#: the processor has a cycle counter that :func:`read_cycles` reads (x86's time-stamp counter)
+HAS_CYCLE_COUNTER = platform.machine().lower() in ("x86_64", "amd64", "i386", "i686", "x86")
+
+if HAS_CYCLE_COUNTER:
+    @intrinsic
+    def _cycle_counter(typingctx):
+        """LLVM's ``readcyclecounter`` (``rdtsc`` on x86): a count that rises at a constant rate."""
+        def codegen(context, builder, signature, args):
+            counter = builder.module.declare_intrinsic(
+                "llvm.readcyclecounter", fnty=ir.FunctionType(ir.IntType(64), []))
+            return builder.call(counter, [])
+        return types.int64(), codegen
+
+    @_jit
+    def read_cycles():
+        """The processor's cycle counter (an integer that rises at a constant rate; the
+        profile of :mod:`fipy_hopper.profiling` converts it to seconds)."""
+        return _cycle_counter()
+else:
+    @_jit
+    def read_cycles():
+        """0: no cycle counter that user code may read on this processor."""
+        return 0
 
 
 @_jit
@@ -616,6 +644,10 @@ def _faces(j0, j1, v, dt, face_sign, open_face, face_flux_sum, displacement, wit
                 displacement[1, j, i] += dt * v[1, j, i]
 
 
+#: the phases of :func:`material_steps` in the order of its ``phase_cycles``
+PHASES = ("step setup", "forces", "nodes", "stress update", "faces")
+
+
 @_jit
 def material_steps(max_steps, clock, v, mass, alpha, sigma, loose, eps_p, face_flux_sum,
                    displacement, with_markers, open_volume, r_c, r_nodes, strain_dims, h,
@@ -624,7 +656,7 @@ def material_steps(max_steps, clock, v, mass, alpha, sigma, loose, eps_p, face_f
                    ramp_time, damping, light_mass, alpha_min, transport_cfl,
                    max_transport_interval, row_nodes, node_i, node_ptr, normal, mu, kind,
                    entry, plate_closed, opening, node_r, contact_impulse, plate_impulse, budget,
-                   work, viscosity, bulk_viscosity, rate_trace, threads):
+                   work, viscosity, bulk_viscosity, rate_trace, threads, phase_cycles):
     """Up to ``max_steps`` material steps, in place.
 
     The symmetry is data: ``r_c`` is the radius of the hoop terms (the cell-centre radius;
@@ -644,21 +676,29 @@ def material_steps(max_steps, clock, v, mass, alpha, sigma, loose, eps_p, face_f
     from the strain pass, which the next step's bulk viscosity reads (any contents: the
     first step of a call computes it).  ``threads``: the number of numba threads (``numba.
     get_num_threads()``; the work is shared out by it, the results do not depend on it).
+    ``phase_cycles``: empty, or ``PHASES`` counters to which the cycles (:func:`read_cycles`)
+    spent in each phase are added; reading the counter changes nothing else.
     Returns ``(steps done, transport due)``:
     the loop stops after the step at which a transport is due (the caller transports; alpha is
     constant until then).
     """
+    timed = phase_cycles.size > 0
+    start = read_cycles() if timed else 0
     carry_runs, load_runs, block_ptr, contrib, row_speed, row_budget = work
     cst = fast._fast_constants(prm)
     n_carry, n_load, n_blocks, j0, j1 = _runs(alpha, alpha_min, sigma, loose, v, contrib,
                                               carry_runs, load_runs, block_ptr, threads)
     j0, j1 = _moving_rows(j0, j1, mass, v, light_mass)
     jf = max(j0 - 1, 0)         # the r-faces below the lowest node row with material move too
+    if timed:
+        phase_cycles[0] += read_cycles() - start
     for n in range(max_steps):
         t = clock[0]
         gravity = g_full * min(1.0, t / ramp_time) if ramp_time > 0.0 else g_full
+        c0 = read_cycles() if timed else 0
         _cell_forces(carry_runs, n_carry, alpha, sigma, v, open_volume, r_c, h, hg_base,
                      contrib, viscosity, bulk_viscosity, alpha_min, rate_trace, n > 0, threads)
+        c1 = read_cycles() if timed else 0
         _node_update(j0, j1, v, mass, contrib, gravity, dt, damping, light_mass, row_nodes,
                      node_i, node_ptr, normal, mu, kind, entry, plate_closed,
                      opening_radius(t, opening), node_r, contact_impulse, plate_impulse,
@@ -667,11 +707,18 @@ def material_steps(max_steps, clock, v, mass, alpha, sigma, loose, eps_p, face_f
             budget[0] += row_budget[j, 0]
             budget[1] += row_budget[j, 1]
             budget[2] += row_budget[j, 2]
+        c2 = read_cycles() if timed else 0
         _stress_update(block_ptr, n_blocks, load_runs, v, sigma, loose, eps_p, r_c, r_nodes,
                        strain_dims, h, dt, kappa, zface_aperture, rface_aperture, prm, cst,
                        rate_trace, threads)
+        c3 = read_cycles() if timed else 0
         _faces(jf, j1, v, dt, face_sign, open_face, face_flux_sum, displacement, with_markers,
                row_speed)
+        if timed:
+            phase_cycles[1] += c1 - c0
+            phase_cycles[2] += c2 - c1
+            phase_cycles[3] += c3 - c2
+            phase_cycles[4] += read_cycles() - c3
         clock[2] += dt
         clock[0] += dt
         clock[1] += 1.0
