@@ -503,6 +503,8 @@ class HopperModel:
         if profile is not None:
             profile.seconds["compiled steps"] += time.perf_counter() - started
             profile.steps += int(done)
+            profile.loaded_cell_steps += int(done) * int(np.count_nonzero(
+                state.alpha >= num.alpha_min))      # alpha is constant within the call
         state.t, state.flux_time = float(clock[0]), float(clock[2])
         self._end_opening(state)
         state.step += int(done)

@@ -45,6 +45,8 @@ class PhaseProfile:
         self.cycles = np.zeros(len(stepping.PHASES), dtype=np.int64)
         self.seconds = dict.fromkeys(TIMED_PARTS, 0.0)
         self.steps = 0
+        #: the loaded cells (alpha >= alpha_min) summed over the steps
+        self.loaded_cell_steps = 0
         self.transports = 0
         self._start = (time.perf_counter(), int(stepping.read_cycles()))
 
@@ -84,6 +86,7 @@ class PhaseProfile:
         return {
             "wall_time_s": wall_time,
             "steps": self.steps,
+            "mean_loaded_cells": self.loaded_cell_steps / steps,
             "transports": self.transports,
             "cycle_rate_hz": rate,
             "compiled_calls_s": self.seconds["compiled steps"],
@@ -101,5 +104,6 @@ def format_report(report: dict) -> str:
         lines.append(f"  {name:34s} {seconds:8.2f} {100 * report['fractions'][name]:6.1f}% "
                      f"{report['us_per_step'][name]:9.1f}")
     lines.append(f"  {'wall time':34s} {report['wall_time_s']:8.2f}  ({report['steps']} steps, "
-                 f"{report['transports']} transports)")
+                 f"{report['transports']} transports, {report['mean_loaded_cells']:.0f} loaded "
+                 "cells on average)")
     return "\n".join(lines)

@@ -67,6 +67,15 @@ def test_a_profile_changes_no_number_of_the_run(discharging):
         assert np.array_equal(getattr(timed, name), getattr(plain, name)), name
     assert (timed.t, timed.step, timed.discharged) == (plain.t, plain.step, plain.discharged)
     assert profile.steps == 600
+    # the loaded cells are counted per step: one step's count is the state's
+    one = PhaseProfile()
+    model.profile = one
+    try:
+        before = state.copy()
+        model.advance(before, 1)
+    finally:
+        model.profile = None
+    assert one.loaded_cell_steps == np.count_nonzero(state.alpha >= model.cfg.numerics.alpha_min)
     assert profile.transports > 10          # about one transport in 15-40 steps here
     for part in ("compiled steps", "transport: advection", "transport: redistribution",
                  "transport: fields and momentum", "transport: markers"):
