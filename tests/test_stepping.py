@@ -265,6 +265,49 @@ def test_a_call_with_traces_on_the_wall_equals_the_numpy_reference(small_cfg, di
     np.testing.assert_array_equal(st.alpha, st2.alpha)
 
 
+def _forces_and_nodes(model, state, with_mass):
+    """The node velocities after one force pass and node update of ``state``, the carry runs
+    chosen with the node masses (as a compiled call does) or by ``alpha != 0`` alone."""
+    g, num = model.grid, model.cfg.numerics
+    carry_runs, load_runs, block_ptr, contrib, _, row_budget = model._work
+    v, sigma, loose = state.v.copy(), state.sigma.copy(), state.loose.copy()
+    mass = model.node_mass(state)
+    extra = (mass, model.light_mass) if with_mass else ()
+    n_carry = stepping._runs(state.alpha, num.alpha_min, sigma, loose, v, contrib, carry_runs,
+                             load_runs, block_ptr, 1, *extra)[0]
+    stepping._cell_forces(carry_runs, n_carry, state.alpha, sigma, v, model.open_volume,
+                          model.r_c, g.h, model.hourglass_base, contrib, model.viscosity,
+                          model.bulk_viscosity, num.alpha_min, np.zeros_like(state.alpha),
+                          False)
+    row_nodes, _, node_i, node_ptr, normal, mu, kind, entry = model.contact_groups
+    stepping._node_update(0, g.nz + 1, v, mass, contrib, 9.81, model.dt, 0.0, model.light_mass,
+                          row_nodes, node_i, node_ptr, normal, mu, kind, entry, False, 0.0,
+                          g.r_nodes, state.wall_impulse.copy(), state.plate_impulse.copy(),
+                          row_budget)
+    cells = {(int(j), i) for j, i0, i1 in carry_runs[:n_carry] for i in range(i0, i1)}
+    return v, cells
+
+
+def test_traces_whose_nodes_are_all_light_are_left_out_of_the_forces(discharging):
+    """A cell whose four nodes are all light pushes only nodes that the update sets at rest:
+    leaving its forces out changes no velocity; a trace on the material, with heavy nodes,
+    keeps its forces."""
+    model, state = discharging
+    st = state.copy()
+    top = st.alpha.shape[0] - 2
+    st.alpha[top, -3] = 1e-30                        # far above the flow: four light nodes
+    j, i = max((j, i) for j, i in zip(*np.nonzero(st.alpha >= 0.5)))   # the highest material
+    st.alpha[j + 1, i] = 1e-30                       # ... and a trace on it
+    light = model.node_mass(st) <= model.light_mass
+    assert light[top:top + 2, -3:-1].all() and not light[j + 1, i:i + 2].any()
+    pruned_v, pruned = _forces_and_nodes(model, st, with_mass=True)
+    full_v, full = _forces_and_nodes(model, st, with_mass=False)
+    assert (top, st.alpha.shape[1] - 3) in full - pruned
+    assert (j + 1, i) in pruned
+    assert not pruned - full
+    assert np.array_equal(pruned_v, full_v)
+
+
 def test_all_finite_finds_every_nan_and_inf():
     """The compiled check after each transport: ``np.all(np.isfinite(a))`` for NaN, +inf and
     -inf anywhere in arrays of the fields' shapes, contiguous or not."""
