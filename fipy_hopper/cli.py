@@ -83,8 +83,8 @@ def _parser() -> argparse.ArgumentParser:
     q = sub.add_parser("demo", help="run the reference hopper from filling to empty",
                        description="Run the reference hopper (D = 0.3 m, 20 deg cone, "
                        "D0 = 0.06 m, 0.3 m of dry sand; the defaults of HopperConfig) from "
-                       "filling to empty: one and a half to five minutes on two cores (98-287 s "
-                       "measured, 8-20 s of it for writing and the pictures).")
+                       "filling to empty: one and a half to five minutes on two cores (91-287 s "
+                       "measured, 7-20 s of it for writing and the pictures).")
     run_options(q, out_required=False)
 
     q = sub.add_parser("plot", help="draw the pictures of a run directory",
