@@ -21,7 +21,6 @@ import sys
 import time
 import traceback
 import warnings
-from contextlib import nullcontext
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Optional, Union
@@ -185,13 +184,13 @@ def run(config_or_path, out, force: bool = False, resume: bool = False, quiet: b
     from .model import InstabilityError
     from .simulation import Simulation
 
-    phases = None
-    if profile:
-        from .profiling import PhaseProfile
-        phases = PhaseProfile()
+    from .profiling import PhaseProfile
+    from .profiling import timed as profiling_timed
+
+    phases = PhaseProfile() if profile else None
 
     def timed(part):
-        return nullcontext() if phases is None else phases.timed(part)
+        return profiling_timed(phases, part)
 
     with timed("set-up"):
         model = make_model(cfg, threads=threads)

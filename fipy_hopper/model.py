@@ -46,14 +46,13 @@ from __future__ import annotations
 
 import math
 import time
-from contextlib import nullcontext
 from dataclasses import dataclass, field
 
 import numpy as np
 
 import numba
 
-from . import dense_loose, geometry, markers, material, momentum, stepping
+from . import dense_loose, geometry, markers, material, momentum, profiling, stepping
 from .config import HopperConfig, damped_step_factor
 from .mesh import HopperGrid, build_grid
 from .material.law import transported_fields
@@ -614,7 +613,9 @@ class HopperModel:
         closed = state.plate_closed and state.opened_at < 0.0     # open from the opening on
         transport = self.transport_closed if closed else self.transport_open
         compiled = self.backend != "numpy"
-        timed = self._timed
+        def timed(part):
+            return profiling.timed(self.profile, part)
+
         with timed("transport: advection"):
             new, face_flux = self._advect(state, transport, u_mean, dt_T, compiled)
         with timed("transport: redistribution"):
@@ -647,10 +648,6 @@ class HopperModel:
                                    f" cell(s) {bad[:3].tolist()}")
         for hook in self.after_transport:
             hook(state)
-
-    def _timed(self, part: str):
-        """A context that adds its wall time to ``part`` of the profile, if there is one."""
-        return nullcontext() if self.profile is None else self.profile.timed(part)
 
     def _advect(self, state: State, transport, u_mean: np.ndarray, dt_T: float,
                 compiled: bool) -> tuple:

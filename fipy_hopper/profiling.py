@@ -25,7 +25,7 @@ are reported together, as the time spent in the compiled calls.
 from __future__ import annotations
 
 import time
-from contextlib import contextmanager
+from contextlib import contextmanager, nullcontext
 
 import numpy as np
 
@@ -95,6 +95,11 @@ class PhaseProfile:
                           for k, v in phases.items()},
             "us_per_step": {k: 1e6 * v / steps for k, v in phases.items()},
         }
+
+
+def timed(profile: PhaseProfile | None, part: str):
+    """A context that adds its wall time to ``part`` of ``profile``; nothing without one."""
+    return nullcontext() if profile is None else profile.timed(part)
 
 
 def format_report(report: dict) -> str:

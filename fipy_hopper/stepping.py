@@ -73,7 +73,7 @@ HAS_CYCLE_COUNTER = platform.machine().lower() in ("x86_64", "amd64", "i386", "i
 if HAS_CYCLE_COUNTER:
     @intrinsic
     def _cycle_counter(typingctx):
-        """LLVM's ``readcyclecounter`` (``rdtsc`` on x86): a count that rises at a constant rate."""
+        """LLVM's ``readcyclecounter`` (``rdtsc`` on x86): a count rising at a constant rate."""
         def codegen(context, builder, signature, args):
             counter = builder.module.declare_intrinsic(
                 "llvm.readcyclecounter", fnty=ir.FunctionType(ir.IntType(64), []))
