@@ -372,12 +372,40 @@ def opening_radius(t, opening):
     return outlet_radius * (t - t_open) / duration
 
 
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def _push_node(v, j, i, mass, contrib, gravity, dt, light_mass):
+    """Node (j, i) of :func:`_node_update`: its force, the sum of its cells' corner forces
+    from 0 in the scatter's order (NE of the cell below left, NW below, SE left, SW own), and
+    its new velocity ``v + dt (f / m - g e_z)``, or rest if no heavier than ``light_mass``."""
+    nz1, nr1 = mass.shape
+    nz, nr = nz1 - 1, nr1 - 1
+    fr = 0.0
+    fz = 0.0
+    if j > 0 and i > 0:
+        fr += contrib[4, j - 1, i - 1]
+        fz += contrib[5, j - 1, i - 1]
+    if j > 0 and i < nr:
+        fr += contrib[6, j - 1, i]
+        fz += contrib[7, j - 1, i]
+    if j < nz and i > 0:
+        fr += contrib[2, j, i - 1]
+        fz += contrib[3, j, i - 1]
+    if j < nz and i < nr:
+        fr += contrib[0, j, i]
+        fz += contrib[1, j, i]
+    m = mass[j, i]
+    heavy = m > light_mass
+    v[0, j, i] = v[0, j, i] + dt * fr / m if heavy else 0.0
+    v[1, j, i] = v[1, j, i] + dt * (fz / m - gravity) if heavy else 0.0
+
+
 @_jit_parallel
 def _node_update(j0, j1, v, mass, contrib, gravity, dt, damping, light_mass, row_nodes,
                  node_i, node_ptr, normal, mu, kind, entry, plate_closed, r_open, node_r,
                  contact_impulse, plate_impulse, row_budget):
     """Velocities of the nodes of rows ``j0 <= j < j1`` from the corner forces (summed in the
-    scatter's order: NE of the cell below left, NW below, SE left, SW own); then, node by
+    scatter's order: NE of the cell below left, NW below, SE left, SW own; the inner nodes of
+    a row in a loop without branches, which the compiler vectorises); then, node by
     node, the contact with the walls and the plate (:func:`_contact_node`; the nodes of row
     ``j`` are ``row_nodes[j]:row_nodes[j + 1]``, node ``q`` at column ``node_i[q]`` with the
     constraints ``node_ptr[q]:node_ptr[q + 1]``; the plate holds a node only while
@@ -395,30 +423,29 @@ def _node_update(j0, j1, v, mass, contrib, gravity, dt, damping, light_mass, row
         weight = 0.0
         damped = 0.0
         stopped = 0.0
-        for i in range(nr1):
-            fr = 0.0
-            fz = 0.0
-            if j > 0 and i > 0:
-                fr += contrib[4, j - 1, i - 1]
-                fz += contrib[5, j - 1, i - 1]
-            if j > 0 and i < nr:
-                fr += contrib[6, j - 1, i]
-                fz += contrib[7, j - 1, i]
-            if j < nz and i > 0:
-                fr += contrib[2, j, i - 1]
-                fz += contrib[3, j, i - 1]
-            if j < nz and i < nr:
-                fr += contrib[0, j, i]
-                fz += contrib[1, j, i]
+        for i in range(nr1):           # the row's impulses, from the velocities before
             m = mass[j, i]
             if m > light_mass:
-                v[0, j, i] = v[0, j, i] + dt * fr / m
-                v[1, j, i] = v[1, j, i] + dt * (fz / m - gravity)
                 weight -= m * gravity * dt
             else:
                 stopped -= m * v[1, j, i]
-                v[0, j, i] = 0.0
-                v[1, j, i] = 0.0
+        if 0 < j < nz:                 # inner columns without branches, in the same order
+            _push_node(v, j, 0, mass, contrib, gravity, dt, light_mass)
+            c0, c1, c2, c3 = contrib[0, j], contrib[1, j], contrib[2, j], contrib[3, j]
+            c4, c5 = contrib[4, j - 1], contrib[5, j - 1]
+            c6, c7 = contrib[6, j - 1], contrib[7, j - 1]
+            v_r, v_z, m_j = v[0, j], v[1, j], mass[j]
+            for i in range(1, nr):
+                fr = (((0.0 + c4[i - 1]) + c6[i]) + c2[i - 1]) + c0[i]
+                fz = (((0.0 + c5[i - 1]) + c7[i]) + c3[i - 1]) + c1[i]
+                m = m_j[i]
+                heavy = m > light_mass
+                v_r[i] = v_r[i] + dt * fr / m if heavy else 0.0
+                v_z[i] = v_z[i] + dt * (fz / m - gravity) if heavy else 0.0
+            _push_node(v, j, nr, mass, contrib, gravity, dt, light_mass)
+        else:
+            for i in range(nr1):
+                _push_node(v, j, i, mass, contrib, gravity, dt, light_mass)
         for q in range(row_nodes[j], row_nodes[j + 1]):
             i = node_i[q]
             _contact_node(v, j, i, mass, node_ptr[q], node_ptr[q + 1], normal, mu, kind, entry,

@@ -308,6 +308,52 @@ def test_traces_whose_nodes_are_all_light_are_left_out_of_the_forces(discharging
     assert np.array_equal(pruned_v, full_v)
 
 
+@pytest.mark.parametrize("damping", [0.0, 40.0])
+def test_node_update_sums_every_node_in_the_scatters_order(damping):
+    """The node update, inner columns vectorised, equals node by node in plain Python: each
+    force summed from 0 in the scatter's order (NE of the cell below left, NW below, SE left,
+    SW own), light nodes at rest, the damping, the axis and the rows' impulses, to the bit."""
+    rng = np.random.default_rng(7)
+    nz, nr = 6, 9
+    contrib = rng.normal(size=(8, nz, nr)) * 10.0 ** rng.integers(-8, 3, size=(8, nz, nr))
+    mass = rng.uniform(0.5, 2.0, size=(nz + 1, nr + 1))
+    light_mass = 1e-3
+    mass[rng.random(mass.shape) < 0.2] = 1e-4                  # light nodes, some moving
+    v = rng.normal(size=(2, nz + 1, nr + 1)) * 1e-9     # small: the forces' last bits show
+    gravity, dt = 9.81, 1e-3
+    expected, budget = v.copy(), np.zeros((nz + 1, 3))
+    for j in range(nz + 1):
+        for i in range(nr + 1):
+            fr = fz = 0.0
+            for dj, di, k in ((-1, -1, 4), (-1, 0, 6), (0, -1, 2), (0, 0, 0)):
+                if 0 <= j + dj < nz and 0 <= i + di < nr:
+                    fr += contrib[k, j + dj, i + di]
+                    fz += contrib[k + 1, j + dj, i + di]
+            m = mass[j, i]
+            if m > light_mass:
+                expected[0, j, i] = expected[0, j, i] + dt * fr / m
+                expected[1, j, i] = expected[1, j, i] + dt * (fz / m - gravity)
+                budget[j, 0] -= m * gravity * dt
+            else:
+                budget[j, 2] -= m * expected[1, j, i]
+                expected[:, j, i] = 0.0
+        if damping > 0.0:
+            for i in range(nr + 1):
+                vz = expected[1, j, i]
+                expected[0, j, i] *= 1.0 / (1.0 + damping * dt)
+                expected[1, j, i] = vz * (1.0 / (1.0 + damping * dt))
+                budget[j, 1] += mass[j, i] * (expected[1, j, i] - vz)
+        expected[0, j, 0] = 0.0
+    none = np.zeros(0, dtype=np.int64)
+    row_budget = np.zeros((nz + 1, 3))
+    stepping._node_update(0, nz + 1, v, mass, contrib, gravity, dt, damping, light_mass,
+                          np.zeros(nz + 2, dtype=np.int64), none, np.zeros(1, dtype=np.int64),
+                          np.zeros((0, 2)), np.zeros(0), none, none, False, 0.0,
+                          np.arange(nr + 1.0), np.zeros((1, 2)), np.zeros((1, 2)), row_budget)
+    assert np.array_equal(v, expected)
+    assert np.array_equal(row_budget, budget)
+
+
 def test_all_finite_finds_every_nan_and_inf():
     """The compiled check after each transport: ``np.all(np.isfinite(a))`` for NaN, +inf and
     -inf anywhere in arrays of the fields' shapes, contiguous or not."""
