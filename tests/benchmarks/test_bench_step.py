@@ -69,12 +69,12 @@ def material_call(model, state, prm=None, part="all"):
     wall, plate = state.wall_impulse.copy(), state.plate_impulse.copy()
     groups = model.contact_groups
     threads = numba.get_num_threads()
+    mass = model.node_mass(state)
     n_carry, n_load, n_blocks, j0, j1 = stepping._runs(
         state.alpha, num.alpha_min, state.sigma, state.loose, state.v, contrib, carry_runs,
-        load_runs, block_ptr, threads)
+        load_runs, block_ptr, threads, mass, model.light_mass)     # as material_steps does
     prm = model._prm if prm is None else prm
     cst = return_fast._fast_constants(prm)
-    mass = model.node_mass(state)
     sigma, loose, eps_p = state.sigma.copy(), state.loose.copy(), state.eps_p.copy()
     v, flux, disp = state.v.copy(), state.face_flux_sum.copy(), state.displacement.copy()
     trace = np.zeros_like(state.alpha)      # tr(D) as the strain pass leaves it for the forces
