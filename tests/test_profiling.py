@@ -16,7 +16,7 @@ import warnings
 import numpy as np
 import pytest
 
-from fipy_hopper import api, stepping
+from fipy_hopper import api, io, stepping
 from fipy_hopper.cli import main
 from fipy_hopper.config import HopperConfig
 from fipy_hopper.model import HopperModel
@@ -131,6 +131,17 @@ def test_run_profile_writes_and_prints_where_the_time_went(tmp_path, capsys):
     # a run without --profile into the same directory leaves no profile of the earlier run
     assert main(["run", str(config), "--out", str(out), "--force", "--quiet"]) == 0
     assert not (out / "profile.json").exists()
+
+
+def test_a_resumed_run_starts_without_the_profile_of_the_earlier_session(tmp_path):
+    for name in ("config.toml", "checkpoint.npz", "profile.json"):
+        (tmp_path / name).write_text("x")
+    folder = io.RunDirectory(tmp_path, resume=True)
+    try:
+        assert not (tmp_path / "profile.json").exists()
+        assert (tmp_path / "checkpoint.npz").exists()
+    finally:
+        folder.close()
 
 
 def test_profile_of_the_lagrangian_formulation_is_refused_before_anything_runs(tmp_path):
