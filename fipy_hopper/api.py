@@ -22,6 +22,7 @@ import time
 import traceback
 import warnings
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 from typing import Callable, Optional, Union
 
@@ -188,9 +189,7 @@ def run(config_or_path, out, force: bool = False, resume: bool = False, quiet: b
     from .profiling import timed as profiling_timed
 
     phases = PhaseProfile() if profile else None
-
-    def timed(part):
-        return profiling_timed(phases, part)
+    timed = partial(profiling_timed, phases)
 
     with timed("set-up"):
         model = make_model(cfg, threads=threads)

@@ -47,6 +47,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
+from functools import partial
 
 import numpy as np
 
@@ -500,7 +501,7 @@ class HopperModel:
             self.viscosity, self.bulk_viscosity, self._rate_trace, self.threads,
             self._no_cycles if profile is None else profile.cycles)
         if profile is not None:
-            profile.seconds["compiled steps"] += time.perf_counter() - started
+            profile.compiled_seconds += time.perf_counter() - started
             profile.steps += int(done)
             profile.loaded_cell_steps += int(done) * int(np.count_nonzero(
                 state.alpha >= num.alpha_min))      # alpha is constant within the call
@@ -613,9 +614,7 @@ class HopperModel:
         closed = state.plate_closed and state.opened_at < 0.0     # open from the opening on
         transport = self.transport_closed if closed else self.transport_open
         compiled = self.backend != "numpy"
-        def timed(part):
-            return profiling.timed(self.profile, part)
-
+        timed = partial(profiling.timed, self.profile)
         with timed("transport: advection"):
             new, face_flux = self._advect(state, transport, u_mean, dt_T, compiled)
         with timed("transport: redistribution"):

@@ -77,7 +77,8 @@ def test_a_profile_changes_no_number_of_the_run(discharging):
         model.profile = None
     assert one.loaded_cell_steps == np.count_nonzero(state.alpha >= model.cfg.numerics.alpha_min)
     assert profile.transports > 10          # about one transport in 15-40 steps here
-    for part in ("compiled steps", "transport: advection", "transport: redistribution",
+    assert profile.compiled_seconds > 0.0
+    for part in ("transport: advection", "transport: redistribution",
                  "transport: fields and momentum", "transport: markers"):
         assert profile.seconds[part] > 0.0, part
 
