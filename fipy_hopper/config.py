@@ -447,6 +447,13 @@ class RunConfig:
     of such windows per bin; ``"auto"`` (the default) is 0.1 s, or the whole discharge when
     ``end_time`` is shorter (:attr:`load_window_s`).
 
+    ``wall_bin_width`` (m): the resolution of the wall-load profiles along the wall: the
+    traction recovered from the wall's reaction is a spline on knots this far apart and is
+    reported as its mean over bins of this width (:mod:`fipy_hopper.wall_traction`).
+    ``"auto"`` (the default) is a twentieth of the bin's diameter (width), but at least three
+    cells (:meth:`HopperConfig.wall_bin_width_m`); a width in metres stays the same under
+    refinement, so profiles of different cell sizes compare bin by bin.
+
     ``opening_time`` (s): the outlet opens from the axis outwards over this time, as an iris
     whose radius grows as ``R_0 (t - t_open) / opening_time``: a plate node is let go when the
     radius passes it.  0 (the default) removes the whole plate at once.  The discharge's time
@@ -467,6 +474,7 @@ class RunConfig:
     markers_per_side: int = 2
     load_window: Union[float, str] = "auto"
     opening_time: float = 0.0
+    wall_bin_width: Union[float, str] = "auto"
 
     def __post_init__(self):
         if isinstance(self.end_time, str):
@@ -491,6 +499,13 @@ class RunConfig:
         else:
             _check_range("run.load_window", self.load_window, OUTPUT_INTERVAL_MIN, TIME_MAX,
                          unit=" s")
+        if isinstance(self.wall_bin_width, str):
+            if self.wall_bin_width != "auto":
+                raise ConfigError(f"run.wall_bin_width = {_show(self.wall_bin_width)}: expected "
+                                  f'a length in metres in (0, {LENGTH_RANGE[1]:g}] or "auto"')
+        else:
+            _check_range("run.wall_bin_width", self.wall_bin_width, 0, LENGTH_RANGE[1],
+                         low_open=True, unit=" m")
         if self.end_time != "empty" and self.end_time > self.max_time:
             raise ConfigError(
                 f"run.end_time = {self.end_time:g} s is beyond run.max_time = "
@@ -611,6 +626,17 @@ class HopperConfig:
     def n_cells(self) -> int:
         nr, nz = self.grid_shape()
         return nr * nz
+
+    @property
+    def wall_bin_width_m(self) -> float:
+        """The wall-load bins' width (m): ``run.wall_bin_width``, or for ``"auto"`` a twentieth
+        of the bin's diameter (a wedge's width), at least three cells.  Three cells is what
+        averages the cut cells' pattern of the wall's reaction to a smooth profile (the
+        traction's spline spans four bins); a twentieth of the silo resolves its loads
+        (15 mm in the reference hopper) independently of the cell size."""
+        if self.run.wall_bin_width != "auto":
+            return float(self.run.wall_bin_width)
+        return max(3.0 * self.numerics.cell_size, self.hopper.bin_diameter / 20.0)
 
     def memory_estimate(self) -> float:
         """Peak resident memory of a run (bytes), from the measured cost a cell (MAX_CELLS)."""

@@ -201,28 +201,82 @@ def classify_outcome(mode: str, stopped: bool, left_fraction: float, channel_dia
     return "no_flow" if left_fraction >= rule.most_left else mode
 
 
+# ---------------------------------------------------------------- wall bins
+#: the wall traction's spline has knots at least this many cells apart (and at least a bin
+#: width): its support, four knot spans, then averages the pattern in which the cut cells
+#: share the wall's reaction among the nodes (docs/physics_and_numerics.md, section 8)
+KNOT_CELLS = 4.0
+
+@dataclass(frozen=True)
+class WallBins:
+    """The bins along the wall that every wall-load profile is reported on: each straight
+    stretch of wall (:func:`fipy_hopper.geometry.wall_stretches`) divided into equal bins of
+    about the configuration's ``wall_bin_width_m``, stretch after stretch from the outlet lip
+    up, so no bin straddles a corner.  Per bin: ``s`` the arc length of its centre from the
+    lip (m), ``(r, z)`` its centre, ``normal`` (nb, 2) the wall's normal into the wall,
+    ``tangent`` (nb, 2) the tangent up the wall, ``area`` its wall area per radian (per metre
+    of a plane wall), ``stretch`` the index of its stretch; ``edges`` (nb + 1,) the bins'
+    bounds in arc length (contiguous)."""
+
+    s: np.ndarray
+    r: np.ndarray
+    z: np.ndarray
+    normal: np.ndarray
+    tangent: np.ndarray
+    area: np.ndarray
+    stretch: np.ndarray
+    edges: np.ndarray
+    stretches: tuple
+
+    @classmethod
+    def of(cls, stretches, width: float) -> "WallBins":
+        from .wall_traction import bin_edges
+        parts = []
+        for k, st in enumerate(stretches):
+            edges = bin_edges(st, width)
+            centres = 0.5 * (edges[1:] + edges[:-1])
+            r, z = st.point(centres)
+            n = len(centres)
+            parts.append((centres, r, z, np.tile(st.normal, (n, 1)), np.tile(st.tangent, (n, 1)),
+                          st.area(edges[:-1], edges[1:]), np.full(n, k), edges[:-1]))
+        cols = [np.concatenate(c) for c in zip(*parts)]
+        edges = np.append(cols[7], stretches[-1].s_end)
+        return cls(*cols[:7], edges=edges, stretches=tuple(stretches))
+
+    def index(self, s) -> np.ndarray:
+        """The bin of each arc length ``s`` (m; clipped onto the wall)."""
+        return np.clip(np.searchsorted(self.edges, s, side="right") - 1, 0, len(self.s) - 1)
+
+    @property
+    def width(self) -> np.ndarray:
+        return np.diff(self.edges)
+
+
+def wall_bins(model) -> WallBins:
+    """The :class:`WallBins` of a model's wall (its configuration's stretches and width)."""
+    cfg = model.cfg
+    return WallBins.of(geometry.wall_stretches(cfg.hopper), cfg.wall_bin_width_m)
+
+
 # ---------------------------------------------------------------- wall pressure
 class WallSampler:
-    """Normal pressure and shear on the wall, binned along the arc length ``s``.
+    """Normal pressure and shear on the wall from the stresses next to it, on the
+    :class:`WallBins`.
 
     The material next to the wall (:meth:`HopperModelProtocol.wall_stress_points
     <fipy_hopper.protocol.HopperModelProtocol.wall_stress_points>`: on the Eulerian grid the
     cells whose centres lie between ``0.5`` and ``2.5`` cells from the wall, inside the
-    material, off the cut cells) is assigned to the wall point nearest to it; each bin of
-    ``bin_cells`` cells of arc length averages its stress weighted by volume (``alpha kappa V``),
-    and ``p_n = -n.sigma.n``, ``tau = t.sigma.n`` with the wall normal ``n`` (into the wall)
-    and the tangent ``t`` pointing up the wall.  Pressures are positive in compression (Pa).
+    material, off the cut cells) is assigned to the bin of the wall point nearest to it; each
+    bin averages its stress weighted by volume (``alpha kappa V``), and ``p_n = -n.sigma.n``,
+    ``tau = t.sigma.n`` with the wall normal ``n`` (into the wall) and the tangent ``t``
+    pointing up the wall.  Pressures are positive in compression (Pa).
     """
 
-    def __init__(self, model, bin_cells: float = 3.0):
-        geom = model.cfg.hopper
+    def __init__(self, model, bins: "WallBins | None" = None):
         self.model = model
-        width = bin_cells * model.cell_size
-        s_max = geometry.arc_length(geom.fill_level, geom)
-        self.edges = np.arange(0.0, s_max + width, width)
-        self.centres = 0.5 * (self.edges[1:] + self.edges[:-1])
-        r_w, z_w, nr, nz = geometry.wall_point(self.centres, geom)
-        self.r, self.z, self.nr, self.nz = r_w, z_w, nr, nz
+        self.bins = bins if bins is not None else wall_bins(model)
+        self.centres, self.r, self.z = self.bins.s, self.bins.r, self.bins.z
+        self.nr, self.nz = self.bins.normal[:, 0], self.bins.normal[:, 1]
 
     def profile(self, state):
         """``(s, r, z, p_n, tau)`` arrays for the bins that hold material (Pa)."""
@@ -235,7 +289,7 @@ class WallSampler:
         NaN where a bin holds no material."""
         s, w, sig = self.model.wall_stress_points(state)
         nb = len(self.centres)
-        bins = np.clip(np.digitize(s, self.edges) - 1, 0, nb - 1)
+        bins = self.bins.index(s)
         wsum = np.bincount(bins, w, nb)
         mean = np.stack([np.bincount(bins, w * sig[:, k], nb) for k in range(4)], axis=1)
         ok = wsum > 0
@@ -258,80 +312,46 @@ class WallSampler:
 
 # ---------------------------------------------------------------- wall loads from the reaction
 class WallLoads:
-    """Wall loads from the wall's reaction: the contact impulses the model measures.
+    """Wall loads from the wall's reaction: the contact impulses the model measures, recovered
+    as a smooth traction stretch by stretch (:mod:`fipy_hopper.wall_traction`).
 
     Every step, the contact of a node with a wall segment changes its velocity by ``dv``; the
     impulse ``m dv`` is the wall's force on the material times ``dt`` (per radian), and the
     model adds it up per contact entry (``State.wall_impulse``, ``State.plate_impulse``).
     Over a window of duration ``T`` the difference ``I`` of those sums gives the mean force
-    ``F = I / T``.  Along the wall, each contact entry stands for the stretch of wall between
-    the midpoints to its neighbours on the same segment (its projection's arc length ``s``
-    from the outlet lip; entries of the outlet lip count on the cone at ``s = 0``, the
-    frictionless free-fall tube below the outlet is left out), so a bin of the profile gets
-    each entry's force in proportion to the wall area of that stretch inside the bin:
+    ``F = I / T`` of each entry.  Each entry belongs to the stretch of its wall segment (the
+    outlet lip's entries to the first stretch, at ``s = 0``; the frictionless free-fall tube
+    below the outlet is left out) and is split into its stretch's normal and tangential
+    components, ``f_n = -F . n`` (compression positive) and ``f_t = F . t`` (``n`` the
+    stretch's normal into the wall, ``t`` its tangent up the wall).  The recovered traction's
+    bin means are
 
-        p_n = -sum_e w_be (F_e . n_e) / A_b,    tau = sum_e w_be (F_e . t_e) / A_b
+        p_n = mean over the bin of  sum_k (sum_e B_k(s_e) f_n,e / A_k) B_k(s),   likewise tau,
 
-    with ``n`` the entry's normal into the wall, ``t`` the tangent up the wall, ``A_b`` the
-    bin's wall area per radian (``int r ds``) and ``w_be`` the fraction of the entry's stretch
-    (by area) in bin ``b``.  ``p_n`` is compressive (Pa), ``tau`` the shear the wall exerts on
-    the material, positive up the wall (resisting downward flow).  The bins are those of
-    :class:`WallSampler` (the stress-sampled second estimate).
+    (:class:`~fipy_hopper.wall_traction.StretchRecovery`): over every stretch the traction
+    times its wall area is the stretch's summed reaction, to round-off.  ``p_n`` is
+    compressive (Pa), ``tau`` the shear the wall exerts on the material, positive up the wall
+    (resisting downward flow).  :meth:`raw_profile` gives the plain binning of the entries'
+    forces (each in the bin of its wall point, over the bin's area), for checking.
     """
 
     def __init__(self, model, sampler: "WallSampler | None" = None):
-        geom = model.cfg.hopper
+        from .wall_traction import StretchRecovery
+
         self.model = model
         self.sampler = sampler if sampler is not None else WallSampler(model)
+        self.bins = self.sampler.bins
         s, normals, seg = model.wall_entries()
-        s_t = float(geometry.transition_arc_length(geom))
-        on_cone = (seg == 1) | (seg == -1)
-        self.entries = np.flatnonzero(seg != 0)          # not the free-fall tube
-        self.on_cone = on_cone[self.entries]
-        self.s = s[self.entries]
-        self.normal = normals[self.entries]
-        self.tangent = np.stack([-self.normal[:, 1], self.normal[:, 0]], axis=1)
-        edges = self.sampler.edges
-        self.centres = self.sampler.centres
-        self.r_w, self.z_w = self.sampler.r, self.sampler.z
-        self.bin_area = self._area(edges[:-1], edges[1:], geom)
-        weights = np.zeros((len(self.centres), len(self.entries)))
-        groups = (on_cone[self.entries], ~on_cone[self.entries])
-        top = (max(float(edges[-1]), float(np.max(self.s)) + model.cell_size) if len(self.s)
-               else edges[-1])
-        for group, (lo, hi) in zip(groups, ((0.0, s_t), (s_t, top))):
-            members = np.flatnonzero(group)
-            if members.size == 0:
-                continue
-            values = np.unique(self.s[members])
-            mids = 0.5 * (values[1:] + values[:-1])
-            bounds = np.concatenate([[lo], mids, [hi]])
-            k = np.searchsorted(values, self.s[members])
-            a, b = bounds[k], bounds[k + 1]
-            stretch = self._area(a, b, geom)
-            overlap = self._area(np.maximum(a[None, :], edges[:-1, None]),
-                                 np.minimum(b[None, :], edges[1:, None]), geom)
-            weights[:, members] = np.where(stretch > 0, overlap / np.where(stretch > 0,
-                                                                            stretch, 1.0), 0.0)
-        self.weights = weights
-
-    @staticmethod
-    def _area(a, b, geom):
-        """Wall area per radian ``int_a^b r(s) ds`` (m^2/rad) between arc lengths a <= b; 0 if
-        ``b <= a``; for a wedge, per metre of length, ``b - a``."""
-        a, b = np.asarray(a, float), np.asarray(b, float)
-        if not geom.axisymmetric:
-            return np.where(b > a, b - a, 0.0)
-        s_t = float(geometry.transition_arc_length(geom))
-        sin_t = math.sin(geom.half_angle) if geom.cone_height > 0 else 1.0
-
-        def primitive(s):
-            cone = np.minimum(s, s_t)
-            above = np.maximum(s - s_t, 0.0)
-            return (geom.outlet_radius * cone + 0.5 * sin_t * cone ** 2
-                    + geom.bin_radius * above)
-        a, b = np.asarray(a, float), np.asarray(b, float)
-        return np.where(b > a, primitive(b) - primitive(a), 0.0)
+        first = self.bins.stretches[0].segment
+        width = model.cfg.wall_bin_width_m
+        self.recoveries = []
+        for st in self.bins.stretches:
+            members = np.flatnonzero((seg == st.segment) | ((seg == -1) & (st.segment == first)))
+            self.recoveries.append(StretchRecovery.build(st, members, s[members], width,
+                                                         KNOT_CELLS * model.cell_size))
+        self.entries = np.concatenate([rec.entries for rec in self.recoveries])
+        self.centres, self.r_w, self.z_w = self.bins.s, self.bins.r, self.bins.z
+        self.bin_area = self.bins.area
 
     @staticmethod
     def reading(model, state) -> dict:
@@ -342,31 +362,48 @@ class WallLoads:
                 "budget": state.momentum_budget.copy(),
                 "momentum": model.vertical_momentum(state)}
 
-    def profile(self, start: dict, end: dict):
-        """``(s, r, z, p_n, tau)`` of the window between two :meth:`reading` s (Pa)."""
+    def stretch_forces(self, start: dict, end: dict) -> list:
+        """Per stretch, the mean force of its entries over the window in the stretch's frame,
+        ``(f_n, f_t)`` (n_entries, 2) (N per radian; per metre of a plane wall)."""
         duration = end["t"] - start["t"]
         if not duration > 0:
             raise ValueError("a wall-load window needs a positive duration")
-        force = (end["wall"] - start["wall"])[self.entries] / duration       # N/rad
-        normal = np.einsum("ek,ek->e", force, self.normal)
-        shear = np.einsum("ek,ek->e", force, self.tangent)
-        p_n = -(self.weights @ normal) / self.bin_area
-        tau = (self.weights @ shear) / self.bin_area
-        return self.centres, self.r_w, self.z_w, p_n, tau
+        out = []
+        for rec in self.recoveries:
+            force = (end["wall"] - start["wall"])[rec.entries] / duration
+            st = rec.stretch
+            out.append(np.stack([-(force @ st.normal), force @ st.tangent], axis=1))
+        return out
+
+    def _profile(self, start: dict, end: dict, recovered: bool):
+        values = [rec.traction(f) if recovered else rec.raw_traction(f)
+                  for rec, f in zip(self.recoveries, self.stretch_forces(start, end))]
+        p = np.concatenate(values)
+        return self.centres, self.r_w, self.z_w, p[:, 0], p[:, 1]
+
+    def profile(self, start: dict, end: dict):
+        """``(s, r, z, p_n, tau)`` of the window between two :meth:`reading` s (Pa): the
+        recovered traction's bin means."""
+        return self._profile(start, end, True)
+
+    def raw_profile(self, start: dict, end: dict):
+        """``(s, r, z, p_n, tau)`` of the window by plain binning of the entries' forces (Pa),
+        for checking the recovery (noisy where the wall cuts the cells)."""
+        return self._profile(start, end, False)
 
     def hoop_force(self, p_n):
         """Hoop force ``N_theta = p_n r / n_r`` (N/m, tension positive) of the bins' normal
         pressures ``p_n`` (Pa); NaN on a flat floor and for a wedge (:meth:`membrane_forces`)."""
         p_n = np.asarray(p_n, dtype=float)
-        n_r = self.sampler.nr
+        n_r = self.bins.normal[:, 0]
         if not self.model.cfg.hopper.axisymmetric:
             return np.full_like(p_n, np.nan)
         curved = n_r > 0.0
         return np.where(curved, p_n * self.r_w / np.where(curved, n_r, 1.0), np.nan)
 
-    def membrane_forces(self, start: dict, end: dict, p_n):
+    def membrane_forces(self, start: dict, end: dict, p_n, tau=None):
         """The forces in the wall per unit length of its circumference (N/m; per metre of a
-        wedge's length), tension positive, from the wall's reaction over a window, as a
+        wedge's length), tension positive, from the recovered traction over a window, as a
         shell of revolution carries them (membrane theory):
 
         * hoop ``N_theta = p_n r / n_r`` per bin (the normal pressure over the wall's second
@@ -379,37 +416,36 @@ class WallLoads:
           friction (per radian) on the wall above that point, a compression (NaN on a flat
           floor, which is not hung);
         * at the transition ``(N_m of the hopper there, the bin wall's axial compression
-          there)`` (N/m), from the sums over the contact entries of each wall: the hopper's
-          and the bin wall's shares of the wall's vertical reaction, so that
-          ``section factor * c_t * (cos(theta) N_hopper + N_bin) = wall vertical force``.
+          there)`` (N/m), from the hopper's and the bin wall's shares of the wall's vertical
+          reaction, so that ``section factor * c_t * (cos(theta) N_hopper + N_bin) = wall
+          vertical force``.
 
-        ``p_n``: the window's normal pressures (:meth:`profile`).  Loads
-        per bin are summed from the entries with :attr:`weights`, cone and bin entries apart,
-        and taken at the bin centres by the midpoint rule (half the own bin's).  Returns
-        ``(hoop, meridional, (hopper_tension_t, bin_compression_t))``.
+        A bin's vertical load is its traction's: ``A_b (-p_n n_z + tau t_z)`` (upward on the
+        material), with ``p_n``, ``tau`` the window's recovered bin means (:meth:`profile`,
+        computed here when not given); each stretch's loads add up to its entries' vertical
+        reaction.  Loads are taken at the bin centres by the midpoint rule (half the own
+        bin's).  Returns ``(hoop, meridional, (hopper_tension_t, bin_compression_t))``.
         """
         geom = self.model.cfg.hopper
-        duration = end["t"] - start["t"]
-        if not duration > 0:
-            raise ValueError("a wall-load window needs a positive duration")
-        # the wall's upward force on the material is the material's downward load on it
-        down = (end["wall"] - start["wall"])[self.entries, 1] / duration     # N/rad
-        cone, wall = self.on_cone, ~self.on_cone
-        cone_load = self.weights[:, cone] @ down[cone]
-        wall_load = self.weights[:, wall] @ down[wall]
-        s_t = float(geometry.transition_arc_length(geom))
-        r, n_r = self.r_w, self.sampler.nr
+        if tau is None:
+            p_n, tau = self.profile(start, end)[3:]
+        bins = self.bins
+        down = bins.area * (-p_n * bins.normal[:, 1] + tau * bins.tangent[:, 1])   # N/rad
+        cone = bins.stretch == 0
+        cone_load = np.where(cone, down, 0.0)
+        wall_load = np.where(cone, 0.0, down)
+        r, n_r = self.r_w, bins.normal[:, 0]
         c = r if geom.axisymmetric else np.ones_like(r)
         hung = geom.cone_height > 0
         cos_t = math.cos(geom.half_angle) if hung else math.nan
         below = np.cumsum(cone_load) - 0.5 * cone_load
         above = np.cumsum(wall_load[::-1])[::-1] - 0.5 * wall_load
-        meridional = np.where(self.centres <= s_t, below / (c * cos_t), -above / c)
+        meridional = np.where(cone, below / (c * cos_t), -above / c)
         meridional[n_r <= 0.0] = np.nan
         hoop = self.hoop_force(p_n)
         c_t = geom.bin_radius if geom.axisymmetric else 1.0
-        at_transition = (float(np.sum(down[cone])) / (c_t * cos_t) if hung else math.nan,
-                         float(np.sum(down[wall])) / c_t)
+        at_transition = (float(np.sum(cone_load)) / (c_t * cos_t) if hung else math.nan,
+                         float(np.sum(wall_load)) / c_t)
         return hoop, meridional, at_transition
 
     def balance(self, start: dict, end: dict) -> dict:
@@ -441,12 +477,13 @@ def wall_k(wall_loads: WallLoads, p_n, state, geom, margin_bins: int = 2) -> flo
     bins of ``p_n / (-sigma_zz)``, ``p_n`` from the reaction and ``sigma_zz`` the mean
     vertical stress of the cells next to the wall (:meth:`WallSampler.mean_stress`), leaving
     out ``margin_bins`` bins next to the transition and next to the free surface."""
-    s = wall_loads.centres
+    bins = wall_loads.bins
+    s = bins.s
     s_t = float(geometry.transition_arc_length(geom))
     s_top = float(geometry.arc_length(geom.fill_level, geom))
-    width = s[1] - s[0] if len(s) > 1 else 0.0
+    margin = margin_bins * bins.width
     szz = wall_loads.sampler.mean_stress(state)[:, 1]
-    keep = ((s > s_t + margin_bins * width) & (s < s_top - margin_bins * width)
+    keep = ((s > s_t + margin) & (s < s_top - margin)
             & np.isfinite(szz) & (szz < 0.0))
     if not keep.any():
         return math.nan

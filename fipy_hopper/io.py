@@ -67,7 +67,8 @@ TIMESERIES_COLUMNS = ("t_s", "mass_in_hopper_kg", "discharged_kg", "discharge_ra
                       "mass_flow_index", "stagnant_fraction", "bin_lateral_stress_ratio")
 #: Columns of ``wall_pressure.csv`` (public contract).
 WALL_PRESSURE_COLUMNS = ("stage", "t_s", "s_m", "r_m", "z_m", "p_n_Pa", "tau_Pa",
-                         "p_n_stress_Pa", "tau_stress_Pa", "window_s", "hoop_force_N_m",
+                         "p_n_stress_Pa", "tau_stress_Pa", "p_n_raw_Pa", "tau_raw_Pa",
+                         "window_s", "hoop_force_N_m",
                          "meridional_force_N_m")
 #: Columns of ``loads.csv`` (public contract): the vertical momentum balance of the grid over
 #: each interval, as mean forces (N, 3D, upward positive; ``weight`` positive).
@@ -243,34 +244,42 @@ def write_timeseries(path: PathLike, record, axisymmetric: bool = True) -> None:
 
 
 def write_wall_pressure(path: PathLike, record) -> None:
-    """``wall_pressure.csv`` from the record's wall loads, one row per arc-length bin.
+    """``wall_pressure.csv`` from the record's wall loads, one row per bin of wall.
 
     ``stage`` is ``filling`` (at rest), ``early_discharge`` / ``mid_discharge`` (90 % / 50 %
     of the mass left) or ``discharge_envelope`` (the largest windowed pressure per bin over
-    the discharge); ``s_m`` is the arc length along the wall from the outlet lip, ``(r_m,
-    z_m)`` the wall point, ``p_n_Pa`` the normal pressure (compression positive) and
-    ``tau_Pa`` the shear the wall exerts on the material (up the wall positive), both from
-    the wall's reaction averaged over the stage's window of ``window_s`` seconds;
-    ``p_n_stress_Pa``, ``tau_stress_Pa`` the estimate from the stresses of the cells next to
-    the wall (empty where a bin held no material); ``t_s`` the time since the outlet opened
-    at the end of the window (0 at rest).  ``hoop_force_N_m`` and ``meridional_force_N_m``:
-    the forces in the wall per unit length of its circumference (per metre of a wedge's
-    length), tension positive, the hopper hung from the transition and the bin's wall
-    standing on it (:meth:`fipy_hopper.diagnostics.WallLoads.membrane_forces`; the envelope
-    has no meridional force, a wedge and a flat floor no hoop force: empty).
+    the discharge); ``s_m`` is the arc length along the wall from the outlet lip to the bin's
+    centre, ``(r_m, z_m)`` the wall point there; the bins divide each straight stretch of
+    wall into equal parts of about ``run.wall_bin_width``.  ``p_n_Pa`` is the normal
+    pressure (compression positive) and ``tau_Pa`` the shear the wall exerts on the material
+    (up the wall positive): the bin's mean of the traction recovered from the wall's reaction
+    averaged over the stage's window of ``window_s`` seconds
+    (:class:`fipy_hopper.diagnostics.WallLoads`; over each stretch it carries the stretch's
+    reaction exactly).  ``p_n_raw_Pa``, ``tau_raw_Pa``: the plain binning of the reaction
+    (each wall node's force in the bin of its wall point, over the bin's area), for checking:
+    noisy where the wall cuts the cells.  ``p_n_stress_Pa``, ``tau_stress_Pa``: the estimate
+    from the stresses of the cells next to the wall (empty where a bin held no material).
+    ``t_s``: the time since the outlet opened at the end of the window (0 at rest).
+    ``hoop_force_N_m`` and ``meridional_force_N_m``: the forces in the wall per unit length
+    of its circumference (per metre of a wedge's length), tension positive, the hopper hung
+    from the transition and the bin's wall standing on it
+    (:meth:`fipy_hopper.diagnostics.WallLoads.membrane_forces`; the envelope has no
+    meridional force, a wedge and a flat floor no hoop force: empty).
     """
     rows = []
     stress = getattr(record, "wall_stress", {})
+    raw = getattr(record, "wall_raw", {})
     window = getattr(record, "wall_window", {})
     forces = getattr(record, "wall_forces", {})
     for stage, (t, s, r, z, p, tau) in record.wall.items():
         empty = np.full(len(s), np.nan)
         p_s, tau_s = stress.get(stage, (empty, empty))
+        p_r, tau_r = raw.get(stage, (empty, empty))
         hoop, meridional = forces.get(stage, (empty, empty))[:2]
         for k in range(len(s)):
             rows.append([stage, _num(t), _num(s[k]), _num(r[k]), _num(z[k]), _num(p[k]),
-                         _num(tau[k]), _num(p_s[k]), _num(tau_s[k]),
-                         _num(window.get(stage, math.nan)), _num(hoop[k]),
+                         _num(tau[k]), _num(p_s[k]), _num(tau_s[k]), _num(p_r[k]),
+                         _num(tau_r[k]), _num(window.get(stage, math.nan)), _num(hoop[k]),
                          _num(meridional[k])])
     _write_csv(path, WALL_PRESSURE_COLUMNS, rows)
 
@@ -929,9 +938,9 @@ _WALL_ARRAY = re.compile(r"wall__(?P<stage>[A-Za-z_]\w*?)__(?P<k>[0-4])")
 #: NaN allowed.  The wall samples ``wall__<stage>__<k>`` must also match the stages of the
 #: metadata.
 CHECKPOINT_AUXILIARY = (r"wall__\w+?__[0-4]", r"wallstress__\w+?__[01]",
-                        r"wallforces__\w+?__[0-2]",
+                        r"wallraw__\w+?__[01]", r"wallforces__\w+?__[0-2]",
                         r"reading__\w+?__(wall|plate|budget)", r"stresssum__\w+?__[0-2]",
-                        r"envelope")
+                        r"envelope", r"envelope_raw")
 _META_KEYS = ("state", "record", "wall_times", "t_open", "next_sample", "schedules")
 
 

@@ -401,9 +401,10 @@ def theory_wall_pressure(cfg: HopperConfig, n: int = 120) -> dict:
 def wall_pressure(run):
     """The wall loads of a run against Janssen (bin), Walker (cone) and EN 1991-4.
 
-    Left: the normal pressure along the wall (kPa) from the wall's reaction (markers joined
-    by lines) at rest and at the discharge stages, the discharge envelope (the largest
-    windowed pressure per bin), the stress-sampled estimate at rest (open markers), and the
+    Left: the normal pressure along the wall (kPa), the traction recovered from the wall's
+    reaction (markers joined by lines) at rest and at the discharge stages, the discharge
+    envelope (the largest windowed pressure per bin), the stress-sampled estimate at rest
+    (open markers), the reaction binned node by node at rest (grey dots), and the
     closed forms of :func:`theory_wall_pressure`: Janssen (solid black), Walker's slices
     (solid filling, dashed discharge), EN 1991-4's hopper loads (dash-dot) and its bin
     discharge load ``C_h`` x Janssen (dotted black).  Right: the overpressure factor
@@ -432,6 +433,9 @@ def wall_pressure(run):
             ax.plot(s_all[sel], np.asarray(table["p_n_stress_Pa"], float)[sel] / 1e3, marker,
                     mfc="none", color=colour, ms=5, lw=0,
                     label="stress-sampled estimate, at rest")
+        if stage == "filling" and "p_n_raw_Pa" in table:
+            ax.plot(s_all[sel], np.asarray(table["p_n_raw_Pa"], float)[sel] / 1e3, ".",
+                    color="0.55", ms=3, lw=0, label="reaction binned node by node, at rest")
     styles = {"Janssen": ("k", "-"), "Walker, cone, filling": ("C0", "-"),
               "Walker, cone, discharge": ("C3", "--"), "Walker, wedge, filling": ("C0", "-"),
               "Walker, wedge, discharge": ("C3", "--"), "EN 1991-4, cone, filling": ("C9", "-."),

@@ -197,8 +197,11 @@ class RunRecord:
     mass_flow_index: list = field(default_factory=list)
     stagnant_fraction: list = field(default_factory=list)
     bin_lateral_stress_ratio: list = field(default_factory=list)   # -, in the bin's full cells
-    # stage -> (t since the outlet opened, s, r, z, p_n, tau): the reaction estimate per bin
+    # stage -> (t since the outlet opened, s, r, z, p_n, tau): the traction recovered from the
+    # wall's reaction, its mean per bin (diagnostics.WallLoads.profile)
     wall: dict = field(default_factory=dict)
+    # stage -> (p_n, tau) of the plain binning of the reaction (WallLoads.raw_profile)
+    wall_raw: dict = field(default_factory=dict)
     # stage -> (p_n, tau) stress-sampled on the same bins (NaN where a bin held no material)
     wall_stress: dict = field(default_factory=dict)
     wall_window: dict = field(default_factory=dict)      # stage -> window duration (s)
@@ -254,6 +257,7 @@ class Simulation:
         self._readings: dict = {}        # window name -> WallLoads.reading at its start
         self._stress_sums: dict = {}     # stage -> [sum p_n, sum tau, count] of the window
         self.envelope = None             # largest windowed p_n per bin in discharge
+        self.envelope_raw = None         # the same of the plain binning (for checking)
         self.wall_schedules: list[WallTimeSchedule] = []   # e.g. checkpoints
         #: the discharge's stop rules, in order (:class:`StopRule`; a custom rule, e.g. a
         #: discharged mass, is inserted or appended here)
@@ -529,7 +533,10 @@ class Simulation:
         if st.t >= self.next_envelope - 1e-12:
             current = loads.reading(m, st)
             p_n = loads.profile(self._readings["envelope"], current)[3]
+            raw = loads.raw_profile(self._readings["envelope"], current)[3]
             self.envelope = p_n if self.envelope is None else np.maximum(self.envelope, p_n)
+            self.envelope_raw = (raw if self.envelope_raw is None
+                                 else np.maximum(self.envelope_raw, raw))
             self.record.envelope_windows += 1
             self._readings["envelope"] = current
             self.next_envelope = st.t + self.load_window
@@ -546,10 +553,11 @@ class Simulation:
         self._stress_sums[stage] = sums
 
     def _wall_stage(self, stage: str, start: dict, end: dict):
-        """Record the wall loads of ``stage`` over the window ``start``-``end``: the reaction
-        profile, and the stress-sampled one (averaged over the window's checks, or at its end
-        when it had none)."""
+        """Record the wall loads of ``stage`` over the window ``start``-``end``: the traction
+        recovered from the reaction, its plain binning, and the stress-sampled profile
+        (averaged over the window's checks, or at its end when it had none)."""
         s, r, z, p_n, tau = self.wall_loads.profile(start, end)
+        self.record.wall_raw[stage] = self.wall_loads.raw_profile(start, end)[3:]
         sums = self._stress_sums.pop(stage, None)
         if sums is None or not np.any(sums[2]):
             p_s, tau_s = self._stress_profile()
@@ -559,7 +567,8 @@ class Simulation:
             tau_s = np.where(sums[2] > 0, sums[1] / count, np.nan)
         t_open = self.t_open if np.isfinite(self.t_open) else end["t"]
         self.record.wall[stage] = (end["t"] - t_open, s, r, z, p_n, tau)
-        hoop, meridional, at_transition = self.wall_loads.membrane_forces(start, end, p_n)
+        hoop, meridional, at_transition = self.wall_loads.membrane_forces(start, end, p_n,
+                                                                          tau)
         self.record.wall_forces[stage] = (hoop, meridional, np.asarray(at_transition))
         self.record.wall_stress[stage] = (p_s, tau_s)
         self.record.wall_window[stage] = end["t"] - start["t"]
@@ -578,6 +587,7 @@ class Simulation:
             nan = np.full_like(self.envelope, np.nan)
             self.record.wall["discharge_envelope"] = (
                 st.t - self.t_open, sampler.centres, sampler.r, sampler.z, self.envelope, nan)
+            self.record.wall_raw["discharge_envelope"] = (self.envelope_raw, nan)
             self.record.wall_stress["discharge_envelope"] = (nan, nan)
             self.record.wall_forces["discharge_envelope"] = (     # no one state: no meridional
                 self.wall_loads.hoop_force(self.envelope), nan, np.full(2, np.nan))
@@ -605,10 +615,12 @@ class Simulation:
         scalars = {k: v for k, v in st.__dict__.items() if not isinstance(v, np.ndarray)}
         rec = dict(self.record.__dict__)
         wall, wall_stress = rec.pop("wall"), rec.pop("wall_stress")
-        wall_forces = rec.pop("wall_forces")
+        wall_forces, wall_raw = rec.pop("wall_forces"), rec.pop("wall_raw")
         for stage, values in wall.items():
             for k, arr in enumerate(values[1:]):
                 arrays[f"wall__{stage}__{k}"] = np.asarray(arr)
+            for k, arr in enumerate(wall_raw.get(stage, ())):
+                arrays[f"wallraw__{stage}__{k}"] = np.asarray(arr)
             for k, arr in enumerate(wall_stress.get(stage, ())):
                 arrays[f"wallstress__{stage}__{k}"] = np.asarray(arr)
             for k, arr in enumerate(wall_forces.get(stage, ())):
@@ -625,6 +637,8 @@ class Simulation:
                     arrays[f"stresssum__{stage}__{k}"] = v
         if self.envelope is not None:
             arrays["envelope"] = self.envelope
+        if self.envelope_raw is not None:
+            arrays["envelope_raw"] = self.envelope_raw
         meta = {"state": scalars, "record": rec,
                 "wall_times": {stage: values[0] for stage, values in wall.items()},
                 "t_open": self.t_open, "next_sample": self.next_sample,
@@ -656,9 +670,11 @@ class Simulation:
         from . import io as fio
 
         arrays, meta = fio.read_checkpoint(path, self.state, self.model.cfg)
-        wall, wall_stress, wall_forces = {}, {}, {}
+        wall, wall_stress, wall_forces, wall_raw = {}, {}, {}, {}
         for stage, t_stage in meta["wall_times"].items():
             wall[stage] = (t_stage,) + tuple(arrays.pop(f"wall__{stage}__{k}") for k in range(5))
+            if f"wallraw__{stage}__0" in arrays:
+                wall_raw[stage] = tuple(arrays.pop(f"wallraw__{stage}__{k}") for k in range(2))
             if f"wallstress__{stage}__0" in arrays:
                 wall_stress[stage] = tuple(arrays.pop(f"wallstress__{stage}__{k}")
                                            for k in range(2))
@@ -676,9 +692,10 @@ class Simulation:
             self._stress_sums[stage] = ([arrays.pop(f"stresssum__{stage}__{k}")
                                          for k in range(3)] if present else None)
         self.envelope = arrays.pop("envelope", None)
+        self.envelope_raw = arrays.pop("envelope_raw", None)
         self.state = type(self.state)(**meta["state"], **arrays)
         self.record = RunRecord(**meta["record"], wall=wall, wall_stress=wall_stress,
-                                wall_forces=wall_forces)
+                                wall_forces=wall_forces, wall_raw=wall_raw)
         ratios = self.record.bin_lateral_stress_ratio     # not recorded by older checkpoints
         ratios[:0] = [math.nan] * (len(self.record.t) - len(ratios))
         self.t_open = meta["t_open"]

@@ -70,20 +70,28 @@ def test_wall_shear_obeys_coulomb_in_every_bin(mass_flow):
 
 
 def test_reaction_profile_accounts_for_the_whole_wall_force(mass_flow):
-    """The bins' forces (pressure times wall area, 3D) add up to the wall's whole normal
-    reaction on the cone and the bin: the spreading over the bins loses nothing."""
+    """The bins' forces (pressure and shear times wall area) add up, stretch by stretch, to
+    the summed reaction of the stretch's contact entries (1e-9: round-off), for the recovered
+    traction and for the plain binning; and the stretches' entries are every wall entry but
+    the frictionless free-fall tube's: the spreading over the bins loses nothing."""
     sim = mass_flow
     loads = sim.wall_loads
-    start, end = loads.reading(sim.model, sim.state), None
+    start = loads.reading(sim.model, sim.state)
     st = sim.state.copy()
     sim.model.advance(st, 50)
     end = loads.reading(sim.model, st)
-    s, _, _, p_n, tau = loads.profile(start, end)
-    force = -(end["wall"] - start["wall"])[loads.entries] / (end["t"] - start["t"])
-    normal_total = np.einsum("ek,ek->e", force, loads.normal)
-    covered = loads.weights.sum(axis=0) > 0.999
-    assert np.sum(p_n * loads.bin_area) == pytest.approx(np.sum(normal_total[covered]),
-                                                           rel=1e-9)
+    _, _, seg = sim.model.wall_entries()
+    assert sorted(loads.entries.tolist()) == np.flatnonzero(seg != 0).tolist()
+    for profile in (loads.profile, loads.raw_profile):
+        _, _, _, p_n, tau = profile(start, end)
+        for k, (rec, force) in enumerate(zip(loads.recoveries, loads.stretch_forces(start,
+                                                                                    end))):
+            in_stretch = loads.bins.stretch == k
+            area = loads.bin_area[in_stretch]
+            assert abs(force[:, 0]).sum() > 0
+            assert np.sum(p_n[in_stretch] * area) == pytest.approx(force[:, 0].sum(), rel=1e-9)
+            assert np.sum(tau[in_stretch] * area) == pytest.approx(force[:, 1].sum(), rel=1e-9,
+                                                                   abs=1e-12)
 
 
 def test_the_forces_in_the_wall_carry_its_vertical_reaction(mass_flow):

@@ -1,0 +1,224 @@
+"""The wall's traction recovered from its reaction, stretch by stretch of straight wall.
+
+The wall's reaction is measured exactly: the contact impulses ``m dv`` at the wall's nodes
+(per radian) add up to the force of every stretch of wall.  Its *distribution* along a wall
+that cuts the cells is not a traction: which node carries how much of it is set by how the
+wall cuts the cells next to it (a node behind the wall, a node just in front of it, a cell
+95 % or 5 % open), a pattern that repeats along the wall every few cells.  Dividing each
+node's force by a wall area of its own turns that pattern into a profile that scatters by
+30 % from bin to bin and does not improve under refinement (docs/physics_and_numerics.md,
+section 8).
+
+Recovery on one straight stretch (a segment between two corners), arc length ``s`` in
+``[s_a, s_b]``: the traction is a clamped cubic B-spline ``t(s) = sum_k t_k B_k(s)`` on knots
+spaced about the wall's bin width ``w``.  The basis is a partition of unity
+(``sum_k B_k = 1``, ``B_k >= 0``); each node's force ``f_e`` is shared among the basis
+functions by their values at the node's wall point ``s_e``, and each coefficient is its
+share over the wall area of its basis function::
+
+    t_k = sum_e B_k(s_e) f_e / A_k,    A_k = int B_k(s) c(s) ds,
+
+with ``c = r`` (per radian) on an axisymmetric wall, 1 on a plane one.  Hence
+``int t c ds = sum_k t_k A_k = sum_e f_e``: the recovered traction carries the stretch's
+reaction exactly, and each component (normal and shear) separately.  The weights are
+positive, so a node force that obeys Coulomb (``|f_t| <= mu f_n``) gives a traction that
+obeys it at every point.  The spline averages the cut pattern over ``4 w`` of wall (its
+support) and resolves the traction at the scale ``w``: with ``w`` fixed in metres, finer
+cells put more nodes under each basis function and the profile converges bin by bin.
+
+Bins: each stretch is divided into equal bins of about ``w``; a bin's value is the mean
+traction over its wall area, ``int_bin t c ds / int_bin c ds``.  Beside it, for checking,
+the *raw* bin value: the forces of the nodes whose wall points fall in the bin over its area.
+
+Everything here is linear in the forces: one sparse matrix per stretch (bins x entries),
+built once per geometry; a window's profile is one product.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import sparse
+from scipy.interpolate import BSpline
+
+#: degree of the traction's B-spline (cubic: support 4 knot spans, C2)
+DEGREE = 3
+#: Gauss-Legendre points per knot span and bin piece: exact for the degree-4 integrands
+#: ``B_k(s) c(s)`` (cubic times linear)
+_GAUSS = np.polynomial.legendre.leggauss(3)
+
+
+@dataclass(frozen=True)
+class WallStretch:
+    """A straight stretch of wall from ``start`` to ``end`` (``(r, z)`` in m), arc length
+    ``s_start`` (m) at ``start`` along its wall (its chain), ``name`` of that wall, whether
+    its area is per radian of an axisymmetric wall (``c = r``) or per metre of a plane one
+    (``c = 1``), and ``segment``, the index of the wall segment whose contact entries it
+    collects."""
+
+    start: tuple
+    end: tuple
+    s_start: float
+    axisymmetric: bool
+    name: str = "wall"
+    segment: int = 0
+
+    @property
+    def length(self) -> float:
+        return float(math.hypot(self.end[0] - self.start[0], self.end[1] - self.start[1]))
+
+    @property
+    def s_end(self) -> float:
+        return self.s_start + self.length
+
+    @property
+    def tangent(self) -> np.ndarray:
+        """Unit tangent from ``start`` to ``end``."""
+        d = np.subtract(self.end, self.start, dtype=float)
+        return d / np.hypot(*d)
+
+    @property
+    def normal(self) -> np.ndarray:
+        """Unit normal into the wall: the tangent turned clockwise (the material lies to the
+        left of a wall followed from its lowest point: inside the hopper)."""
+        t = self.tangent
+        return np.array([t[1], -t[0]])
+
+    def point(self, s):
+        """``(r, z)`` of the wall point at arc length ``s`` (m)."""
+        u = (np.asarray(s, float) - self.s_start)
+        t = self.tangent
+        return self.start[0] + u * t[0], self.start[1] + u * t[1]
+
+    def weight(self, s):
+        """The area weight ``c(s)``: the radius ``r(s)`` (m) per radian, or 1 (plane)."""
+        s = np.asarray(s, float)
+        return self.point(s)[0] if self.axisymmetric else np.ones_like(s)
+
+    def area(self, a, b):
+        """Wall area ``int_a^b c ds`` (m^2 per radian; m^2 per metre of a plane wall),
+        0 where ``b <= a``."""
+        a, b = np.asarray(a, float), np.asarray(b, float)
+        mid = 0.5 * (a + b)
+        return np.where(b > a, (b - a) * self.weight(mid), 0.0)
+
+
+def bin_edges(stretch: WallStretch, width: float) -> np.ndarray:
+    """Edges (m of arc length) of the stretch's equal bins of about ``width`` m (at least
+    one)."""
+    n = max(1, int(round(stretch.length / width)))
+    return np.linspace(stretch.s_start, stretch.s_end, n + 1)
+
+
+def knots(stretch: WallStretch, spacing: float) -> np.ndarray:
+    """The clamped knot vector of the traction's B-spline on the stretch: equal spans of about
+    ``spacing`` m (at least one), the end knots repeated ``DEGREE + 1`` times."""
+    n = max(1, int(round(stretch.length / spacing)))
+    inner = np.linspace(stretch.s_start, stretch.s_end, n + 1)
+    return np.concatenate([[inner[0]] * DEGREE, inner, [inner[-1]] * DEGREE])
+
+
+def basis(knot_vector: np.ndarray, s) -> np.ndarray:
+    """Values ``B_k(s)`` (len(s), n_basis) of the clamped B-splines; ``s`` is clipped onto
+    the stretch (a node just beyond a corner counts at the corner)."""
+    lo, hi = knot_vector[DEGREE], knot_vector[-DEGREE - 1]
+    s = np.clip(np.asarray(s, float), lo, hi)
+    n_basis = len(knot_vector) - DEGREE - 1
+    if len(s) == 0:
+        return np.zeros((0, n_basis))
+    return BSpline.design_matrix(s, knot_vector, DEGREE).toarray()
+
+
+def _pieces(edges_a: np.ndarray, edges_b: np.ndarray):
+    """Quadrature points and weights on the common refinement of two partitions of one
+    interval: ``(s (n_pieces, q), w (n_pieces, q), piece_lo (n_pieces,))``."""
+    cuts = np.unique(np.concatenate([edges_a, edges_b]))
+    lo, hi = cuts[:-1], cuts[1:]
+    keep = hi > lo
+    lo, hi = lo[keep], hi[keep]
+    x, w = _GAUSS
+    s = 0.5 * (lo + hi)[:, None] + 0.5 * (hi - lo)[:, None] * x[None, :]
+    return s, 0.5 * (hi - lo)[:, None] * w[None, :], lo
+
+
+@dataclass
+class StretchRecovery:
+    """The linear maps of one stretch: node forces -> spline coefficients -> bin means.
+
+    ``share`` (n_basis, n_entries, sparse): ``B_k(s_e)``; ``basis_area`` (n_basis,): ``A_k``;
+    ``bin_mean`` (n_bins, n_basis): ``int_bin B_k c ds / int_bin c ds``; ``raw`` (n_bins,
+    n_entries, sparse): 1 where the entry's wall point lies in the bin; ``bin_area``
+    (n_bins,).  ``entries``: the rows of the wall's entries that belong to the stretch."""
+
+    stretch: WallStretch
+    entries: np.ndarray
+    knot_vector: np.ndarray
+    edges: np.ndarray
+    share: sparse.csr_matrix
+    basis_area: np.ndarray
+    bin_mean: np.ndarray
+    raw: sparse.csr_matrix
+    bin_area: np.ndarray
+
+    @classmethod
+    def build(cls, stretch: WallStretch, entries, s_entries, bin_width: float,
+              knot_spacing: float | None = None) -> "StretchRecovery":
+        """Maps for the entries (row indices ``entries``, arc lengths ``s_entries``) of the
+        stretch, bins of about ``bin_width`` m and knots every ``knot_spacing`` m, but not
+        closer than the bin width."""
+        entries = np.asarray(entries, dtype=np.int64)
+        s_entries = np.asarray(s_entries, float)
+        kv = knots(stretch, max(bin_width, knot_spacing or 0.0))
+        edges = bin_edges(stretch, bin_width)
+        share = sparse.csr_matrix(basis(kv, s_entries).T)
+        s_q, w_q, lo = _pieces(kv[DEGREE:len(kv) - DEGREE], edges)
+        c_q = stretch.weight(s_q) * w_q                               # (pieces, q)
+        values = basis(kv, s_q.ravel()).reshape(s_q.shape + (-1,))   # (pieces, q, basis)
+        piece_basis = np.einsum("pq,pqk->pk", c_q, values)           # int over each piece
+        basis_area = piece_basis.sum(axis=0)
+        piece_bin = np.clip(np.searchsorted(edges, lo, side="right") - 1, 0, len(edges) - 2)
+        n_bins = len(edges) - 1
+        bin_area = np.bincount(piece_bin, c_q.sum(axis=1), n_bins)
+        bin_mean = np.zeros((n_bins, len(basis_area)))
+        np.add.at(bin_mean, piece_bin, piece_basis)
+        bin_mean /= bin_area[:, None]
+        in_bin = np.clip(np.searchsorted(edges, s_entries, side="right") - 1, 0, n_bins - 1)
+        raw = sparse.csr_matrix((np.ones(len(entries)), (in_bin, np.arange(len(entries)))),
+                                shape=(n_bins, len(entries)))
+        return cls(stretch, entries, kv, edges, share, basis_area, bin_mean, raw, bin_area)
+
+    @property
+    def centres(self) -> np.ndarray:
+        return 0.5 * (self.edges[1:] + self.edges[:-1])
+
+    def coefficients(self, force: np.ndarray) -> np.ndarray:
+        """Spline coefficients ``t_k`` (Pa) of the entries' forces ``force`` (n_entries, ...)
+        (N per radian, or per metre of a plane wall)."""
+        return (self.share @ force) / self.basis_area.reshape((-1,) + (1,) * (force.ndim - 1))
+
+    def traction(self, force: np.ndarray) -> np.ndarray:
+        """The recovered traction's mean over each bin (Pa), (n_bins, ...)."""
+        return self.bin_mean @ self.coefficients(force)
+
+    def raw_traction(self, force: np.ndarray) -> np.ndarray:
+        """The forces of the entries in each bin over the bin's area (Pa), (n_bins, ...)."""
+        return (self.raw @ force) / self.bin_area.reshape((-1,) + (1,) * (force.ndim - 1))
+
+    def evaluate(self, force: np.ndarray, s) -> np.ndarray:
+        """The recovered traction at arc lengths ``s`` (Pa)."""
+        return basis(self.knot_vector, s) @ self.coefficients(force)
+
+    @property
+    def breakpoints(self) -> np.ndarray:
+        """The distinct knots (m of arc length): the ends of the spline's spans."""
+        return self.knot_vector[DEGREE:len(self.knot_vector) - DEGREE]
+
+    def mean_over(self, force: np.ndarray, a: float, b: float) -> float:
+        """The recovered traction's mean over ``[a, b]`` (within the stretch) by area (Pa)."""
+        inside = self.breakpoints[(self.breakpoints > a) & (self.breakpoints < b)]
+        s_q, w_q, _ = _pieces(inside, np.array([a, b], float))
+        c_q = (self.stretch.weight(s_q) * w_q).ravel()
+        values = basis(self.knot_vector, s_q.ravel()) @ self.coefficients(force)
+        return float(np.sum(c_q * values) / np.sum(c_q))
