@@ -247,12 +247,13 @@ def comparison_window(cfg):
     Bins are compared whose centres lie more than one outlet diameter from the outlet lip (the
     Eulerian cut cells at the lip give a stress concentration there: measured 6.9 kPa against
     1.4 kPa in the first bin of the coarse test hopper, 23 kPa against 1.9 kPa in the reference
-    hopper at 1 cm), and more than 1.5 bin widths (4.5 cells) from the cone-cylinder transition
-    (``p_n`` jumps there and a bin straddling it mixes the two sides differently in the two
-    samplers) and from the free surface (``p_n`` goes to zero; a relative error means nothing).
+    hopper at 1 cm), and more than a bin width (``wall_bin_width_m``) from the cone-cylinder
+    transition (``p_n`` jumps there; no bin straddles it, but the stress sampled half a cell to
+    two cells in mixes the two sides) and from the free surface (``p_n`` goes to zero; a
+    relative error means nothing).
     """
-    geom, h = cfg.hopper, cfg.numerics.cell_size
-    margin = 1.5 * 3.0 * h
+    geom = cfg.hopper
+    margin = cfg.wall_bin_width_m
     s_t = geometry.transition_arc_length(geom)
     s_top = geometry.arc_length(geom.fill_level, geom)
     return geom.outlet_diameter, margin, margin, s_t, s_top

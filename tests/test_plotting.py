@@ -85,13 +85,14 @@ def test_forces_picture_is_skipped_for_a_table_without_forces(tmp_path):
     cfg = cone()
     (tmp_path / "config.toml").write_text(cfg.to_toml())
     (tmp_path / "summary.json").write_text("{}")
-    rows = [["filling", 0.0, 0.1 * k, 0.05, 0.1 * k, 100.0 * k, 10.0 * k, "", "", 0.01,
-             5.0 * k, 2.0 * k] for k in range(1, 5)]
-    for columns in (io.WALL_PRESSURE_COLUMNS[:10], io.WALL_PRESSURE_COLUMNS):
+    values = {"stage": "filling", "t_s": 0.0, "r_m": 0.05, "window_s": 0.01}
+    old = [c for c in io.WALL_PRESSURE_COLUMNS if not c.endswith("_N_m")]
+    for columns in (old, io.WALL_PRESSURE_COLUMNS):
         with open(tmp_path / "wall_pressure.csv", "w", newline="") as fh:
             writer = csv.writer(fh)
             writer.writerow(columns)
-            writer.writerows(row[:len(columns)] for row in rows)
+            writer.writerows([values.get(c, 0.1 * k if c in ("s_m", "z_m") else 10.0 * k)
+                              for c in columns] for k in range(1, 5))
         fig = wall_forces(tmp_path)
-        assert (fig is None) == (len(columns) == 10)
+        assert (fig is None) == (columns is old)
     assert len(fig.axes) == 2
