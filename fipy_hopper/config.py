@@ -17,6 +17,8 @@ from __future__ import annotations
 import dataclasses
 import difflib
 import math
+import re
+import sys
 import warnings
 from dataclasses import dataclass, field, fields
 from pathlib import Path
@@ -743,7 +745,17 @@ class HopperConfig:
         try:
             data = tomllib.loads(text)
         except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-            raise ConfigError(f"{path} is not valid TOML: {exc}") from None
+            twice = str(exc).startswith(("Cannot overwrite", "Cannot declare"))
+            raise ConfigError(f"{path} is not valid TOML: "
+                              f"{twice and _duplicate_key(text) or short_text(exc)}") from None
+        except ValueError:      # an integer beyond Python's limit of digits
+            limit = sys.get_int_max_str_digits()
+            raise ConfigError(f"{path} is not valid TOML: {_toml_place(text, _long_integer)}"
+                              f"an integer of more than {limit:,} digits") from None
+        except RecursionError:
+            raise ConfigError(f"{path} is not valid TOML: {_toml_place(text, _nesting_over())}"
+                              "arrays or inline tables nested too deeply (a configuration "
+                              "is [section] and key = value)") from None
         return cls.from_dict(data)
 
     def to_dict(self) -> dict:
@@ -797,6 +809,75 @@ def _grid_shape(geom: HopperGeometry, num: NumericsConfig, h: float) -> tuple:
     n_below = max(int(math.ceil(num.free_fall_depth * geom.outlet_diameter / h - 1e-9)), 3)
     n_above = int(math.ceil(geom.top / h - 1e-9)) + 1
     return nr, n_below + n_above
+
+
+_TOML_HEADER = re.compile(r"\s*\[\[?([^\[\]]+)\]\]?\s*(#.*)?$")
+_TOML_KEY = re.compile(r"\s*([A-Za-z0-9_\-. \t\"']+?)\s*=")
+
+
+def _toml_keys(text: str, tables: bool = False):
+    """``(line number, dotted key)`` of each ``key = value`` line of a TOML text, with the name
+    of its table (and ``[table]`` for each table header when ``tables``): a line scan for
+    messages only, which does not follow multi-line values."""
+    table = ""
+    for number, line in enumerate(text.splitlines(), start=1):
+        header = _TOML_HEADER.match(line)
+        if header:
+            table = _dotted(header.group(1))
+            if tables and not line.lstrip().startswith("[["):
+                yield number, f"[{table}]"
+            continue
+        key = _TOML_KEY.match(line)
+        if key and not line.lstrip().startswith("#"):
+            yield number, ".".join(p for p in (table, _dotted(key.group(1))) if p)
+
+
+def _dotted(name: str) -> str:
+    return ".".join(part.strip().strip("\"'") for part in name.split("."))
+
+
+def _duplicate_key(text: str) -> str:
+    """'the key 'a.b' is set twice (lines m and n)' for the first key (or table) set twice,
+    or ''."""
+    seen = {}
+    for number, key in _toml_keys(text, tables=True):
+        if key in seen:
+            what = "table" if key.startswith("[") else "key"
+            return (f"the {what} '{short_text(key, 60)}' is set twice (lines {seen[key]} and "
+                    f"{number})")
+        seen[key] = number
+    return ""
+
+
+def _long_integer(line: str) -> bool:
+    limit = sys.get_int_max_str_digits()
+    return any(len(run.replace("_", "")) > limit for run in re.findall(r"[0-9][0-9_]*", line))
+
+
+def _nesting_over(limit: int = 100):
+    """A test of successive lines: true from the line where the brackets still open pass
+    ``limit``."""
+    depth = 0
+
+    def is_here(line: str) -> bool:
+        nonlocal depth
+        for c in line:
+            depth += (c in "[{") - (c in "]}")
+            if depth > limit:
+                return True
+        return False
+    return is_here
+
+
+def _toml_place(text: str, is_here) -> str:
+    """'line n (key 'a.b'): ' of the first line of ``text`` where ``is_here(line)``, or ''."""
+    keys = dict(_toml_keys(text))
+    key = ""
+    for number, line in enumerate(text.splitlines(), start=1):
+        key = keys.get(number, key)
+        if is_here(line):
+            return f"line {number}" + (f" (key '{short_text(key, 60)}')" if key else "") + ": "
+    return ""
 
 
 def _toml_value(value) -> str:

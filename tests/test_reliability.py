@@ -133,6 +133,48 @@ def test_plot_on_a_foreign_directory_is_one_line(tmp_path, capsys, name, files):
     assert not (run / "discharge.png").exists()
 
 
+# ---------------------------------------------------------------- hostile TOML
+HOSTILE_TOML = [
+    ("a table nested 5,000 deep", "[run]\nend_time = " + "{a = " * 5000 + "1" + "}" * 5000,
+     ["nested too deeply", "line 2", "'run.end_time'"]),
+    ("an array nested 5,000 deep over many lines", "[run]\nx = [\n" + "[\n" * 5000
+     + "]\n" * 5001, ["nested too deeply", "'run.x'"]),
+    ("a 5,000-digit integer", "[hopper]\nbin_diameter = " + "7" * 5000,
+     ["line 2", "'hopper.bin_diameter'", "more than 4,300 digits"]),
+    ("a key set twice", "[hopper]\nbin_diameter = 0.3\nfill_height = 0.2\n"
+     "bin_diameter = 0.4\n", ["'hopper.bin_diameter' is set twice", "lines 2 and 4"]),
+    ("a dotted key set again in its table", "hopper.bin_diameter = 0.3\n[hopper]\n"
+     "bin_diameter = 0.4\n", ["'hopper.bin_diameter' is set twice", "lines 1 and 3"]),
+    ("a table declared twice", "[run]\nend_time = 1.0\n[hopper]\nfill_height = 0.2\n"
+     "[run]\nmax_time = 9.0\n", ["'[run]' is set twice", "lines 1 and 5"]),
+]
+
+
+@pytest.mark.parametrize("name, text, words", HOSTILE_TOML, ids=[c[0] for c in HOSTILE_TOML])
+def test_hostile_toml_is_one_line_naming_the_file_and_the_key(tmp_path, capsys, name, text,
+                                                              words):
+    """Deep nesting (a RecursionError in the parser), an integer beyond Python's digit limit
+    (a ValueError) and a key or table set twice: exit 2 with one line naming the file, the
+    line and the key, from ``validate``, ``run`` and ``plot`` (a run directory's config)."""
+    path = tmp_path / "hostile.toml"
+    path.write_text(text)
+    out = tmp_path / "run"
+    for argv in (["validate", str(path)], ["run", str(path), "--out", str(out), "--quiet"]):
+        assert main(argv) == 2
+        line = one_error_line(capsys.readouterr().err)
+        assert f"{path} is not valid TOML: " in line, line
+        for word in words:
+            assert word in line, (word, line)
+        assert len(line) < 300
+    assert not out.exists()
+    out.mkdir()
+    shutil.copy(path, out / "config.toml")
+    (out / "timeseries.csv").write_text("t_s,mass_in_hopper_kg,discharged_kg,"
+                                        "discharge_rate_kg_s\n")
+    assert main(["plot", str(out)]) == 2
+    assert words[0] in one_error_line(capsys.readouterr().err)
+
+
 # ---------------------------------------------------------------- size of a run
 @pytest.mark.parametrize("changes", [
     {},
