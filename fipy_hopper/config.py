@@ -594,7 +594,7 @@ class HopperConfig:
                 f"(numerics.max_fill_time = {fill:g} s) and the discharge ({run.discharge_time:g}"
                 f" s): no snapshot in between; allowed range is [{FIELD_INTERVAL_MIN:g}, "
                 f"{max(fill, run.discharge_time):g}] s")
-        if run.end_time != "empty" and run.field_interval > run.end_time:
+        if run.end_time != "empty" and 0 < run.end_time < run.field_interval:
             warnings.warn(f"run.field_interval = {run.field_interval:g} s is longer than "
                           f"run.end_time = {run.end_time:g} s: the discharge gets only its "
                           "first and last field snapshots", SamplingWarning, stacklevel=3)

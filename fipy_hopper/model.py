@@ -367,17 +367,19 @@ class HopperModel:
         """``sum m v_z`` over the grid's nodes (kg m/s per radian)."""
         return float(np.sum(self.node_mass(state) * state.v[1]))
 
-    def check_stable(self, state: State) -> None:
-        """Raise :class:`InstabilityError` on a runaway or non-finite velocity (above
-        :func:`runaway_speed`), or a non-finite material fraction or stress."""
+    def check_stable(self, state: State, limit: float | None = None) -> None:
+        """Raise :class:`InstabilityError` naming the first node of a non-finite or runaway
+        velocity (above ``limit``, by default :func:`runaway_speed`), or the first cell of a
+        non-finite material fraction or stress."""
         v, g = state.v, self.grid
         speed = np.hypot(v[0], v[1])
-        limit = runaway_speed(self.cfg.hopper)
+        limit = runaway_speed(self.cfg.hopper) if limit is None else limit
         bad = ~np.isfinite(speed) | (speed > limit)
         if bad.any():
             j, i = np.argwhere(bad)[0]
+            kind = "runaway" if np.isfinite(speed[j, i]) else "non-finite"
             raise InstabilityError(
-                f"runaway velocity at step {state.step}, t = {state.t:.6g} s, node r = "
+                f"{kind} velocity at step {state.step}, t = {state.t:.6g} s, node r = "
                 f"{g.r_nodes[i]:.4g} m, z = {g.z_nodes[j]:.4g} m (|v| = {speed[j, i]:.3g} m/s, "
                 f"limit {limit:.3g} m/s)")
         broken = ~np.isfinite(state.alpha) | ~np.isfinite(state.sigma).all(axis=-1)
@@ -642,9 +644,7 @@ class HopperModel:
         state.face_flux_sum[:] = 0.0
         state.flux_time = 0.0
         if not stepping.all_finite(state.v) or not stepping.all_finite(state.sigma):
-            bad = np.argwhere(~np.isfinite(state.sigma).all(axis=-1))
-            raise InstabilityError(f"non-finite field at step {state.step}, t = {state.t:.6g} s,"
-                                   f" cell(s) {bad[:3].tolist()}")
+            self.check_stable(state, limit=math.inf)     # names the node or the cell
         for hook in self.after_transport:
             hook(state)
 

@@ -175,6 +175,48 @@ def test_hostile_toml_is_one_line_naming_the_file_and_the_key(tmp_path, capsys, 
     assert words[0] in one_error_line(capsys.readouterr().err)
 
 
+# ---------------------------------------------------------------- messages
+def test_a_fill_only_run_gets_no_warning_about_field_snapshots(tmp_path, capsys):
+    """``end_time = 0`` has no discharge to sample: no SamplingWarning (a short discharge
+    still gets one)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", fconfig.SamplingWarning)
+        HopperConfig().replace(run={"end_time": 0.0})
+    with pytest.warns(fconfig.SamplingWarning, match="run.end_time = 0.01 s"):
+        HopperConfig().replace(run={"end_time": 0.01, "output_interval": 0.005})
+    path = tmp_path / "fill.toml"
+    path.write_text(COARSE.replace("end_time = 0.05", "end_time = 0.0"))
+    assert main(["validate", str(path)]) == 0
+    assert "snapshot" not in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("field, words", [
+    ("v", ["non-finite velocity", "node r = 0.05 m, z = 0.", "|v| = nan m/s"]),
+    ("sigma", ["non-finite material fraction or stress", "cell r = 0.055 m, z = 0."]),
+])
+def test_the_instability_after_a_transport_names_the_node_or_the_cell(tmp_path, field, words):
+    """A non-finite velocity names its node, a non-finite stress its cell (never ``[]``)."""
+    from fipy_hopper.model import HopperModel, InstabilityError
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model = HopperModel(HopperConfig.from_toml(coarse(tmp_path)), threads=1)
+    state = model.initial_state()
+    model.advance(state, 3)
+    j, i = [int(np.argmin(np.abs(model.grid.z_nodes - 0.1))),
+            int(np.argmin(np.abs(model.grid.r_nodes - 0.05)))]
+    if field == "v":
+        state.v[1, j, i] = np.nan
+    else:
+        state.sigma[j, i, 0] = np.inf
+    with pytest.raises(InstabilityError) as err:
+        model.transport_step(state)
+    message = str(err.value)
+    assert "[]" not in message
+    for word in words:
+        assert word in message, message
+
+
 # ---------------------------------------------------------------- size of a run
 @pytest.mark.parametrize("changes", [
     {},
