@@ -47,9 +47,10 @@ class _Parser(argparse.ArgumentParser):
 
 def _parser() -> argparse.ArgumentParser:
     p = _Parser(prog=PROG, description=(
-        "Eulerian Mohr-Coulomb simulation of granular discharge from a conical hopper "
-        "(axisymmetric, on FiPy): flow rate, flow mode and wall pressures, compared with "
-        "Beverloo, Jenike, Janssen and Walker."),
+        "Eulerian Mohr-Coulomb simulation of granular flow in silos and hoppers (conical, "
+        "axisymmetric, or wedge-shaped, in plane strain; on FiPy): filling, discharge rate, "
+        "flow mode and wall loads, compared with Beverloo, Jenike, Janssen, Walker and "
+        "EN 1991-4."),
         epilog="Exit codes: 0 success, 1 the run failed, 2 bad input, 130 interrupted.")
     p.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = p.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)

@@ -352,6 +352,14 @@ def test_help_everywhere(argv, capsys):
     assert "fipy-hopper" in capsys.readouterr().out
 
 
+def test_the_description_names_silos_and_hoppers_of_every_shape(capsys):
+    """The program's description is not that of a conical hopper only: wedges run too."""
+    assert main(["--help"]) == 0
+    text = " ".join(capsys.readouterr().out.split())
+    assert "silos and hoppers" in text and "wedge" in text and "conical" in text
+    assert "from a conical hopper" not in text
+
+
 def test_usage_errors_exit_2(capsys):
     assert main([]) == 2
     assert main(["run"]) == 2                      # no configuration, no --out
