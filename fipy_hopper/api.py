@@ -335,8 +335,7 @@ class Results:
 
     def field(self, index: int = -1):
         """The ``meshio.Mesh`` of snapshot ``index`` (cell data ``alpha``, ``layer``, ...)."""
-        import meshio
-        return meshio.read(self.path / fio.RunDirectory.FIELDS / self.snapshots[index]["file"])
+        return fio.read_vtu(self.path / fio.RunDirectory.FIELDS / self.snapshots[index]["file"])
 
     def wall_stage(self, stage: str) -> dict:
         """The wall pressure rows of one stage (``filling``, ``early_discharge``, ...)."""

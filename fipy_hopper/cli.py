@@ -197,6 +197,8 @@ def _plot(args) -> int:
         return _error(exc, EXIT_BAD_INPUT)
     try:
         paths = plotting.plot_run(run)
+    except RunDirectoryError as exc:      # a snapshot that cannot be read
+        return _error(exc, EXIT_BAD_INPUT)
     except Exception as exc:  # a file that passed the checks but cannot be drawn
         return _error(f"cannot draw the pictures of {_short(run)}: {type(exc).__name__}: "
                       f"{_short(exc, 300)}", EXIT_FAILED)

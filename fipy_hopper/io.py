@@ -51,12 +51,12 @@ except ImportError:       # pragma: no cover
     fcntl = None
 
 __all__ = [
-    "RunDirectory", "RunDirectoryError", "CheckpointError", "read_checkpoint",
+    "RunDirectory", "RunDirectoryError", "CheckpointError", "RunFileError", "read_checkpoint",
     "validate_checkpoint", "checkpoint_template", "checkpoint_size_limit", "check_run_files",
     "Manifest", "FieldWriter", "atomic_path",
     "atomic_write_text", "write_json", "write_timeseries", "write_wall_pressure", "read_csv",
     "environment_versions", "code_commit", "grid_points_and_quads", "cell_fields", "marker_file",
-    "write_markers", "read_markers",
+    "write_markers", "read_markers", "read_vtu",
     "TIMESERIES_COLUMNS", "WALL_PRESSURE_COLUMNS",
 ]
 
@@ -124,6 +124,10 @@ class RunDirectoryError(Exception):
 
 class CheckpointError(RunDirectoryError):
     """A checkpoint file cannot be restored (corrupt, too large, wrong arrays)."""
+
+
+class RunFileError(RunDirectoryError, ValueError):
+    """A file of a run directory cannot be read (corrupt, truncated, not what its name says)."""
 
 
 # ---------------------------------------------------------------- atomic files
@@ -697,15 +701,26 @@ def write_markers(path: PathLike, markers) -> None:
         meshio.write(tmp, mesh, file_format="vtu")
 
 
+def read_vtu(path: PathLike):
+    """The ``meshio.Mesh`` of a VTU file; :class:`RunFileError` naming the file if it cannot
+    be read (meshio's reader is called directly: ``meshio.read`` prints and calls
+    ``sys.exit(1)`` on a corrupt file, which is caught here all the same)."""
+    import meshio
+
+    try:
+        return meshio.vtu.read(os.fspath(path))
+    except (SystemExit, Exception) as exc:
+        raise RunFileError(f"{_short(path)} is not a readable VTU file: "
+                           f"{type(exc).__name__}: {_short(exc, 120)}") from None
+
+
 def read_markers(path: PathLike) -> Optional[np.ndarray]:
     """The markers ``(n, 3)`` = ``(r, z, layer)`` of a file of :func:`write_markers`, or
     ``None`` if there is no such file."""
-    import meshio
-
     path = Path(path)
     if not path.is_file():
         return None
-    mesh = meshio.read(path)
+    mesh = read_vtu(path)
     return np.column_stack([mesh.points[:, 0], mesh.points[:, 1],
                             np.asarray(mesh.point_data["layer"], dtype=float).ravel()])
 

@@ -34,7 +34,7 @@ import numpy as np
 from . import geometry, theory
 from .config import HopperConfig
 from .io import (FieldWriter, RunDirectory, atomic_path, marker_file, read_csv, read_markers,
-                 read_snapshot_index, result_key)
+                 read_snapshot_index, read_vtu, result_key)
 
 __all__ = ["plot_run", "flow_pattern", "discharge_curves", "wall_pressure", "stress_pattern",
            "animate", "load_snapshot", "draw_layers", "theory_wall_pressure"]
@@ -89,10 +89,8 @@ def snapshots(run) -> list:
 def load_snapshot(run, entry) -> dict:
     """One snapshot as ``(nz, nr)`` arrays with its node coordinates ``r_nodes``, ``z_nodes``;
     ``markers`` is its ``(n, 3)`` array of marker points ``(r, z, layer)``, or ``None``."""
-    import meshio
-
     folder = Path(run) / RunDirectory.FIELDS
-    mesh = meshio.read(folder / entry["file"])
+    mesh = read_vtu(folder / entry["file"])
     r_nodes = np.unique(mesh.points[:, 0])
     z_nodes = np.unique(mesh.points[:, 1])
     shape = (len(z_nodes) - 1, len(r_nodes) - 1)
@@ -589,7 +587,6 @@ def stress_pattern(run):
     """Trajectories of the major principal stress over the mobilised friction, at rest and in
     discharge: the active state of the fill (sigma1 near vertical) and the passive, arched
     state of the flow (sigma1 across it), from the stresses of the field snapshots."""
-    import meshio
     from . import diagnostics
 
     run = Path(run)
@@ -600,7 +597,7 @@ def stress_pattern(run):
     folder = run / RunDirectory.FIELDS
     mesh_artist = None
     for ax, (title, entry) in zip(axes, chosen):
-        mesh = meshio.read(folder / entry["file"])
+        mesh = read_vtu(folder / entry["file"])
         r_nodes, z_nodes = np.unique(mesh.points[:, 0]), np.unique(mesh.points[:, 1])
         shape = (len(z_nodes) - 1, len(r_nodes) - 1)
         cell = {k: np.asarray(mesh.cell_data[k][0]).reshape(shape)
@@ -645,7 +642,6 @@ def lagrangian_mesh(run):
     """The Lagrangian mesh of a ``formulation = "lagrangian"`` run, coloured by layer, at the
     opening of the outlet (the last snapshot of the fill) and at the end of the run (where a
     distortion stopped it), with the hopper wall."""
-    import meshio
     from matplotlib.collections import PolyCollection
 
     run = Path(run)
@@ -656,7 +652,7 @@ def lagrangian_mesh(run):
     fig = _figure(4.2 * max(len(chosen), 1), 5.2)
     axes = np.atleast_1d(fig.subplots(1, max(len(chosen), 1)))
     wall = geometry.wall_polyline(cfg.hopper, 0.0, cfg.hopper.top)
-    meshes = [meshio.read(run / RunDirectory.FIELDS / entry["file"]) for entry in chosen]
+    meshes = [read_vtu(run / RunDirectory.FIELDS / entry["file"]) for entry in chosen]
     cells = [{"alpha": np.asarray(mesh.cell_data["alpha"][0]),
               "layer": np.asarray(mesh.cell_data["layer"][0])} for mesh in meshes]
     cmap, norm = _layer_colours(_n_layers(cells))

@@ -217,6 +217,31 @@ def test_the_instability_after_a_transport_names_the_node_or_the_cell(tmp_path, 
         assert word in message, message
 
 
+@pytest.mark.parametrize("content", [b"junk", b"<?xml version='1.0'?>\n<VTKFile type=",
+                                     b"\x00\xff" * 100])
+def test_a_corrupt_snapshot_is_one_line_not_meshios_exit(tmp_path, capsys, content):
+    """meshio.read prints and calls ``sys.exit(1)`` on a file it cannot read: ``plot`` says so
+    in one line with exit 2 (nothing on stdout), :meth:`Results.field` raises the same
+    :class:`RunFileError` naming the file."""
+    from fipy_hopper.io import RunFileError
+
+    run = tmp_path / "run"
+    (run / "fields").mkdir(parents=True)
+    (run / "config.toml").write_text(HopperConfig().to_toml())
+    (run / "timeseries.csv").write_text("t_s,mass_in_hopper_kg,discharged_kg,"
+                                        "discharge_rate_kg_s\n0.0,1.0,0.0,0.0\n")
+    (run / "summary.json").write_text("{}")
+    (run / "fields" / "snapshots.csv").write_text(
+        "index,file,step,t_s,discharge_time_s,stage\n0,fields_0000.vtu,0,0.0,nan,filling\n")
+    (run / "fields" / "fields_0000.vtu").write_bytes(content)
+    assert main(["plot", str(run)]) == 2
+    captured = capsys.readouterr()
+    line = one_error_line(captured.err)
+    assert "fields_0000.vtu is not a readable VTU file" in line and captured.out == ""
+    with pytest.raises(RunFileError, match="fields_0000.vtu is not a readable VTU file"):
+        fh.read_results(run).field(0)
+
+
 # ---------------------------------------------------------------- size of a run
 @pytest.mark.parametrize("changes", [
     {},
