@@ -88,9 +88,11 @@ def _parser() -> argparse.ArgumentParser:
                        "measured, 7-20 s of it for writing and the pictures).")
     run_options(q, out_required=False)
 
+    from .plotting import PICTURES
     q = sub.add_parser("plot", help="draw the pictures of a run directory",
-                       description="Draw flow_pattern.png, discharge.png, wall_pressure.png, "
-                       "stress_pattern.png and discharge.gif from the files in DIR.")
+                       description="Draw the pictures of the run in DIR from its files (those "
+                       "the run has the data of): " + "; ".join(
+                           f"{p.name}, {p.shows}" for p in PICTURES) + ".")
     q.add_argument("dir", metavar="DIR", help="run directory")
 
     q = sub.add_parser("validate", help="check a configuration and print derived quantities",

@@ -318,8 +318,6 @@ class RunDirectory:
     FIELDS = "fields"
     ERROR_LOG = "error.log"
     LOCK = ".lock"
-    FIGURES = ("flow_pattern.png", "discharge.png", "wall_pressure.png", "stress_pattern.png",
-               "discharge.gif")
 
     def __init__(self, path: PathLike, force: bool = False, resume: bool = False):
         self._lock_fd = None
@@ -469,10 +467,19 @@ class RunDirectory:
     def checkpoint(self) -> Path:
         return self.path / self.CHECKPOINT
 
+    #: every file a run writes at the top of its directory, besides the pictures
+    OUTPUTS = (CONFIG, MANIFEST, SUMMARY, PROFILE, TIMESERIES, WALL_PRESSURE, LOADS, CHECKPOINT,
+               ERROR_LOG)
+
+    @classmethod
+    def output_names(cls) -> tuple:
+        """The files of a run at the top of its directory: :data:`OUTPUTS` and every picture
+        of :data:`fipy_hopper.plotting.PICTURES`."""
+        from .plotting import PICTURES
+        return cls.OUTPUTS + tuple(picture.name for picture in PICTURES)
+
     def _remove_outputs(self) -> None:
-        names = (self.CONFIG, self.MANIFEST, self.SUMMARY, self.PROFILE, self.TIMESERIES,
-                 self.WALL_PRESSURE, self.LOADS, self.CHECKPOINT, self.ERROR_LOG) + self.FIGURES
-        for name in names:
+        for name in self.output_names():
             with contextlib.suppress(FileNotFoundError):
                 (self.path / name).unlink()
         if self.fields.is_dir():
