@@ -38,8 +38,9 @@ from .config import HopperConfig
 from .io import (FieldWriter, RunDirectory, atomic_path, marker_file, read_csv, read_markers,
                  read_snapshot_index, read_vtu, result_key)
 
-__all__ = ["plot_run", "PICTURES", "Picture", "flow_pattern", "discharge_curves", "wall_pressure", "stress_pattern",
-           "animate", "load_snapshot", "draw_layers", "theory_wall_pressure"]
+__all__ = ["plot_run", "PICTURES", "Picture", "flow_pattern", "discharge_curves",
+           "wall_pressure", "stress_pattern", "animate", "load_snapshot", "draw_layers",
+           "theory_wall_pressure"]
 
 #: Diameter of a drawn marker over the markers' median nearest-neighbour spacing: above
 #: ``sqrt(2)``, the discs of a square lattice cover it (the material looks filled).
