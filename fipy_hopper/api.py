@@ -151,7 +151,10 @@ def run(config_or_path, out, force: bool = False, resume: bool = False, quiet: b
     ``KeyboardInterrupt`` after writing the outputs so far with ``stop_reason``
     ``"interrupted"`` (continue with ``resume=True``).  A run stopped by
     ``run.wall_time_limit`` returns normally with ``stop_reason`` ``"wall_time_limit"``; its
-    last checkpoint is kept, so ``resume=True`` continues it.
+    last checkpoint is kept, so ``resume=True`` continues it.  A fill that does not come to
+    rest by ``numerics.max_fill_time`` ends a fill-only run (``end_time = 0``) with
+    ``stop_reason`` ``"fill_not_at_rest"``; a discharge started from it warns
+    (:class:`~fipy_hopper.simulation.NotAtRestWarning`).
     """
     cfg, source = _resolve(config_or_path)
     source = config_source or source
@@ -183,7 +186,7 @@ def run(config_or_path, out, force: bool = False, resume: bool = False, quiet: b
         manifest = fio.Manifest.new(rundir / rundir.MANIFEST, source, command)
 
     from .model import InstabilityError
-    from .simulation import Simulation
+    from .simulation import NotAtRestWarning, Simulation, not_at_rest_message
 
     from .profiling import PhaseProfile
     from .profiling import timed as profiling_timed
@@ -231,6 +234,8 @@ def run(config_or_path, out, force: bool = False, resume: bool = False, quiet: b
         reason = sim.record.stop_reason
         if reason == "wall_time_limit":      # not the end of the run: it can be resumed
             status = "stopped"
+        elif sim.fill_gave_up and reason != "fill_not_at_rest":
+            warnings.warn(not_at_rest_message(cfg), NotAtRestWarning)
     except InstabilityError as exc:
         status, reason, error = "failed", f"unstable: {exc}", exc
     except KeyboardInterrupt as exc:

@@ -13,8 +13,11 @@ Exit codes: 0 success; 2 bad input (a configuration error, a missing or non-TOML
 output directory that would be overwritten or that another run is using, a path the system
 refuses, a directory that ``plot`` cannot read), reported in one line on stderr; 1 a run that
 failed (unstable, or an internal error), with the reason, after writing everything measured so
-far; 130 a run interrupted with Ctrl-C or SIGTERM (continue it with ``--resume`` once a
-checkpoint has been written).
+far, and a fill-only run (``end_time = 0``) whose fill did not come to rest by
+``numerics.max_fill_time`` (``stop_reason`` ``"fill_not_at_rest"``: its outputs are written,
+but its loads are those of a moving fill; a discharge started from such a fill is a warning);
+130 a run interrupted with Ctrl-C or SIGTERM (continue it with ``--resume`` once a checkpoint
+has been written).
 """
 
 from __future__ import annotations
@@ -51,7 +54,8 @@ def _parser() -> argparse.ArgumentParser:
         "axisymmetric, or wedge-shaped, in plane strain; on FiPy): filling, discharge rate, "
         "flow mode and wall loads, compared with Beverloo, Jenike, Janssen, Walker and "
         "EN 1991-4."),
-        epilog="Exit codes: 0 success, 1 the run failed, 2 bad input, 130 interrupted.")
+        epilog="Exit codes: 0 success, 1 the run failed (or a fill-only run's fill did not "
+        "come to rest), 2 bad input, 130 interrupted.")
     p.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = p.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
 
@@ -249,6 +253,11 @@ def _run(args, config, source=None) -> int:
         print(format_report(report))
     if not args.quiet:
         _print_summary(summary, args.out)
+    if summary.get("stop_reason") == "fill_not_at_rest":
+        from .simulation import not_at_rest_message
+        return _error(f"{not_at_rest_message(config)} (the outputs are in {args.out})",
+                      EXIT_FAILED)
+    if not args.quiet:
         if summary.get("stop_reason") == "wall_time_limit":
             if (Path(args.out) / RunDirectory.CHECKPOINT).is_file():
                 print(f"  stopped at run.wall_time_limit; continue with: {again}")

@@ -17,7 +17,10 @@ Stages:
   energy is below ``settle_kinetic_energy * M g L`` (``M`` the mass, ``L`` the fill depth from
   outlet to surface) and the damping carries less than ``settle_damping_fraction`` of the
   weight over the last check interval (the walls and the plate hold the rest).  Filling gives
-  up at ``max_fill_time`` and says so.  ``end_time = 0`` stops there (``"filled"``).
+  up at ``max_fill_time`` and says so (``RunRecord.fill_at_rest`` false,
+  :func:`not_at_rest_message`).  ``end_time = 0`` stops there: ``"filled"``, or
+  ``"fill_not_at_rest"`` when the fill gave up before it came to rest (its wall loads are
+  those of a moving fill).
 - **discharge**: the plate is removed; the run stops at ``end_time`` or, for ``"empty"``, when
   less than ``empty_fraction`` of the initial mass is left in the hopper (``"empty"``), or when
   the flow has stopped (``"at_rest"``, :data:`AT_REST_AFTER`: a heel on a shallow cone, an
@@ -77,6 +80,18 @@ AT_REST_AFTER, AT_REST_WINDOW, AT_REST_RATE = 0.5, 0.25, 1e-3
 STAGE_MARKS = {"early_discharge": 0.9, "mid_discharge": 0.5}
 #: Wall-load stages in the order they are written.
 WALL_STAGES = ("filling", "early_discharge", "mid_discharge", "discharge_envelope")
+
+
+class NotAtRestWarning(RuntimeWarning):
+    """The fill gave up at ``numerics.max_fill_time`` and the discharge started from it."""
+
+
+def not_at_rest_message(cfg) -> str:
+    """What to say of a fill that did not come to rest by ``numerics.max_fill_time``."""
+    return (f"the fill did not come to rest within numerics.max_fill_time = "
+            f"{cfg.numerics.max_fill_time:g} s: its wall loads (and a discharge started from "
+            "it) are those of a moving fill; raise numerics.max_fill_time (or relax "
+            "numerics.settle_kinetic_energy, numerics.settle_damping_fraction)")
 
 
 @dataclass
@@ -419,7 +434,8 @@ class Simulation:
             if self.record.stop_reason == "wall_time_limit" or halt_reason(self.state):
                 pass
             elif self.end_time != "empty" and float(self.end_time) == 0.0:
-                self.record.stop_reason = "filled"
+                self.record.stop_reason = ("filled" if self.record.fill_at_rest
+                                           else "fill_not_at_rest")
             else:
                 self.discharge()
         finally:
@@ -428,6 +444,11 @@ class Simulation:
             if self.progress:
                 sys.stderr.write("\n")
         return self.record
+
+    @property
+    def fill_gave_up(self) -> bool:
+        """True once the fill has stopped at ``max_fill_time`` without coming to rest."""
+        return bool(self.record.rest_balance) and not self.record.fill_at_rest
 
     # -------------------------------------------------------------- measuring
     def _at_rest(self) -> bool:

@@ -400,6 +400,40 @@ def test_a_fill_only_run_draws_only_what_it_has(run_dir, tmp_path):
     assert len(plotting.wall_pressure(run_dir).axes) == 2      # with a discharge: both
 
 
+def unsettled(tmp_path, end_time):
+    """The coarse hopper whose fill gives up (max_fill_time just past the gravity ramp)."""
+    path = tmp_path / f"unsettled_{end_time}.toml"
+    path.write_text(COARSE.replace("gravity_ramp_time = 0.05", "gravity_ramp_time = 0.05\n"
+                                   "max_fill_time = 0.06")
+                    .replace("end_time = 0.2", f"end_time = {end_time}")
+                    .replace("output_interval = 0.02", "output_interval = 0.01")
+                    .replace("field_interval = 0.05", "field_interval = 0.02"))
+    return path
+
+
+def test_a_fill_that_never_comes_to_rest_is_not_filled(tmp_path, capsys):
+    """A fill-only run whose fill gives up at numerics.max_fill_time: ``stop_reason``
+    ``"fill_not_at_rest"``, exit 1 and one error line naming the key (its outputs written);
+    a discharge started from it finishes with exit 0 and one warning line."""
+    out = tmp_path / "fill"
+    assert main(["run", str(unsettled(tmp_path, 0.0)), "--out", str(out), "--quiet"]) == 1
+    err = capsys.readouterr().err
+    lines = [line for line in err.splitlines() if "cells across the outlet" not in line]
+    assert len(lines) == 1 and lines[0].startswith("fipy-hopper: error: the fill did not come "
+                                                   "to rest"), err
+    assert "numerics.max_fill_time = 0.06 s" in lines[0] and str(out) in lines[0]
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["stop_reason"] == "fill_not_at_rest" and summary["fill_at_rest"] is False
+    assert (out / "wall_pressure.png").is_file()
+    out = tmp_path / "discharge"
+    assert main(["run", str(unsettled(tmp_path, 0.02)), "--out", str(out), "--quiet"]) == 0
+    lines = [line for line in capsys.readouterr().err.splitlines()
+             if "cells across the outlet" not in line]
+    assert len(lines) == 1 and lines[0].startswith("fipy-hopper: warning: the fill did not "
+                                                   "come to rest"), lines
+    assert json.loads((out / "summary.json").read_text())["stop_reason"] == "end_time"
+
+
 def test_the_description_names_silos_and_hoppers_of_every_shape(capsys):
     """The program's description is not that of a conical hopper only: wedges run too."""
     assert main(["--help"]) == 0
