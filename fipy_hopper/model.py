@@ -56,7 +56,7 @@ import numba
 from . import dense_loose, geometry, markers, material, momentum, profiling, stepping
 from .config import HopperConfig, damped_step_factor
 from .mesh import HopperGrid, build_grid
-from .material.law import transported_fields
+from .material.law import compiled_refusal, transported_fields
 from .transport import material_rows
 
 GRAVITY = 9.81  # m/s^2
@@ -138,7 +138,9 @@ class HopperModel:
     compiled steps (default: one per core).  ``law``: the constitutive law
     (:mod:`fipy_hopper.material.law`; default the configuration's Mohr–Coulomb material), from
     which the model takes its time step, its transported internal variables and its stress
-    update; its density must be the configuration's.
+    update; its density must be the configuration's.  The compiled step fuses Mohr-Coulomb's
+    return: on ``backend="numba"`` a law with a stress update of its own is refused
+    (:func:`~fipy_hopper.material.law.compiled_refusal`), ``backend="numpy"`` runs it.
     """
 
     def __init__(self, cfg: HopperConfig, grid: HopperGrid | None = None,
@@ -163,6 +165,12 @@ class HopperModel:
         if self.material.rho != cfg.material.density:
             raise ValueError(f"the law's density {self.material.rho} kg/m3 is not "
                              f"material.density = {cfg.material.density} kg/m3")
+        refusal = compiled_refusal(self.material) if backend == "numba" else ""
+        if refusal:
+            raise NotImplementedError(
+                f"{refusal}: the compiled step runs Mohr-Coulomb's return mapping; run it "
+                f'with HopperModel(cfg, law=..., backend="numpy"), whose step calls the '
+                f"law's own update_reference")
         if transported_fields(self.material) != TRANSPORTED:
             raise NotImplementedError(
                 f"the compiled step carries the fields {TRANSPORTED}; a law with the internal "
