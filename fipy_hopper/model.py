@@ -53,7 +53,8 @@ import numpy as np
 
 import numba
 
-from . import dense_loose, geometry, markers, material, momentum, profiling, stepping
+from . import (dense_loose, fipy_adapter, geometry, markers, material, momentum, profiling,
+               stepping)
 from .config import HopperConfig, damped_step_factor
 from .mesh import HopperGrid, build_grid
 from .material.law import compiled_refusal, transported_fields
@@ -212,7 +213,7 @@ class HopperModel:
         normals = np.asarray(g.mesh.faceNormals)
         nzf = g.n_zfaces
         self.face_sign = np.concatenate([normals[1, :nzf], normals[0, nzf:]])
-        self.face_area = np.asarray(g.mesh._faceAreas) * g.face_aperture
+        self.face_area = np.asarray(fipy_adapter.face_areas(g.mesh)) * g.face_aperture
         # wall contact: every node within half a cell in front of a wall segment (or behind
         # it) is constrained by that segment's normal; nodes round the convex lip by the
         # normal towards the nearest wall point.  The free-fall tube (segment 0) is frictionless.
