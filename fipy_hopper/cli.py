@@ -72,8 +72,9 @@ def _parser() -> argparse.ArgumentParser:
         q.add_argument("--checkpoint-interval", metavar="SECONDS", type=float, default=60.0,
                        help="wall-clock seconds between checkpoints (default 60; 0: none)")
         q.add_argument("--threads", metavar="N", type=int, default=None,
-                       help="threads of the compiled steps (default: one per core; the "
-                       "results do not depend on it; use 1 when other runs share the cores)")
+                       help="threads of the compiled steps, at most one per core this process "
+                       "may use (default: the cores other processes leave free, measured "
+                       "every few seconds; the results do not depend on it)")
         q.add_argument("--profile", action="store_true",
                        help="time the phases of the run (compiled step, transport, output, "
                        "pictures) into DIR/profile.json and print them; the results do not "
@@ -222,9 +223,9 @@ def _run(args, config, source=None) -> int:
                       "a finite number of seconds >= 0 (0: no checkpoints)", EXIT_BAD_INPUT)
     if not args.out.strip():
         return _error(f"--out = {args.out!r}: expected a directory name", EXIT_BAD_INPUT)
-    if args.threads is not None and not 1 <= args.threads <= 1024:
-        return _error(f"--threads = {args.threads}: expected a number of threads in [1, 1024]",
-                      EXIT_BAD_INPUT)
+    if args.threads is not None:
+        from .resources import check_threads
+        check_threads(args.threads, "--threads")
     command = " ".join(shlex.quote(a) for a in [PROG] + list(args.argv))
     start = ("fipy-hopper demo" if args.command == "demo" else
              f"fipy-hopper run {shlex.quote(args.config)}") + f" --out {shlex.quote(args.out)}"
@@ -237,6 +238,10 @@ def _run(args, config, source=None) -> int:
                               profile=args.profile)
     except (ConfigError, RunDirectoryError) as exc:
         return _error(exc, EXIT_BAD_INPUT)
+    except api.PicturesInterrupted:
+        return _error(f"interrupted while drawing the pictures; the results of the run are "
+                      f"complete in {args.out}; draw its pictures with: {PROG} plot "
+                      f"{shlex.quote(args.out)}", EXIT_INTERRUPTED)
     except KeyboardInterrupt:
         return _error(_interrupted_message(args.out, start, again), EXIT_INTERRUPTED)
     except Exception as exc:

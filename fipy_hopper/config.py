@@ -139,10 +139,14 @@ OUTPUT_INTERVAL_MIN, FIELD_INTERVAL_MIN = 1e-4, 1e-3
 #: at 286,770 and 3.89 GB at 1,141,858, i.e. 3.2-3.6 kB a cell on top of about 0.15-0.26 GB;
 #: the peak is the cut-cell sub-sampling of mesh.build_grid, and the initial state, ten steps,
 #: a transport, a field snapshot and a checkpoint add nothing beyond it.  2 million cells
-#: need about 7 GB (MEMORY_BASE + MEMORY_PER_CELL * cells, rounded up from the measurements).
+#: need about 7 GB (:func:`grid_memory`, rounded up from the measurements) before the run's
+#: markers and wall loads (:func:`fipy_hopper.resources.memory_estimate`).
 MAX_CELLS = 2_000_000
 MEMORY_PER_CELL = 3.5e3            # bytes a cell (measured, see MAX_CELLS)
 MEMORY_BASE = 0.2e9                # bytes: Python, FiPy, numba and the compiled kernels
+#: bytes a cell that the model and its state keep once the grid is built (measured,
+#: tracemalloc: 2.25 kB a cell at 18,414 and 72,346 cells, without markers and wall loads)
+MEMORY_KEPT_PER_CELL = 2.3e3
 #: Most explicit time steps a run may need.  Even at the cost of a step on a tiny grid
 #: (measured: 2,937 steps of a 624-cell hopper in 0.43 s, 0.15 ms a step) 1e9 steps take
 #: about two days; on the reference grid (0.5 ms a step) a week.  More cannot finish.
@@ -615,8 +619,10 @@ class HopperConfig:
         return nr * nz
 
     def memory_estimate(self) -> float:
-        """Peak resident memory of a run (bytes), from the measured cost a cell (MAX_CELLS)."""
-        return MEMORY_BASE + MEMORY_PER_CELL * self.n_cells
+        """Peak resident memory of a run (bytes): the grid, its markers and its wall loads
+        (:func:`fipy_hopper.resources.memory_estimate`)."""
+        from .resources import memory_estimate
+        return memory_estimate(self)
 
     @property
     def time_step(self) -> float:
@@ -651,8 +657,8 @@ class HopperConfig:
                 f"across the outlet radius; a smaller hopper or a wider outlet")
         raise ConfigError(
             f"numerics.cell_size = {h:g} m makes a grid of {n:,} cells (about "
-            f"{(MEMORY_BASE + MEMORY_PER_CELL * n) / 1e9:.3g} GB); at most {MAX_CELLS:,} cells "
-            f"(about {(MEMORY_BASE + MEMORY_PER_CELL * MAX_CELLS) / 1e9:.2g} GB) are allowed: "
+            f"{grid_memory(n) / 1e9:.3g} GB for the grid alone); at most {MAX_CELLS:,} cells "
+            f"(about {grid_memory(MAX_CELLS) / 1e9:.2g} GB) are allowed: "
             f"{what}")
 
     def _check_step_count(self) -> None:
@@ -805,10 +811,25 @@ def _ceil_digits(x: float, digits: int = 3) -> float:
 
 def _grid_shape(geom: HopperGeometry, num: NumericsConfig, h: float) -> tuple:
     """``(nr, nz)`` by the rules of :func:`fipy_hopper.mesh.build_grid` for cell size ``h``."""
+    nr, n_below, n_above = grid_rows(geom, num, h)
+    return nr, n_below + n_above
+
+
+def grid_rows(geom: HopperGeometry, num: NumericsConfig, h: float) -> tuple:
+    """``(nr, n_below, n_above)``: the columns of the grid, its rows below the outlet plane
+    and above it, by the rules of :func:`fipy_hopper.mesh.build_grid` for cell size ``h``."""
     nr = int(math.ceil(geom.bin_radius / h - 1e-9)) + 2
     n_below = max(int(math.ceil(num.free_fall_depth * geom.outlet_diameter / h - 1e-9)), 3)
     n_above = int(math.ceil(geom.top / h - 1e-9)) + 1
-    return nr, n_below + n_above
+    return nr, n_below, n_above
+
+
+def grid_memory(n_cells: int, kept: bool = False) -> float:
+    """Peak bytes of building a grid of ``n_cells`` cells and its model (measured, see
+    :data:`MAX_CELLS`), or with ``kept`` what they keep once built
+    (:data:`MEMORY_KEPT_PER_CELL`); a run adds its markers and wall loads
+    (:func:`fipy_hopper.resources.memory_estimate`)."""
+    return MEMORY_BASE + (MEMORY_KEPT_PER_CELL if kept else MEMORY_PER_CELL) * n_cells
 
 
 _TOML_HEADER = re.compile(r"\s*\[\[?([^\[\]]+)\]\]?\s*(#.*)?$")

@@ -316,6 +316,13 @@ class WallLoads:
         self.weights = weights
 
     @staticmethod
+    def estimated_bytes(n_bins: int, n_entries: int) -> int:
+        """Peak bytes of the wall loads of ``n_bins`` bins and ``n_entries`` contact entries
+        while they are built: the dense ``weights`` (8 bytes an element) and at most seven
+        temporaries of its size (measured, tracemalloc: 7.3-7.8 times at 4,768-72,346 cells)."""
+        return 8 * 8 * int(n_bins) * int(n_entries)
+
+    @staticmethod
     def _area(a, b, geom):
         """Wall area per radian ``int_a^b r(s) ds`` (m^2/rad) between arc lengths a <= b; 0 if
         ``b <= a``; for a wedge, per metre of length, ``b - a``."""

@@ -54,7 +54,7 @@ import numpy as np
 import numba
 
 from . import (dense_loose, fipy_adapter, geometry, markers, material, momentum, profiling,
-               stepping)
+               resources, stepping)
 from .config import HopperConfig, damped_step_factor
 from .mesh import HopperGrid, build_grid
 from .material.law import compiled_refusal, transported_fields
@@ -136,7 +136,8 @@ class HopperModel:
     of every part of a step (:func:`fipy_hopper.material.update_reference`, the numpy
     transport and redistribution, :func:`fipy_hopper.markers.advance_reference`), which a
     test holds the compiled path to over a short run.  ``threads``: numba threads of the
-    compiled steps (default: one per core).  ``law``: the constitutive law
+    compiled steps (default: one per core this process may use,
+    :func:`~fipy_hopper.resources.thread_limit`).  ``law``: the constitutive law
     (:mod:`fipy_hopper.material.law`; default the configuration's Mohr–Coulomb material), from
     which the model takes its time step, its transported internal variables and its stress
     update; its density must be the configuration's.  The compiled step fuses Mohr-Coulomb's
@@ -274,7 +275,7 @@ class HopperModel:
         self._prm = self.material.kernel_parameters()
         self._no_displacement = np.zeros((2, 1, 1))
         self._no_cycles = np.zeros(0, dtype=np.int64)      # material_steps: no phase timing
-        self.threads = int(threads) if threads else numba.config.NUMBA_NUM_THREADS
+        self.threads = int(threads) if threads else resources.thread_limit()
 
     # ------------------------------------------------------------------ state
     def initial_state(self, n_layers: int = 8) -> State:
