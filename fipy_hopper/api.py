@@ -156,9 +156,9 @@ def run(config_or_path, out, force: bool = False, resume: bool = False, quiet: b
     everything measured so far with ``stop_reason`` ``"unstable: ..."`` (``"failed: ..."``);
     ``KeyboardInterrupt`` after writing the outputs so far with ``stop_reason``
     ``"interrupted"`` (continue with ``resume=True``), or :class:`PicturesInterrupted` (a
-    ``KeyboardInterrupt``) when only the pictures of a finished run were being drawn.  A run stopped by
-    ``run.wall_time_limit`` returns normally with ``stop_reason`` ``"wall_time_limit"``; its
-    last checkpoint is kept, so ``resume=True`` continues it.  A fill that does not come to
+    ``KeyboardInterrupt``) when only the pictures of a finished run were being drawn.  A run
+    stopped by ``run.wall_time_limit`` returns normally with ``stop_reason``
+    ``"wall_time_limit"``; its last checkpoint is kept, so ``resume=True`` continues it.  A fill that does not come to
     rest by ``numerics.max_fill_time`` ends a fill-only run (``end_time = 0``) with
     ``stop_reason`` ``"fill_not_at_rest"``; a discharge started from it warns
     (:class:`~fipy_hopper.simulation.NotAtRestWarning`).
