@@ -198,13 +198,12 @@ def run(config_or_path, out, force: bool = False, resume: bool = False, quiet: b
     with timed("set-up"):
         model = make_model(cfg, threads=threads)
     model.profile = phases
+    sim = Simulation(model, progress=(not quiet) and sys.stderr.isatty())
+    if governor is not None:
+        model.threads = governor.update()
+        sim.add_wall_time_callback(governor, governor.interval)
     rundir = fio.RunDirectory(out, force=force, resume=resume)
     try:
-        progress = (not quiet) and sys.stderr.isatty()
-        sim = Simulation(model, progress=progress)
-        if governor is not None:
-            model.threads = governor.update()
-            sim.add_wall_time_callback(governor, governor.interval)
         strength = (cfg.material.cohesion, cfg.material.friction_angle_deg)
         fields = (fio.FieldWriter(rundir.fields, model.grid, *strength) if not lagrangian
                   else fio.MeshFieldWriter(rundir.fields, model, *strength))
