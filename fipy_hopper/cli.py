@@ -131,9 +131,14 @@ def _validate(args) -> int:
     """Check a configuration and print what follows from it, without building the grid (the
     grid's size and the time step follow from the configuration by the model's own rules)."""
     from .api import expected_quantities
+    from .resources import available_memory
 
     cfg = _load(args.config)
     e = expected_quantities(cfg)
+    need, have = cfg.memory_estimate(), available_memory()
+    memory = f"about {need / 1e9:.2g} GB" + (
+        "" if have is None else f" ({have / 1e9:.2g} GB available)" if need <= have else
+        f", more than the {have / 1e9:.2g} GB available: the run would be refused")
     geom, run = cfg.hopper, cfg.run
     nr, nz = cfg.grid_shape()
     h = cfg.numerics.cell_size
@@ -150,8 +155,7 @@ def _validate(args) -> int:
         f"{args.config}: valid",
         f"  grid               {nr} x {nz} = {nr * nz} cells of {h:g} m "
         f"({geom.outlet_radius / h:.1f} across the outlet "
-        f"{'radius' if geom.axisymmetric else 'half-width'}), "
-        f"about {cfg.memory_estimate() / 1e9:.2g} GB",
+        f"{'radius' if geom.axisymmetric else 'half-width'}), {memory}",
         f"  P-wave speed c_p   {e['p_wave_speed_m_s']:.4g} m/s",
         f"  time step          {cfg.time_step:.4g} s (at most {cfg.step_estimate():.3g} steps)",
         f"  {hopper + ' height':<18} {geom.cone_height:.4g} m (transition to the bin)",

@@ -433,6 +433,19 @@ def test_a_run_that_needs_more_memory_than_there_is_is_refused(tmp_path, capsys,
     assert not (tmp_path / "api").exists()
 
 
+def test_validate_says_whether_the_memory_a_run_needs_is_available(tmp_path, capsys,
+                                                                  monkeypatch):
+    from fipy_hopper import resources
+
+    path = coarse(tmp_path)
+    need = HopperConfig.from_toml(path).memory_estimate()
+    for have, words in ((2 * need, "GB available)"), (need / 2, "the run would be refused")):
+        monkeypatch.setattr(resources, "available_memory", lambda: have)
+        assert main(["validate", str(path)]) == 0
+        grid = [line for line in capsys.readouterr().out.splitlines() if "grid" in line][0]
+        assert f"about {need / 1e9:.2g} GB" in grid and words in grid, grid
+
+
 def test_threads_beyond_the_cores_are_refused_before_anything(tmp_path, capsys):
     """``--threads`` above the cores this process may use (its CPU affinity, its cgroup's
     quota, NUMBA_NUM_THREADS) or below 1: one line naming the range, nothing written."""
