@@ -1,4 +1,4 @@
-"""fipy_hopper: Eulerian Mohr-Coulomb simulation of granular discharge from conical hoppers.
+"""fipy_hopper: Eulerian Mohr-Coulomb simulation of granular flow in silos and hoppers.
 
 Units are SI throughout (m, s, kg, Pa); angles are given in degrees at the configuration
 boundary and used in radians inside.  Stress arrays have shape ``(..., 4)`` in the order

@@ -30,6 +30,7 @@ import numpy as np
 
 from .config import ConfigError, HopperConfig
 from . import io as fio
+from . import resources
 
 __all__ = ["load_config", "run", "read_results", "Results", "expected_quantities",
            "make_model"]
@@ -128,7 +129,8 @@ def run(config_or_path, out, force: bool = False, resume: bool = False, quiet: b
     Parameters
     ----------
     config_or_path : a :class:`HopperConfig`, a dict of sections or a path to a TOML file.
-    out : the run directory; refused if it exists and is not empty, unless ``force``.
+    out : the run directory; refused if it exists and is not empty, unless ``force``, and
+        if it holds the configuration file being run (a run writes its ``config.toml``).
     force : overwrite the outputs of a previous run in ``out``.
     resume : continue the interrupted run in ``out`` from its checkpoint; the configuration
         must equal the one the run started with.  The outputs equal an uninterrupted run's.
@@ -139,19 +141,27 @@ def run(config_or_path, out, force: bool = False, resume: bool = False, quiet: b
         before it runs, to attach more callbacks (``sim.add_callback``).
     command, config_source : recorded in the manifest (the command line and the configuration
         file, when called from the command line).
-    threads : numba threads of the compiled steps (default: one per core); the results do not
-        depend on it.
+    threads : numba threads of the compiled steps, at most the cores this process may use
+        (:func:`~fipy_hopper.resources.check_threads`).  Default: the cores that other
+        processes leave free, measured at the start and every few seconds of the run
+        (:class:`~fipy_hopper.resources.ThreadGovernor`).  The results do not depend on it.
     profile : time the phases of the run (:mod:`fipy_hopper.profiling`) and write them to
         ``profile.json``; the results do not depend on it.  A resumed run's profile covers
         the session since the resumption.
 
     Raises :class:`ConfigError` or :class:`~fipy_hopper.io.RunDirectoryError` before anything
-    runs; :class:`~fipy_hopper.model.InstabilityError` (and any other error) after writing
+    runs, and before the run directory is made or changed (a run that needs more memory than
+    is available, :func:`~fipy_hopper.resources.check_memory`; a checkpoint that is not this
+    run's); :class:`~fipy_hopper.model.InstabilityError` (and any other error) after writing
     everything measured so far with ``stop_reason`` ``"unstable: ..."`` (``"failed: ..."``);
     ``KeyboardInterrupt`` after writing the outputs so far with ``stop_reason``
-    ``"interrupted"`` (continue with ``resume=True``).  A run stopped by
-    ``run.wall_time_limit`` returns normally with ``stop_reason`` ``"wall_time_limit"``; its
-    last checkpoint is kept, so ``resume=True`` continues it.
+    ``"interrupted"`` (continue with ``resume=True``), or :class:`PicturesInterrupted` (a
+    ``KeyboardInterrupt``) when only the pictures of a finished run were being drawn.  A run
+    stopped by ``run.wall_time_limit`` returns normally with ``stop_reason``
+    ``"wall_time_limit"``; its last checkpoint is kept, so ``resume=True`` continues it.  A fill that does not come to
+    rest by ``numerics.max_fill_time`` ends a fill-only run (``end_time = 0``) with
+    ``stop_reason`` ``"fill_not_at_rest"``; a discharge started from it warns
+    (:class:`~fipy_hopper.simulation.NotAtRestWarning`).
     """
     cfg, source = _resolve(config_or_path)
     source = config_source or source
@@ -166,24 +176,18 @@ def run(config_or_path, out, force: bool = False, resume: bool = False, quiet: b
                           'step; numerics.formulation = "lagrangian" has none to time')
     if lagrangian:
         checkpoint_interval = 0
-    rundir = fio.RunDirectory(out, force=force, resume=resume)
+    # every refusal before anything is built or written
+    if threads is not None:
+        resources.check_threads(threads)
+    resources.check_memory(cfg)
+    _refuse_replacing_the_input(source, out, resume)
+    fio.RunDirectory.check(out, force=force, resume=resume)
     if resume:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            saved = load_config(rundir / rundir.CONFIG)
-        if saved != cfg:
-            raise ConfigError(f"the configuration differs from the one the run in {rundir.path} "
-                              f"started with ({rundir / rundir.CONFIG}); resume with that one")
-        if (rundir / rundir.MANIFEST).is_file():
-            manifest = fio.Manifest.load(rundir / rundir.MANIFEST)
-        else:
-            manifest = fio.Manifest.new(rundir / rundir.MANIFEST, source, command)
-    else:
-        fio.atomic_write_text(rundir / rundir.CONFIG, cfg.to_toml())
-        manifest = fio.Manifest.new(rundir / rundir.MANIFEST, source, command)
+        _refuse_another_configuration(cfg, out)
+    governor = resources.ThreadGovernor() if threads is None and not lagrangian else None
 
     from .model import InstabilityError
-    from .simulation import Simulation
+    from .simulation import NotAtRestWarning, Simulation, not_at_rest_message
 
     from .profiling import PhaseProfile
     from .profiling import timed as profiling_timed
@@ -194,35 +198,48 @@ def run(config_or_path, out, force: bool = False, resume: bool = False, quiet: b
     with timed("set-up"):
         model = make_model(cfg, threads=threads)
     model.profile = phases
-    progress = (not quiet) and sys.stderr.isatty()
-    sim = Simulation(model, progress=progress)
-    strength = (cfg.material.cohesion, cfg.material.friction_angle_deg)
-    fields = (fio.FieldWriter(rundir.fields, model.grid, *strength) if not lagrangian
-              else fio.MeshFieldWriter(rundir.fields, model, *strength))
+    sim = Simulation(model, progress=(not quiet) and sys.stderr.isatty())
+    if governor is not None:
+        model.threads = governor.update()
+        sim.add_wall_time_callback(governor, governor.interval)
+    rundir = fio.RunDirectory(out, force=force, resume=resume)
+    try:
+        strength = (cfg.material.cohesion, cfg.material.friction_angle_deg)
+        fields = (fio.FieldWriter(rundir.fields, model.grid, *strength) if not lagrangian
+                  else fio.MeshFieldWriter(rundir.fields, model, *strength))
+        manifest = None
 
-    def snapshot(sim_, state):
-        with timed("snapshots and checkpoints"):
-            fields(sim_, state)
-            _write_tables(rundir, sim_.record, cfg.hopper.axisymmetric)
-
-    interval = cfg.run.field_interval
-    sim.add_callback(snapshot, interval, stages=("filling",))
-    sim.add_callback(snapshot, interval, stages=("discharge",))
-    if checkpoint_interval and checkpoint_interval > 0:
-        def checkpoint(sim_, state):
+        def snapshot(sim_, state):
             with timed("snapshots and checkpoints"):
-                sim_.checkpoint(rundir.checkpoint)
-                manifest.checkpoint_written(state.t, state.step)
-        sim.add_wall_time_callback(checkpoint, checkpoint_interval)
-    if setup is not None:
-        setup(sim)
+                fields(sim_, state)
+                _write_tables(rundir, sim_.record, cfg.hopper.axisymmetric)
 
-    if resume:
-        sim.restore(rundir.checkpoint)
-        fields.resume(sim.state.step)
-        manifest.begin_session(command, sim.state.step, sim.state.t)
-    else:
-        manifest.begin_session(command)
+        interval = cfg.run.field_interval
+        sim.add_callback(snapshot, interval, stages=("filling",))
+        sim.add_callback(snapshot, interval, stages=("discharge",))
+        if checkpoint_interval and checkpoint_interval > 0:
+            def checkpoint(sim_, state):
+                with timed("snapshots and checkpoints"):
+                    sim_.checkpoint(rundir.checkpoint)
+                    manifest.checkpoint_written(state.t, state.step)
+            sim.add_wall_time_callback(checkpoint, checkpoint_interval)
+        if setup is not None:
+            setup(sim)
+        if resume:       # the checkpoint is checked before anything in the directory changes
+            sim.restore(rundir.checkpoint)
+            manifest = (fio.Manifest.load(rundir / rundir.MANIFEST)
+                        if (rundir / rundir.MANIFEST).is_file()
+                        else fio.Manifest.new(rundir / rundir.MANIFEST, source, command))
+            rundir.remove_profile()
+            fields.resume(sim.state.step)
+            manifest.begin_session(command, sim.state.step, sim.state.t)
+        else:
+            fio.atomic_write_text(rundir / rundir.CONFIG, cfg.to_toml())
+            manifest = fio.Manifest.new(rundir / rundir.MANIFEST, source, command)
+            manifest.begin_session(command)
+    except BaseException:
+        rundir.close()
+        raise
 
     started = time.perf_counter()
     status, reason, error = "finished", "", None
@@ -231,6 +248,8 @@ def run(config_or_path, out, force: bool = False, resume: bool = False, quiet: b
         reason = sim.record.stop_reason
         if reason == "wall_time_limit":      # not the end of the run: it can be resumed
             status = "stopped"
+        elif sim.fill_gave_up and reason != "fill_not_at_rest":
+            warnings.warn(not_at_rest_message(cfg), NotAtRestWarning)
     except InstabilityError as exc:
         status, reason, error = "failed", f"unstable: {exc}", exc
     except KeyboardInterrupt as exc:
@@ -254,11 +273,14 @@ def run(config_or_path, out, force: bool = False, resume: bool = False, quiet: b
     fio.write_json(rundir / rundir.SUMMARY, summary)
     if status == "finished":
         rundir.checkpoint.unlink(missing_ok=True)
+    pictures_interrupted = False
     if plots and status != "interrupted":
         try:
             from . import plotting
             with timed("pictures"):
                 plotting.plot_run(rundir.path)
+        except KeyboardInterrupt:            # the results are complete: only pictures lack
+            pictures_interrupted = True
         except Exception as exc:  # pictures are a convenience; the data are written
             warnings.warn(f"the pictures could not be drawn: {exc}", RuntimeWarning)
     if phases is not None:
@@ -266,7 +288,42 @@ def run(config_or_path, out, force: bool = False, resume: bool = False, quiet: b
     rundir.close()                           # release the run directory's lock
     if error is not None:
         raise error
+    if pictures_interrupted:
+        raise PicturesInterrupted(rundir.path)
     return fio._jsonable(summary)
+
+
+class PicturesInterrupted(KeyboardInterrupt):
+    """Ctrl-C (or SIGTERM) while the pictures of a run were drawn: the run's results are
+    complete in the directory ``args[0]``; ``fipy-hopper plot DIR`` draws the pictures."""
+
+
+def _refuse_replacing_the_input(source: str, out, resume: bool) -> None:
+    """A new run writes its resolved configuration to ``out/config.toml``: refuse when that
+    is the configuration file being run (``--out`` the folder holding it)."""
+    if resume or not source or source.startswith("<"):
+        return
+    target = Path(out) / fio.RunDirectory.CONFIG
+    try:
+        same = Path(source).is_file() and target.is_file() and target.samefile(source)
+    except OSError:
+        return
+    if same:
+        raise fio.RunDirectoryError(
+            f"{target} is the configuration being run, and a run writes its resolved "
+            f"configuration there: choose another run directory than {out} (or move the "
+            f"configuration out of it)")
+
+
+def _refuse_another_configuration(cfg: HopperConfig, out) -> None:
+    """``resume``: the configuration must be the one the run in ``out`` started with."""
+    saved_path = Path(out) / fio.RunDirectory.CONFIG
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        saved = load_config(saved_path)
+    if saved != cfg:
+        raise ConfigError(f"the configuration differs from the one the run in {out} started "
+                          f"with ({saved_path}); resume with that one")
 
 
 def make_model(cfg: HopperConfig, threads: Optional[int] = None):
@@ -335,8 +392,7 @@ class Results:
 
     def field(self, index: int = -1):
         """The ``meshio.Mesh`` of snapshot ``index`` (cell data ``alpha``, ``layer``, ...)."""
-        import meshio
-        return meshio.read(self.path / fio.RunDirectory.FIELDS / self.snapshots[index]["file"])
+        return fio.read_vtu(self.path / fio.RunDirectory.FIELDS / self.snapshots[index]["file"])
 
     def wall_stage(self, stage: str) -> dict:
         """The wall pressure rows of one stage (``filling``, ``early_discharge``, ...)."""

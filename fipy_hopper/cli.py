@@ -13,8 +13,11 @@ Exit codes: 0 success; 2 bad input (a configuration error, a missing or non-TOML
 output directory that would be overwritten or that another run is using, a path the system
 refuses, a directory that ``plot`` cannot read), reported in one line on stderr; 1 a run that
 failed (unstable, or an internal error), with the reason, after writing everything measured so
-far; 130 a run interrupted with Ctrl-C or SIGTERM (continue it with ``--resume`` once a
-checkpoint has been written).
+far, and a fill-only run (``end_time = 0``) whose fill did not come to rest by
+``numerics.max_fill_time`` (``stop_reason`` ``"fill_not_at_rest"``: its outputs are written,
+but its loads are those of a moving fill; a discharge started from such a fill is a warning);
+130 a run interrupted with Ctrl-C or SIGTERM (continue it with ``--resume`` once a checkpoint
+has been written).
 """
 
 from __future__ import annotations
@@ -47,10 +50,12 @@ class _Parser(argparse.ArgumentParser):
 
 def _parser() -> argparse.ArgumentParser:
     p = _Parser(prog=PROG, description=(
-        "Eulerian Mohr-Coulomb simulation of granular discharge from a conical hopper "
-        "(axisymmetric, on FiPy): flow rate, flow mode and wall pressures, compared with "
-        "Beverloo, Jenike, Janssen and Walker."),
-        epilog="Exit codes: 0 success, 1 the run failed, 2 bad input, 130 interrupted.")
+        "Eulerian Mohr-Coulomb simulation of granular flow in silos and hoppers (conical, "
+        "axisymmetric, or wedge-shaped, in plane strain; on FiPy): filling, discharge rate, "
+        "flow mode and wall loads, compared with Beverloo, Jenike, Janssen, Walker and "
+        "EN 1991-4."),
+        epilog="Exit codes: 0 success, 1 the run failed (or a fill-only run's fill did not "
+        "come to rest), 2 bad input, 130 interrupted.")
     p.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = p.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
 
@@ -67,8 +72,9 @@ def _parser() -> argparse.ArgumentParser:
         q.add_argument("--checkpoint-interval", metavar="SECONDS", type=float, default=60.0,
                        help="wall-clock seconds between checkpoints (default 60; 0: none)")
         q.add_argument("--threads", metavar="N", type=int, default=None,
-                       help="threads of the compiled steps (default: one per core; the "
-                       "results do not depend on it; use 1 when other runs share the cores)")
+                       help="threads of the compiled steps, at most one per core this process "
+                       "may use (default: the cores other processes leave free, measured "
+                       "every few seconds; the results do not depend on it)")
         q.add_argument("--profile", action="store_true",
                        help="time the phases of the run (compiled step, transport, output, "
                        "pictures) into DIR/profile.json and print them; the results do not "
@@ -87,9 +93,11 @@ def _parser() -> argparse.ArgumentParser:
                        "measured, 7-20 s of it for writing and the pictures).")
     run_options(q, out_required=False)
 
+    from .plotting import PICTURES
     q = sub.add_parser("plot", help="draw the pictures of a run directory",
-                       description="Draw flow_pattern.png, discharge.png, wall_pressure.png, "
-                       "stress_pattern.png and discharge.gif from the files in DIR.")
+                       description="Draw the pictures of the run in DIR from its files (those "
+                       "the run has the data of): " + "; ".join(
+                           f"{p.name}, {p.shows}" for p in PICTURES) + ".")
     q.add_argument("dir", metavar="DIR", help="run directory")
 
     q = sub.add_parser("validate", help="check a configuration and print derived quantities",
@@ -123,9 +131,14 @@ def _validate(args) -> int:
     """Check a configuration and print what follows from it, without building the grid (the
     grid's size and the time step follow from the configuration by the model's own rules)."""
     from .api import expected_quantities
+    from .resources import available_memory
 
     cfg = _load(args.config)
     e = expected_quantities(cfg)
+    need, have = cfg.memory_estimate(), available_memory()
+    memory = f"about {need / 1e9:.2g} GB" + (
+        "" if have is None else f" ({have / 1e9:.2g} GB available)" if need <= have else
+        f", more than the {have / 1e9:.2g} GB available: the run would be refused")
     geom, run = cfg.hopper, cfg.run
     nr, nz = cfg.grid_shape()
     h = cfg.numerics.cell_size
@@ -142,8 +155,7 @@ def _validate(args) -> int:
         f"{args.config}: valid",
         f"  grid               {nr} x {nz} = {nr * nz} cells of {h:g} m "
         f"({geom.outlet_radius / h:.1f} across the outlet "
-        f"{'radius' if geom.axisymmetric else 'half-width'}), "
-        f"about {cfg.memory_estimate() / 1e9:.2g} GB",
+        f"{'radius' if geom.axisymmetric else 'half-width'}), {memory}",
         f"  P-wave speed c_p   {e['p_wave_speed_m_s']:.4g} m/s",
         f"  time step          {cfg.time_step:.4g} s (at most {cfg.step_estimate():.3g} steps)",
         f"  {hopper + ' height':<18} {geom.cone_height:.4g} m (transition to the bin)",
@@ -196,6 +208,8 @@ def _plot(args) -> int:
         return _error(exc, EXIT_BAD_INPUT)
     try:
         paths = plotting.plot_run(run)
+    except RunDirectoryError as exc:      # a snapshot that cannot be read
+        return _error(exc, EXIT_BAD_INPUT)
     except Exception as exc:  # a file that passed the checks but cannot be drawn
         return _error(f"cannot draw the pictures of {_short(run)}: {type(exc).__name__}: "
                       f"{_short(exc, 300)}", EXIT_FAILED)
@@ -213,9 +227,9 @@ def _run(args, config, source=None) -> int:
                       "a finite number of seconds >= 0 (0: no checkpoints)", EXIT_BAD_INPUT)
     if not args.out.strip():
         return _error(f"--out = {args.out!r}: expected a directory name", EXIT_BAD_INPUT)
-    if args.threads is not None and not 1 <= args.threads <= 1024:
-        return _error(f"--threads = {args.threads}: expected a number of threads in [1, 1024]",
-                      EXIT_BAD_INPUT)
+    if args.threads is not None:
+        from .resources import check_threads
+        check_threads(args.threads, "--threads")
     command = " ".join(shlex.quote(a) for a in [PROG] + list(args.argv))
     start = ("fipy-hopper demo" if args.command == "demo" else
              f"fipy-hopper run {shlex.quote(args.config)}") + f" --out {shlex.quote(args.out)}"
@@ -228,6 +242,10 @@ def _run(args, config, source=None) -> int:
                               profile=args.profile)
     except (ConfigError, RunDirectoryError) as exc:
         return _error(exc, EXIT_BAD_INPUT)
+    except api.PicturesInterrupted:
+        return _error(f"interrupted while drawing the pictures; the results of the run are "
+                      f"complete in {args.out}; draw its pictures with: {PROG} plot "
+                      f"{shlex.quote(args.out)}", EXIT_INTERRUPTED)
     except KeyboardInterrupt:
         return _error(_interrupted_message(args.out, start, again), EXIT_INTERRUPTED)
     except Exception as exc:
@@ -244,6 +262,11 @@ def _run(args, config, source=None) -> int:
         print(format_report(report))
     if not args.quiet:
         _print_summary(summary, args.out)
+    if summary.get("stop_reason") == "fill_not_at_rest":
+        from .simulation import not_at_rest_message
+        return _error(f"{not_at_rest_message(config)} (the outputs are in {args.out})",
+                      EXIT_FAILED)
+    if not args.quiet:
         if summary.get("stop_reason") == "wall_time_limit":
             if (Path(args.out) / RunDirectory.CHECKPOINT).is_file():
                 print(f"  stopped at run.wall_time_limit; continue with: {again}")

@@ -17,6 +17,8 @@ from __future__ import annotations
 import dataclasses
 import difflib
 import math
+import re
+import sys
 import warnings
 from dataclasses import dataclass, field, fields
 from pathlib import Path
@@ -137,10 +139,14 @@ OUTPUT_INTERVAL_MIN, FIELD_INTERVAL_MIN = 1e-4, 1e-3
 #: at 286,770 and 3.89 GB at 1,141,858, i.e. 3.2-3.6 kB a cell on top of about 0.15-0.26 GB;
 #: the peak is the cut-cell sub-sampling of mesh.build_grid, and the initial state, ten steps,
 #: a transport, a field snapshot and a checkpoint add nothing beyond it.  2 million cells
-#: need about 7 GB (MEMORY_BASE + MEMORY_PER_CELL * cells, rounded up from the measurements).
+#: need about 7 GB (:func:`grid_memory`, rounded up from the measurements) before the run's
+#: markers and wall loads (:func:`fipy_hopper.resources.memory_estimate`).
 MAX_CELLS = 2_000_000
 MEMORY_PER_CELL = 3.5e3            # bytes a cell (measured, see MAX_CELLS)
 MEMORY_BASE = 0.2e9                # bytes: Python, FiPy, numba and the compiled kernels
+#: bytes a cell that the model and its state keep once the grid is built (measured,
+#: tracemalloc: 2.25 kB a cell at 18,414 and 72,346 cells, without markers and wall loads)
+MEMORY_KEPT_PER_CELL = 2.3e3
 #: Most explicit time steps a run may need.  Even at the cost of a step on a tiny grid
 #: (measured: 2,937 steps of a 624-cell hopper in 0.43 s, 0.15 ms a step) 1e9 steps take
 #: about two days; on the reference grid (0.5 ms a step) a week.  More cannot finish.
@@ -607,7 +613,7 @@ class HopperConfig:
                 f"(numerics.max_fill_time = {fill:g} s) and the discharge ({run.discharge_time:g}"
                 f" s): no snapshot in between; allowed range is [{FIELD_INTERVAL_MIN:g}, "
                 f"{max(fill, run.discharge_time):g}] s")
-        if run.end_time != "empty" and run.field_interval > run.end_time:
+        if run.end_time != "empty" and 0 < run.end_time < run.field_interval:
             warnings.warn(f"run.field_interval = {run.field_interval:g} s is longer than "
                           f"run.end_time = {run.end_time:g} s: the discharge gets only its "
                           "first and last field snapshots", SamplingWarning, stacklevel=3)
@@ -634,13 +640,19 @@ class HopperConfig:
         averages the cut cells' pattern of the wall's reaction to a smooth profile (the
         traction's spline spans four bins); a twentieth of the silo resolves its loads
         (15 mm in the reference hopper) independently of the cell size."""
+        return self.wall_bin_width_at(self.numerics.cell_size)
+
+    def wall_bin_width_at(self, cell_size: float) -> float:
+        """:attr:`wall_bin_width_m` on a grid of ``cell_size`` m."""
         if self.run.wall_bin_width != "auto":
             return float(self.run.wall_bin_width)
-        return max(3.0 * self.numerics.cell_size, self.hopper.bin_diameter / 20.0)
+        return max(3.0 * cell_size, self.hopper.bin_diameter / 20.0)
 
     def memory_estimate(self) -> float:
-        """Peak resident memory of a run (bytes), from the measured cost a cell (MAX_CELLS)."""
-        return MEMORY_BASE + MEMORY_PER_CELL * self.n_cells
+        """Peak resident memory of a run (bytes): the grid, its markers and its wall loads
+        (:func:`fipy_hopper.resources.memory_estimate`)."""
+        from .resources import memory_estimate
+        return memory_estimate(self)
 
     @property
     def time_step(self) -> float:
@@ -675,8 +687,8 @@ class HopperConfig:
                 f"across the outlet radius; a smaller hopper or a wider outlet")
         raise ConfigError(
             f"numerics.cell_size = {h:g} m makes a grid of {n:,} cells (about "
-            f"{(MEMORY_BASE + MEMORY_PER_CELL * n) / 1e9:.3g} GB); at most {MAX_CELLS:,} cells "
-            f"(about {(MEMORY_BASE + MEMORY_PER_CELL * MAX_CELLS) / 1e9:.2g} GB) are allowed: "
+            f"{grid_memory(n) / 1e9:.3g} GB for the grid alone); at most {MAX_CELLS:,} cells "
+            f"(about {grid_memory(MAX_CELLS) / 1e9:.2g} GB) are allowed: "
             f"{what}")
 
     def _check_step_count(self) -> None:
@@ -769,7 +781,17 @@ class HopperConfig:
         try:
             data = tomllib.loads(text)
         except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-            raise ConfigError(f"{path} is not valid TOML: {exc}") from None
+            twice = str(exc).startswith(("Cannot overwrite", "Cannot declare"))
+            raise ConfigError(f"{path} is not valid TOML: "
+                              f"{twice and _duplicate_key(text) or short_text(exc)}") from None
+        except ValueError:      # an integer beyond Python's limit of digits
+            limit = sys.get_int_max_str_digits()
+            raise ConfigError(f"{path} is not valid TOML: {_toml_place(text, _long_integer)}"
+                              f"an integer of more than {limit:,} digits") from None
+        except RecursionError:
+            raise ConfigError(f"{path} is not valid TOML: {_toml_place(text, _nesting_over())}"
+                              "arrays or inline tables nested too deeply (a configuration "
+                              "is [section] and key = value)") from None
         return cls.from_dict(data)
 
     def to_dict(self) -> dict:
@@ -819,10 +841,94 @@ def _ceil_digits(x: float, digits: int = 3) -> float:
 
 def _grid_shape(geom: HopperGeometry, num: NumericsConfig, h: float) -> tuple:
     """``(nr, nz)`` by the rules of :func:`fipy_hopper.mesh.build_grid` for cell size ``h``."""
+    nr, n_below, n_above = grid_rows(geom, num, h)
+    return nr, n_below + n_above
+
+
+def grid_rows(geom: HopperGeometry, num: NumericsConfig, h: float) -> tuple:
+    """``(nr, n_below, n_above)``: the columns of the grid, its rows below the outlet plane
+    and above it, by the rules of :func:`fipy_hopper.mesh.build_grid` for cell size ``h``."""
     nr = int(math.ceil(geom.bin_radius / h - 1e-9)) + 2
     n_below = max(int(math.ceil(num.free_fall_depth * geom.outlet_diameter / h - 1e-9)), 3)
     n_above = int(math.ceil(geom.top / h - 1e-9)) + 1
-    return nr, n_below + n_above
+    return nr, n_below, n_above
+
+
+def grid_memory(n_cells: int, kept: bool = False) -> float:
+    """Peak bytes of building a grid of ``n_cells`` cells and its model (measured, see
+    :data:`MAX_CELLS`), or with ``kept`` what they keep once built
+    (:data:`MEMORY_KEPT_PER_CELL`); a run adds its markers and wall loads
+    (:func:`fipy_hopper.resources.memory_estimate`)."""
+    return MEMORY_BASE + (MEMORY_KEPT_PER_CELL if kept else MEMORY_PER_CELL) * n_cells
+
+
+_TOML_HEADER = re.compile(r"\s*\[\[?([^\[\]]+)\]\]?\s*(#.*)?$")
+_TOML_KEY = re.compile(r"\s*([A-Za-z0-9_\-. \t\"']+?)\s*=")
+
+
+def _toml_keys(text: str, tables: bool = False):
+    """``(line number, dotted key)`` of each ``key = value`` line of a TOML text, with the name
+    of its table (and ``[table]`` for each table header when ``tables``): a line scan for
+    messages only, which does not follow multi-line values."""
+    table = ""
+    for number, line in enumerate(text.splitlines(), start=1):
+        header = _TOML_HEADER.match(line)
+        if header:
+            table = _dotted(header.group(1))
+            if tables and not line.lstrip().startswith("[["):
+                yield number, f"[{table}]"
+            continue
+        key = _TOML_KEY.match(line)
+        if key and not line.lstrip().startswith("#"):
+            yield number, ".".join(p for p in (table, _dotted(key.group(1))) if p)
+
+
+def _dotted(name: str) -> str:
+    return ".".join(part.strip().strip("\"'") for part in name.split("."))
+
+
+def _duplicate_key(text: str) -> str:
+    """'the key 'a.b' is set twice (lines m and n)' for the first key (or table) set twice,
+    or ''."""
+    seen = {}
+    for number, key in _toml_keys(text, tables=True):
+        if key in seen:
+            what = "table" if key.startswith("[") else "key"
+            return (f"the {what} '{short_text(key, 60)}' is set twice (lines {seen[key]} and "
+                    f"{number})")
+        seen[key] = number
+    return ""
+
+
+def _long_integer(line: str) -> bool:
+    limit = sys.get_int_max_str_digits()
+    return any(len(run.replace("_", "")) > limit for run in re.findall(r"[0-9][0-9_]*", line))
+
+
+def _nesting_over(limit: int = 100):
+    """A test of successive lines: true from the line where the brackets still open pass
+    ``limit``."""
+    depth = 0
+
+    def is_here(line: str) -> bool:
+        nonlocal depth
+        for c in line:
+            depth += (c in "[{") - (c in "]}")
+            if depth > limit:
+                return True
+        return False
+    return is_here
+
+
+def _toml_place(text: str, is_here) -> str:
+    """'line n (key 'a.b'): ' of the first line of ``text`` where ``is_here(line)``, or ''."""
+    keys = dict(_toml_keys(text))
+    key = ""
+    for number, line in enumerate(text.splitlines(), start=1):
+        key = keys.get(number, key)
+        if is_here(line):
+            return f"line {number}" + (f" (key '{short_text(key, 60)}')" if key else "") + ": "
+    return ""
 
 
 def _toml_value(value) -> str:

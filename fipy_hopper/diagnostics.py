@@ -354,6 +354,16 @@ class WallLoads:
         self.bin_area = self.bins.area
 
     @staticmethod
+    def estimated_bytes(n_bins: int, n_entries: int) -> int:
+        """Peak bytes of the wall loads of ``n_bins`` bins and ``n_entries`` contact entries
+        while they are built and used: the sparse maps of
+        :class:`~fipy_hopper.wall_traction.StretchRecovery` (four basis values and one bin an
+        entry, a few quadrature points a bin) with their temporaries, and a window's forces:
+        at most 256 bytes an entry and 2 kB a bin (measured with tracemalloc:
+        ``tests/test_reliability.py``)."""
+        return 256 * int(n_entries) + 2048 * int(n_bins)
+
+    @staticmethod
     def reading(model, state) -> dict:
         """The cumulative measurements of ``state`` at this moment (copies): the impulses,
         the momentum budget, the vertical momentum ``sum m v_z`` (per radian) and the time."""

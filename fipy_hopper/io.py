@@ -51,12 +51,12 @@ except ImportError:       # pragma: no cover
     fcntl = None
 
 __all__ = [
-    "RunDirectory", "RunDirectoryError", "CheckpointError", "read_checkpoint",
+    "RunDirectory", "RunDirectoryError", "CheckpointError", "RunFileError", "read_checkpoint",
     "validate_checkpoint", "checkpoint_template", "checkpoint_size_limit", "check_run_files",
     "Manifest", "FieldWriter", "atomic_path",
     "atomic_write_text", "write_json", "write_timeseries", "write_wall_pressure", "read_csv",
     "environment_versions", "code_commit", "grid_points_and_quads", "cell_fields", "marker_file",
-    "write_markers", "read_markers",
+    "write_markers", "read_markers", "read_vtu",
     "TIMESERIES_COLUMNS", "WALL_PRESSURE_COLUMNS",
 ]
 
@@ -125,6 +125,10 @@ class RunDirectoryError(Exception):
 
 class CheckpointError(RunDirectoryError):
     """A checkpoint file cannot be restored (corrupt, too large, wrong arrays)."""
+
+
+class RunFileError(RunDirectoryError, ValueError):
+    """A file of a run directory cannot be read (corrupt, truncated, not what its name says)."""
 
 
 # ---------------------------------------------------------------- atomic files
@@ -323,17 +327,18 @@ class RunDirectory:
     FIELDS = "fields"
     ERROR_LOG = "error.log"
     LOCK = ".lock"
-    FIGURES = ("flow_pattern.png", "discharge.png", "wall_pressure.png", "stress_pattern.png",
-               "discharge.gif")
 
-    def __init__(self, path: PathLike, force: bool = False, resume: bool = False):
+    def __init__(self, path: PathLike, force: bool = False, resume: bool = False,
+                 _check_only: bool = False):
         self._lock_fd = None
         if not os.fspath(path).strip():
             raise RunDirectoryError(f"the run directory {os.fspath(path)!r} is an empty path; "
                                     "give a directory name")
         self.path = Path(path)
         try:
-            self._open(force, resume)
+            self._refusals(force, resume)
+            if not _check_only:
+                self._open(force, resume)
         except OSError as exc:       # a name too long, no permission, ...
             self.close()
             raise RunDirectoryError(f"cannot use {_short(self.path)} as a run directory: "
@@ -342,7 +347,15 @@ class RunDirectory:
             self.close()
             raise
 
-    def _open(self, force: bool, resume: bool) -> None:
+    @classmethod
+    def check(cls, path: PathLike, force: bool = False, resume: bool = False) -> None:
+        """Raise the :class:`RunDirectoryError` that opening ``path`` would raise before
+        anything is written (not a directory, not empty, in use, nothing to resume), creating,
+        locking and removing nothing."""
+        cls(path, force=force, resume=resume, _check_only=True)
+
+    def _refusals(self, force: bool, resume: bool) -> None:
+        """The refusals that need no lock (taken again under it by :meth:`_open`)."""
         if self.path.exists() and not self.path.is_dir():
             raise RunDirectoryError(f"{_short(self.path)} exists and is not a directory")
         if resume:
@@ -352,14 +365,17 @@ class RunDirectory:
                 raise RunDirectoryError(
                     f"cannot resume: {_short(self.path)} holds no {' and no '.join(missing)} "
                     "(only an interrupted run can be resumed)")
+            self._refuse_if_in_use()
+        elif self._contents():
+            self._refuse_if_in_use()
+            if not force:
+                self._refuse_not_empty()
+
+    def _open(self, force: bool, resume: bool) -> None:
+        if resume:
             self._lock()
             self._remove_temporaries()
-            with contextlib.suppress(FileNotFoundError):   # the profile of an earlier session
-                (self.path / self.PROFILE).unlink()
         else:
-            if self._contents() and not force:
-                self._refuse_if_in_use()
-                self._refuse_not_empty()
             self.path.mkdir(parents=True, exist_ok=True)
             self._lock()
             if self._contents():      # again under the lock: another run may have written
@@ -474,10 +490,19 @@ class RunDirectory:
     def checkpoint(self) -> Path:
         return self.path / self.CHECKPOINT
 
+    #: every file a run writes at the top of its directory, besides the pictures
+    OUTPUTS = (CONFIG, MANIFEST, SUMMARY, PROFILE, TIMESERIES, WALL_PRESSURE, LOADS, CHECKPOINT,
+               ERROR_LOG)
+
+    @classmethod
+    def output_names(cls) -> tuple:
+        """The files of a run at the top of its directory: :data:`OUTPUTS` and every picture
+        of :data:`fipy_hopper.plotting.PICTURES`."""
+        from .plotting import PICTURES
+        return cls.OUTPUTS + tuple(picture.name for picture in PICTURES)
+
     def _remove_outputs(self) -> None:
-        names = (self.CONFIG, self.MANIFEST, self.SUMMARY, self.PROFILE, self.TIMESERIES,
-                 self.WALL_PRESSURE, self.LOADS, self.CHECKPOINT, self.ERROR_LOG) + self.FIGURES
-        for name in names:
+        for name in self.output_names():
             with contextlib.suppress(FileNotFoundError):
                 (self.path / name).unlink()
         if self.fields.is_dir():
@@ -486,6 +511,12 @@ class RunDirectory:
                                        "snapshots.csv" or ".tmp" in item.name):
                     item.unlink()
         self._remove_temporaries()
+
+    def remove_profile(self) -> None:
+        """Remove the profile of an earlier session (a resumed run, once its checkpoint has
+        been restored)."""
+        with contextlib.suppress(FileNotFoundError):
+            (self.path / self.PROFILE).unlink()
 
     def _remove_temporaries(self) -> None:
         """Temporary files left by a run killed in the middle of a write."""
@@ -575,8 +606,15 @@ class Manifest:
 
     @classmethod
     def load(cls, path: PathLike) -> "Manifest":
-        with open(path, encoding="utf-8") as fh:
-            return cls(path, json.load(fh))
+        """Read ``manifest.json``; :class:`RunFileError` naming it if it is not a manifest."""
+        try:
+            with open(path, encoding="utf-8") as fh:
+                data = json.load(fh)
+        except (ValueError, UnicodeDecodeError) as exc:
+            raise RunFileError(f"{_short(path)} is not JSON: {_short(exc, 120)}") from None
+        if not isinstance(data, dict) or not isinstance(data.get("sessions"), list):
+            raise RunFileError(f"{_short(path)} is not a manifest of fipy-hopper")
+        return cls(path, data)
 
     def begin_session(self, command: str, resumed_from_step: Optional[int] = None,
                       resumed_from_t: Optional[float] = None) -> None:
@@ -706,15 +744,26 @@ def write_markers(path: PathLike, markers) -> None:
         meshio.write(tmp, mesh, file_format="vtu")
 
 
+def read_vtu(path: PathLike):
+    """The ``meshio.Mesh`` of a VTU file; :class:`RunFileError` naming the file if it cannot
+    be read (meshio's reader is called directly: ``meshio.read`` prints and calls
+    ``sys.exit(1)`` on a corrupt file, which is caught here all the same)."""
+    import meshio
+
+    try:
+        return meshio.vtu.read(os.fspath(path))
+    except (SystemExit, Exception) as exc:
+        raise RunFileError(f"{_short(path)} is not a readable VTU file: "
+                           f"{type(exc).__name__}: {_short(exc, 120)}") from None
+
+
 def read_markers(path: PathLike) -> Optional[np.ndarray]:
     """The markers ``(n, 3)`` = ``(r, z, layer)`` of a file of :func:`write_markers`, or
     ``None`` if there is no such file."""
-    import meshio
-
     path = Path(path)
     if not path.is_file():
         return None
-    mesh = meshio.read(path)
+    mesh = read_vtu(path)
     return np.column_stack([mesh.points[:, 0], mesh.points[:, 1],
                             np.asarray(mesh.point_data["layer"], dtype=float).ravel()])
 
@@ -971,23 +1020,55 @@ def checkpoint_size_limit(state, cfg) -> int:
     return int(2 * arrays + 4096 * samples + 64 * 2 ** 20)
 
 
-def read_checkpoint(path: PathLike, state, cfg) -> tuple:
+def checkpoint_time_limit(cfg, dt: float) -> tuple:
+    """``(t_max, step_max)``: the latest time (s) and the most steps a checkpoint of ``cfg``
+    with the time step ``dt`` can hold: the longest fill and discharge, ``max_fill_time`` +
+    :attr:`RunConfig.discharge_time`, and 1 s and ten steps more (the checks that end them)."""
+    t_max = cfg.numerics.max_fill_time + cfg.run.discharge_time + 1.0 + 10.0 * dt
+    return t_max, int(math.ceil(t_max / dt)) + 10
+
+
+def read_checkpoint(path: PathLike, state, cfg, dt: Optional[float] = None) -> tuple:
     """:func:`validate_checkpoint` for a run whose fresh state is ``state`` (``model.State``)
-    and whose configuration is ``cfg``: ``(arrays, meta)``.
+    and whose configuration is ``cfg`` (time step ``dt``, by default ``cfg.time_step``):
+    ``(arrays, meta)``.
 
     The expected arrays and the optional ones come from ``state``
-    (:func:`checkpoint_template`), the size bound from :func:`checkpoint_size_limit`, and the
-    scalars of ``meta["state"]`` must be fields of ``state``.
+    (:func:`checkpoint_template`), the size bound from :func:`checkpoint_size_limit`, the
+    bounds of the time and the step from :func:`checkpoint_time_limit`, and the scalars of
+    ``meta["state"]`` must be fields of ``state`` of the types of its values.
     """
     shapes, optional = checkpoint_template(state)
+    t_max, step_max = checkpoint_time_limit(cfg, cfg.time_step if dt is None else dt)
+    scalars = {k: v for k, v in vars(state).items() if not isinstance(v, np.ndarray)}
     return validate_checkpoint(path, shapes, checkpoint_size_limit(state, cfg),
-                               optional=optional, state_keys=list(vars(state)))
+                               optional=optional, state_keys=list(vars(state)),
+                               state_types=scalars, t_max=t_max, step_max=step_max)
+
+
+def is_number(value) -> bool:
+    """A JSON number of the metadata (an int or a float, NaN allowed; not a bool)."""
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def same_kind(value, like) -> bool:
+    """``value`` of the JSON type of ``like``: a bool, a whole number, a number (for a float
+    or None: finite or not), a string; None is also a number."""
+    if isinstance(like, bool):
+        return isinstance(value, bool)
+    if isinstance(like, int):
+        return isinstance(value, int) and not isinstance(value, bool)
+    if isinstance(like, float) or like is None:
+        return value is None or is_number(value)
+    return isinstance(value, type(like))
 
 
 def validate_checkpoint(path: PathLike, expected_shapes: dict, max_bytes: int,
                         optional: Iterable[str] = (), dtypes: Optional[dict] = None,
                         state_keys: Optional[Iterable[str]] = None,
-                        auxiliary: Iterable[str] = CHECKPOINT_AUXILIARY) -> tuple:
+                        auxiliary: Iterable[str] = CHECKPOINT_AUXILIARY,
+                        state_types: Optional[dict] = None, t_max: float = math.inf,
+                        step_max: int = 2 ** 62) -> tuple:
     """Open a checkpoint ``.npz`` of :meth:`Simulation.checkpoint` safely: ``(arrays, meta)``.
 
     Nothing is read before the archive's members are known to be what a checkpoint holds:
@@ -1001,9 +1082,11 @@ def validate_checkpoint(path: PathLike, expected_shapes: dict, max_bytes: int,
     match a pattern of ``auxiliary`` (up to 3 axes, NaN allowed); the wall samples
     ``wall__<stage>__<k>`` (``k`` 0-4, one length per stage) must be complete for each stage
     in ``meta["wall_times"]``.  Every name of ``expected_shapes`` must be present unless listed
-    in ``optional``; any other name is refused.  ``meta["state"]`` holds a finite time ``t``, a
-    ``step`` >= 0, a ``stage`` and other plain JSON scalars (only names in ``state_keys``,
-    when given, none of them an array's name).
+    in ``optional``; any other name is refused.  ``meta["state"]`` holds a time ``t`` in
+    ``[0, t_max]``, a whole ``step`` in ``[0, step_max]``, a ``stage`` (``filling`` or
+    ``discharge``) and other plain JSON scalars (only names in ``state_keys``, when given, none
+    of them an array's name; of the type of their value in ``state_types``, when given,
+    :func:`same_kind`; floats finite).
 
     Raises :class:`CheckpointError` (one line naming the file) for anything else: a corrupt or
     truncated file, a zip bomb, an unexpected, missing or misshapen array.
@@ -1098,15 +1181,25 @@ def validate_checkpoint(path: PathLike, expected_shapes: dict, max_bytes: int,
             not isinstance(meta["schedules"], list):
         fail("its metadata is malformed (state, record, wall_times, schedules)")
     state = meta["state"]
-    if not (isinstance(state.get("t"), (int, float)) and math.isfinite(state["t"])
-            and isinstance(state.get("step"), int) and state["step"] >= 0
-            and state.get("stage") in ("filling", "discharge")):
-        fail("its metadata has no valid state time, step and stage")
+    t, step = state.get("t"), state.get("step")
+    if not (is_number(t) and 0.0 <= t <= t_max):
+        fail(f"its state time t = {_short(t, 40)} is not a time of this run (a number of "
+             f"seconds in [0, {t_max:.6g}])")
+    if isinstance(step, bool) or not isinstance(step, int) or not 0 <= step <= step_max:
+        fail(f"its state step = {_short(step, 40)} is not a step of this run (a whole number "
+             f"in [0, {step_max}])")
+    if state.get("stage") not in ("filling", "discharge"):
+        fail(f"its state stage = {_short(state.get('stage'), 40)!s} is not filling or "
+             "discharge")
     allowed = None if state_keys is None else set(state_keys) - set(expected_shapes)
     for key, value in state.items():
         if allowed is not None and key not in allowed or \
                 not isinstance(value, (int, float, str, bool, type(None))):
             fail(f"its metadata holds an unexpected state value {str(key)[:40]!r}")
+        like = (state_types or {}).get(key, value)
+        if not same_kind(value, like) or is_number(value) and not math.isfinite(value):
+            fail(f"its state value {str(key)[:40]} = {_short(value, 40)} is not "
+                 f"{'a finite number' if is_number(like) else type(like).__name__}")
     missing = [k for k in expected_shapes if k not in arrays and k not in optional]
     if missing:
         fail(f"array {missing[0]!r} is missing")

@@ -20,9 +20,9 @@ from dataclasses import dataclass
 
 import numpy as np
 from fipy import CylindricalGrid2D
-from fipy.meshes.uniformGrid2D import UniformGrid2D
 
 from . import geometry
+from .fipy_adapter import UniformGrid2D
 from .config import HopperConfig
 
 

@@ -53,10 +53,11 @@ import numpy as np
 
 import numba
 
-from . import dense_loose, geometry, markers, material, momentum, profiling, stepping
+from . import (dense_loose, fipy_adapter, geometry, markers, material, momentum, profiling,
+               resources, stepping)
 from .config import HopperConfig, damped_step_factor
 from .mesh import HopperGrid, build_grid
-from .material.law import transported_fields
+from .material.law import compiled_refusal, transported_fields
 from .transport import material_rows
 
 GRAVITY = 9.81  # m/s^2
@@ -135,10 +136,13 @@ class HopperModel:
     of every part of a step (:func:`fipy_hopper.material.update_reference`, the numpy
     transport and redistribution, :func:`fipy_hopper.markers.advance_reference`), which a
     test holds the compiled path to over a short run.  ``threads``: numba threads of the
-    compiled steps (default: one per core).  ``law``: the constitutive law
+    compiled steps (default: one per core this process may use,
+    :func:`~fipy_hopper.resources.thread_limit`).  ``law``: the constitutive law
     (:mod:`fipy_hopper.material.law`; default the configuration's Mohr–Coulomb material), from
     which the model takes its time step, its transported internal variables and its stress
-    update; its density must be the configuration's.
+    update; its density must be the configuration's.  The compiled step fuses Mohr-Coulomb's
+    return: on ``backend="numba"`` a law with a stress update of its own is refused
+    (:func:`~fipy_hopper.material.law.compiled_refusal`), ``backend="numpy"`` runs it.
     """
 
     def __init__(self, cfg: HopperConfig, grid: HopperGrid | None = None,
@@ -163,6 +167,12 @@ class HopperModel:
         if self.material.rho != cfg.material.density:
             raise ValueError(f"the law's density {self.material.rho} kg/m3 is not "
                              f"material.density = {cfg.material.density} kg/m3")
+        refusal = compiled_refusal(self.material) if backend == "numba" else ""
+        if refusal:
+            raise NotImplementedError(
+                f"{refusal}: the compiled step runs Mohr-Coulomb's return mapping; run it "
+                f'with HopperModel(cfg, law=..., backend="numpy"), whose step calls the '
+                f"law's own update_reference")
         if transported_fields(self.material) != TRANSPORTED:
             raise NotImplementedError(
                 f"the compiled step carries the fields {TRANSPORTED}; a law with the internal "
@@ -204,7 +214,7 @@ class HopperModel:
         normals = np.asarray(g.mesh.faceNormals)
         nzf = g.n_zfaces
         self.face_sign = np.concatenate([normals[1, :nzf], normals[0, nzf:]])
-        self.face_area = np.asarray(g.mesh._faceAreas) * g.face_aperture
+        self.face_area = np.asarray(fipy_adapter.face_areas(g.mesh)) * g.face_aperture
         # wall contact: every node within half a cell in front of a wall segment (or behind
         # it) is constrained by that segment's normal; nodes round the convex lip by the
         # normal towards the nearest wall point.  The free-fall tube (segment 0) is frictionless.
@@ -265,7 +275,7 @@ class HopperModel:
         self._prm = self.material.kernel_parameters()
         self._no_displacement = np.zeros((2, 1, 1))
         self._no_cycles = np.zeros(0, dtype=np.int64)      # material_steps: no phase timing
-        self.threads = int(threads) if threads else numba.config.NUMBA_NUM_THREADS
+        self.threads = int(threads) if threads else resources.thread_limit()
 
     # ------------------------------------------------------------------ state
     def initial_state(self, n_layers: int = 8) -> State:
@@ -367,17 +377,19 @@ class HopperModel:
         """``sum m v_z`` over the grid's nodes (kg m/s per radian)."""
         return float(np.sum(self.node_mass(state) * state.v[1]))
 
-    def check_stable(self, state: State) -> None:
-        """Raise :class:`InstabilityError` on a runaway or non-finite velocity (above
-        :func:`runaway_speed`), or a non-finite material fraction or stress."""
+    def check_stable(self, state: State, limit: float | None = None) -> None:
+        """Raise :class:`InstabilityError` naming the first node of a non-finite or runaway
+        velocity (above ``limit``, by default :func:`runaway_speed`), or the first cell of a
+        non-finite material fraction or stress."""
         v, g = state.v, self.grid
         speed = np.hypot(v[0], v[1])
-        limit = runaway_speed(self.cfg.hopper)
+        limit = runaway_speed(self.cfg.hopper) if limit is None else limit
         bad = ~np.isfinite(speed) | (speed > limit)
         if bad.any():
             j, i = np.argwhere(bad)[0]
+            kind = "runaway" if np.isfinite(speed[j, i]) else "non-finite"
             raise InstabilityError(
-                f"runaway velocity at step {state.step}, t = {state.t:.6g} s, node r = "
+                f"{kind} velocity at step {state.step}, t = {state.t:.6g} s, node r = "
                 f"{g.r_nodes[i]:.4g} m, z = {g.z_nodes[j]:.4g} m (|v| = {speed[j, i]:.3g} m/s, "
                 f"limit {limit:.3g} m/s)")
         broken = ~np.isfinite(state.alpha) | ~np.isfinite(state.sigma).all(axis=-1)
@@ -642,9 +654,7 @@ class HopperModel:
         state.face_flux_sum[:] = 0.0
         state.flux_time = 0.0
         if not stepping.all_finite(state.v) or not stepping.all_finite(state.sigma):
-            bad = np.argwhere(~np.isfinite(state.sigma).all(axis=-1))
-            raise InstabilityError(f"non-finite field at step {state.step}, t = {state.t:.6g} s,"
-                                   f" cell(s) {bad[:3].tolist()}")
+            self.check_stable(state, limit=math.inf)     # names the node or the cell
         for hook in self.after_transport:
             hook(state)
 

@@ -27,17 +27,20 @@ from __future__ import annotations
 import json
 import math
 import warnings
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
 from . import geometry, theory
 from .config import HopperConfig
 from .io import (FieldWriter, RunDirectory, atomic_path, marker_file, read_csv, read_markers,
-                 read_snapshot_index, result_key)
+                 read_snapshot_index, read_vtu, result_key)
 
-__all__ = ["plot_run", "flow_pattern", "discharge_curves", "wall_pressure", "stress_pattern",
-           "animate", "load_snapshot", "draw_layers", "theory_wall_pressure"]
+__all__ = ["plot_run", "PICTURES", "Picture", "flow_pattern", "discharge_curves",
+           "wall_pressure", "stress_pattern", "animate", "load_snapshot", "draw_layers",
+           "theory_wall_pressure"]
 
 #: Diameter of a drawn marker over the markers' median nearest-neighbour spacing: above
 #: ``sqrt(2)``, the discs of a square lattice cover it (the material looks filled).
@@ -89,10 +92,8 @@ def snapshots(run) -> list:
 def load_snapshot(run, entry) -> dict:
     """One snapshot as ``(nz, nr)`` arrays with its node coordinates ``r_nodes``, ``z_nodes``;
     ``markers`` is its ``(n, 3)`` array of marker points ``(r, z, layer)``, or ``None``."""
-    import meshio
-
     folder = Path(run) / RunDirectory.FIELDS
-    mesh = meshio.read(folder / entry["file"])
+    mesh = read_vtu(folder / entry["file"])
     r_nodes = np.unique(mesh.points[:, 0])
     z_nodes = np.unique(mesh.points[:, 1])
     shape = (len(z_nodes) - 1, len(r_nodes) - 1)
@@ -409,17 +410,24 @@ def wall_pressure(run):
     (solid filling, dashed discharge), EN 1991-4's hopper loads (dash-dot) and its bin
     discharge load ``C_h`` x Janssen (dotted black).  Right: the overpressure factor
     (envelope / at rest) per bin with EN 1991-4's discharge factor for the bin wall, and the
-    switch peak against Walker's switch pressure.
+    switch peak against Walker's switch pressure.  A run without a discharge envelope (a
+    fill-only run, ``end_time = 0``) gets the left panel alone.
     """
     run = Path(run)
     cfg = _config(run)
     summary = _summary(run)
     table = read_csv(run / RunDirectory.WALL_PRESSURE)
-    fig = _figure(11.0, 4.4)
-    ax, ax_f = fig.subplots(1, 2, width_ratios=(3, 2))
     stages = np.asarray(table.get("stage", np.array([])), dtype=str)
     s_all = np.asarray(table.get("s_m", []), dtype=float)
     p_all = np.asarray(table.get("p_n_Pa", []), dtype=float)
+    filled, envelope = stages == "filling", stages == "discharge_envelope"
+    overpressure = filled.any() and envelope.any() and filled.sum() == envelope.sum()
+    if overpressure:
+        fig = _figure(11.0, 4.4)
+        ax, ax_f = fig.subplots(1, 2, width_ratios=(3, 2))
+    else:
+        fig = _figure(6.6, 4.4)
+        ax, ax_f = fig.subplots(1, 1), None
     for stage in dict.fromkeys(stages.tolist()):
         sel = stages == stage
         if stage == "discharge_envelope":
@@ -451,7 +459,7 @@ def wall_pressure(run):
             ax.plot(s, c_h * p / 1e3, ":", color="k", lw=1.2,
                     label=f"EN 1991-4 discharge, bin (C_h = {c_h:g} x Janssen)")
     s_t = float(geometry.transition_arc_length(cfg.hopper))
-    for a in (ax, ax_f):
+    for a in (ax, ax_f) if overpressure else (ax,):
         a.axvline(s_t, color="0.5", lw=0.8, ls=":")
     ax.text(s_t, 0.0, " transition", va="bottom", fontsize=8, color="0.4")
     ax.set_xlabel("arc length along the wall from the outlet lip, s (m)")
@@ -461,8 +469,7 @@ def wall_pressure(run):
     ax.legend(loc="best", fontsize=6.5)
     ax.set_title(f"Wall pressure (phi = {cfg.material.friction_angle_deg:g} deg, "
                  f"phi_w = {cfg.wall.friction_angle_deg:g} deg)", fontsize=10)
-    filled, envelope = stages == "filling", stages == "discharge_envelope"
-    if filled.any() and envelope.any() and filled.sum() == envelope.sum():
+    if overpressure:
         p_fill, p_env = p_all[filled], p_all[envelope]
         loaded = p_fill > 0.05 * p_fill.max()
         ratio = np.where(loaded, p_env / np.where(loaded, p_fill, 1.0), np.nan)
@@ -483,8 +490,6 @@ def wall_pressure(run):
         ax_f.set_ylim(bottom=0.0)
         ax_f.legend(loc="best", fontsize=7)
         ax_f.set_title("Discharge overpressure", fontsize=10)
-    else:
-        ax_f.set_axis_off()
     return fig
 
 
@@ -593,7 +598,6 @@ def stress_pattern(run):
     """Trajectories of the major principal stress over the mobilised friction, at rest and in
     discharge: the active state of the fill (sigma1 near vertical) and the passive, arched
     state of the flow (sigma1 across it), from the stresses of the field snapshots."""
-    import meshio
     from . import diagnostics
 
     run = Path(run)
@@ -604,7 +608,7 @@ def stress_pattern(run):
     folder = run / RunDirectory.FIELDS
     mesh_artist = None
     for ax, (title, entry) in zip(axes, chosen):
-        mesh = meshio.read(folder / entry["file"])
+        mesh = read_vtu(folder / entry["file"])
         r_nodes, z_nodes = np.unique(mesh.points[:, 0]), np.unique(mesh.points[:, 1])
         shape = (len(z_nodes) - 1, len(r_nodes) - 1)
         cell = {k: np.asarray(mesh.cell_data[k][0]).reshape(shape)
@@ -649,7 +653,6 @@ def lagrangian_mesh(run):
     """The Lagrangian mesh of a ``formulation = "lagrangian"`` run, coloured by layer, at the
     opening of the outlet (the last snapshot of the fill) and at the end of the run (where a
     distortion stopped it), with the hopper wall."""
-    import meshio
     from matplotlib.collections import PolyCollection
 
     run = Path(run)
@@ -660,7 +663,7 @@ def lagrangian_mesh(run):
     fig = _figure(4.2 * max(len(chosen), 1), 5.2)
     axes = np.atleast_1d(fig.subplots(1, max(len(chosen), 1)))
     wall = geometry.wall_polyline(cfg.hopper, 0.0, cfg.hopper.top)
-    meshes = [meshio.read(run / RunDirectory.FIELDS / entry["file"]) for entry in chosen]
+    meshes = [read_vtu(run / RunDirectory.FIELDS / entry["file"]) for entry in chosen]
     cells = [{"alpha": np.asarray(mesh.cell_data["alpha"][0]),
               "layer": np.asarray(mesh.cell_data["layer"][0])} for mesh in meshes]
     cmap, norm = _layer_colours(_n_layers(cells))
@@ -685,32 +688,71 @@ def lagrangian_mesh(run):
     return fig
 
 
-def plot_run(run) -> list:
-    """Draw every picture of a run directory into it; returns the paths written.
+@dataclass(frozen=True)
+class Picture:
+    """A picture :func:`plot_run` draws into a run directory: its file ``name``, what it
+    ``shows``, ``draw(run, path)`` (writes it) and ``applies(facts)``, whether the run has what
+    it shows (``facts``: :func:`_run_facts`)."""
 
-    A picture whose data are missing (no snapshots yet, no wall samples) is skipped.  A
-    Lagrangian run (``numerics.formulation = "lagrangian"``) gets ``lagrangian_mesh.png`` in
-    place of the pictures of the grid's fields.
-    """
-    run = Path(run)
-    written = []
-    if (run / RunDirectory.TIMESERIES).is_file():
-        written.append(_save(discharge_curves(run), run / "discharge.png"))
-    if (run / RunDirectory.WALL_PRESSURE).is_file():
-        written.append(_save(wall_pressure(run), run / "wall_pressure.png"))
-        forces = wall_forces(run)
-        if forces is not None:
-            written.append(_save(forces, run / "wall_forces.png"))
+    name: str
+    shows: str
+    draw: Callable
+    applies: Callable
+
+
+def _figure_file(make):
+    """``draw(run, path)`` for a function that returns a figure (or None: nothing to draw)."""
+    def draw(run, path):
+        fig = make(run)
+        return None if fig is None else _save(fig, path)
+    return draw
+
+
+def _run_facts(run) -> dict:
+    """What a run directory holds, for :attr:`Picture.applies`: ``samples`` (the time
+    series has rows: a discharge), ``wall`` (wall loads), ``snapshots``, ``discharge`` (a
+    snapshot of the discharge) and ``lagrangian`` (the formulation)."""
     entries = snapshots(run)
-    if entries and _config(run).numerics.formulation == "lagrangian":
-        written.append(_save(lagrangian_mesh(run), run / "lagrangian_mesh.png"))
-        return written
-    if entries:
-        written.append(_save(stress_pattern(run), run / "stress_pattern.png"))
-    if any(e["stage"] == "discharge" for e in entries):
-        written.append(_save(flow_pattern(run), run / "flow_pattern.png"))
-        written.append(animate(run))
-    return written
+    series = run / RunDirectory.TIMESERIES
+    return {"samples": series.is_file() and len(read_csv(series)["t_s"]) > 0,
+            "wall": (run / RunDirectory.WALL_PRESSURE).is_file(),
+            "snapshots": bool(entries),
+            "discharge": any(e["stage"] == "discharge" for e in entries),
+            "lagrangian": bool(entries) and _config(run).numerics.formulation == "lagrangian"}
+
+
+#: Every picture :func:`plot_run` can draw, in the order drawn: the one list (the help of
+#: ``fipy-hopper plot`` and the files ``--force`` removes are read from it).  A fill-only run
+#: (``end_time = 0``) has no time series, so no ``discharge.png``; a Lagrangian run gets
+#: ``lagrangian_mesh.png`` in place of the pictures of the grid's fields.
+PICTURES = (
+    Picture("discharge.png", "the mass in the hopper and the discharge rate",
+            _figure_file(discharge_curves), lambda f: f["samples"]),
+    Picture("wall_pressure.png", "the wall pressure against Janssen, Walker and EN 1991-4",
+            _figure_file(wall_pressure), lambda f: f["wall"]),
+    Picture("wall_forces.png", "the hoop and meridional forces in the wall",
+            _figure_file(wall_forces), lambda f: f["wall"]),
+    Picture("lagrangian_mesh.png", "the mesh of a Lagrangian run",
+            _figure_file(lagrangian_mesh), lambda f: f["lagrangian"]),
+    Picture("stress_pattern.png", "the major principal stress trajectories",
+            _figure_file(stress_pattern), lambda f: f["snapshots"] and not f["lagrangian"]),
+    Picture("flow_pattern.png", "the layers and the speed in discharge",
+            _figure_file(flow_pattern), lambda f: f["discharge"] and not f["lagrangian"]),
+    Picture("discharge.gif", "an animation of the snapshots",
+            lambda run, path: animate(run, path),
+            lambda f: f["discharge"] and not f["lagrangian"]),
+)
+
+
+def plot_run(run) -> list:
+    """Draw every picture of :data:`PICTURES` that the run directory has the data of into
+    it; returns the paths written.  A picture whose data are missing (no snapshots yet, no
+    wall samples, no discharge) is skipped."""
+    run = Path(run)
+    facts = _run_facts(run)
+    written = [picture.draw(run, run / picture.name) for picture in PICTURES
+               if picture.applies(facts)]
+    return [path for path in written if path is not None]
 
 
 if __name__ == "__main__":  # pragma: no cover

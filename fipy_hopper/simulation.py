@@ -17,7 +17,10 @@ Stages:
   energy is below ``settle_kinetic_energy * M g L`` (``M`` the mass, ``L`` the fill depth from
   outlet to surface) and the damping carries less than ``settle_damping_fraction`` of the
   weight over the last check interval (the walls and the plate hold the rest).  Filling gives
-  up at ``max_fill_time`` and says so.  ``end_time = 0`` stops there (``"filled"``).
+  up at ``max_fill_time`` and says so (``RunRecord.fill_at_rest`` false,
+  :func:`not_at_rest_message`).  ``end_time = 0`` stops there: ``"filled"``, or
+  ``"fill_not_at_rest"`` when the fill gave up before it came to rest (its wall loads are
+  those of a moving fill).
 - **discharge**: the plate is removed; the run stops at ``end_time`` or, for ``"empty"``, when
   less than ``empty_fraction`` of the initial mass is left in the hopper (``"empty"``), or when
   the flow has stopped (``"at_rest"``, :data:`AT_REST_AFTER`: a heel on a shallow cone, an
@@ -51,6 +54,7 @@ What is measured, and when:
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import os
@@ -77,6 +81,18 @@ AT_REST_AFTER, AT_REST_WINDOW, AT_REST_RATE = 0.5, 0.25, 1e-3
 STAGE_MARKS = {"early_discharge": 0.9, "mid_discharge": 0.5}
 #: Wall-load stages in the order they are written.
 WALL_STAGES = ("filling", "early_discharge", "mid_discharge", "discharge_envelope")
+
+
+class NotAtRestWarning(RuntimeWarning):
+    """The fill gave up at ``numerics.max_fill_time`` and the discharge started from it."""
+
+
+def not_at_rest_message(cfg) -> str:
+    """What to say of a fill that did not come to rest by ``numerics.max_fill_time``."""
+    return (f"the fill did not come to rest within numerics.max_fill_time = "
+            f"{cfg.numerics.max_fill_time:g} s: its wall loads (and a discharge started from "
+            "it) are those of a moving fill; raise numerics.max_fill_time (or relax "
+            "numerics.settle_kinetic_energy, numerics.settle_damping_fraction)")
 
 
 @dataclass
@@ -423,7 +439,8 @@ class Simulation:
             if self.record.stop_reason == "wall_time_limit" or halt_reason(self.state):
                 pass
             elif self.end_time != "empty" and float(self.end_time) == 0.0:
-                self.record.stop_reason = "filled"
+                self.record.stop_reason = ("filled" if self.record.fill_at_rest
+                                           else "fill_not_at_rest")
             else:
                 self.discharge()
         finally:
@@ -432,6 +449,11 @@ class Simulation:
             if self.progress:
                 sys.stderr.write("\n")
         return self.record
+
+    @property
+    def fill_gave_up(self) -> bool:
+        """True once the fill has stopped at ``max_fill_time`` without coming to rest."""
+        return bool(self.record.rest_balance) and not self.record.fill_at_rest
 
     # -------------------------------------------------------------- measuring
     def _at_rest(self) -> bool:
@@ -639,7 +661,7 @@ class Simulation:
             arrays["envelope"] = self.envelope
         if self.envelope_raw is not None:
             arrays["envelope_raw"] = self.envelope_raw
-        meta = {"state": scalars, "record": rec,
+        meta = {"fingerprint": self.fingerprint(), "state": scalars, "record": rec,
                 "wall_times": {stage: values[0] for stage, values in wall.items()},
                 "t_open": self.t_open, "next_sample": self.next_sample,
                 "next_load_sample": self.next_load_sample,
@@ -661,15 +683,28 @@ class Simulation:
                 os.unlink(tmp)
             raise
 
+    def fingerprint(self) -> str:
+        """What the run is, as a hash: its resolved configuration (the canonical TOML) and its
+        material law (class and parameters).  A checkpoint holds it; :meth:`restore` refuses
+        another run's."""
+        law = self.model.material
+        text = (self.model.cfg.to_toml() + f"\n# law {type(law).__module__}."
+                f"{type(law).__qualname__} {sorted(law.parameters().items())!r}\n")
+        return hashlib.sha256(text.encode("utf-8")).hexdigest()
+
     def restore(self, path) -> None:
         """Continue from a checkpoint written by :meth:`checkpoint` (same configuration).
 
-        The file is checked before use (:func:`fipy_hopper.io.read_checkpoint`: its size, the
-        names, types and shapes of its arrays against this run's state, no pickle): a damaged
-        or foreign checkpoint raises :class:`~fipy_hopper.io.CheckpointError`."""
+        The file is checked before anything changes (:func:`fipy_hopper.io.read_checkpoint`:
+        its size, the names, types and shapes of its arrays against this run's state, no
+        pickle, the state's time and step within this run's; then :meth:`_check_checkpoint`:
+        the fingerprint of this run, the record's and the measurements' types, names and
+        shapes): a damaged or foreign checkpoint raises
+        :class:`~fipy_hopper.io.CheckpointError` naming the file and what is wrong."""
         from . import io as fio
 
-        arrays, meta = fio.read_checkpoint(path, self.state, self.model.cfg)
+        arrays, meta = fio.read_checkpoint(path, self.state, self.model.cfg, self.model.dt)
+        self._check_checkpoint(arrays, meta, f"checkpoint {path}")
         wall, wall_stress, wall_forces, wall_raw = {}, {}, {}, {}
         for stage, t_stage in meta["wall_times"].items():
             wall[stage] = (t_stage,) + tuple(arrays.pop(f"wall__{stage}__{k}") for k in range(5))
@@ -707,6 +742,97 @@ class Simulation:
         for s, t_next in zip(self.schedules, meta["schedules"]):
             s.next_time = t_next
         self.model.reset_caches()
+
+    def _check_checkpoint(self, arrays: dict, meta: dict, where: str) -> None:
+        """Raise :class:`~fipy_hopper.io.CheckpointError` unless the metadata and the
+        measurement arrays of a checkpoint are this run's, as :meth:`checkpoint` writes them:
+        the fingerprint; the record's fields with the types of :class:`RunRecord`'s (lists of
+        numbers of one length); the stages, readings and sums with the shapes of this run's
+        wall bins and contacts; the schedules' times numbers."""
+        from .io import CheckpointError, is_number, same_kind
+
+        def fail(message):
+            raise CheckpointError(f"{where}: {message}")
+
+        if meta.get("fingerprint") != self.fingerprint():
+            fail("it belongs to another run (its configuration or material law differs from "
+                 "this run's)" if isinstance(meta.get("fingerprint"), str) else
+                 "it holds no fingerprint of its run (written by an older version); start the "
+                 "run again")
+        known = {"fingerprint", "state", "record", "wall_times", "t_open", "next_sample",
+                 "next_load_sample", "next_envelope", "readings", "stress_sums", "mass_books",
+                 "schedules"}
+        for key in meta:
+            if key not in known:
+                fail(f"its metadata holds an unknown entry {str(key)[:40]!r}")
+        for key in ("t_open", "next_sample", "next_load_sample", "next_envelope",
+                    "mass_books"):
+            if not same_kind(meta.get(key), 0.0):
+                fail(f"its metadata's {key} = {str(meta[key])[:40]} is not a number")
+        record, template = meta["record"], vars(RunRecord())
+        series = ("t", "mass_in_hopper", "discharged", "rate", "mass_flow_index",
+                  "stagnant_fraction", "bin_lateral_stress_ratio")
+        for key, value in record.items():
+            like = template.get(key)
+            if key in ("wall", "wall_stress", "wall_forces", "wall_raw") or key not in template:
+                fail(f"its record holds an unknown field {str(key)[:40]!r}")
+            if isinstance(like, list) and key in series:
+                ok = isinstance(value, list) and all(is_number(v) for v in value)
+            elif key == "loads":
+                ok = isinstance(value, list) and all(
+                    isinstance(row, dict) and all(isinstance(v, str) or is_number(v)
+                                                  for v in row.values()) for row in value)
+            elif isinstance(like, dict):
+                ok = isinstance(value, dict) and all(is_number(v) for v in value.values())
+            else:
+                ok = same_kind(value, like) and not (isinstance(like, int) and value < 0)
+            if not ok:
+                fail(f"its record's {key} is not {type(like).__name__} of the run's kind")
+        lengths = {len(record.get(k, [])) for k in series[:-1]}
+        if len(lengths) > 1 or len(record.get(series[-1], [])) > max(lengths):
+            fail("its record's time series have different lengths")
+        n_bins = len(self.wall_sampler.centres)
+        stages = set(WALL_STAGES) | {mark.name for mark in self.stage_marks}
+        shapes = {}
+        for stage, t_stage in meta["wall_times"].items():
+            if stage not in stages or not is_number(t_stage):
+                fail(f"its wall samples name an unknown stage {str(stage)[:40]!r}")
+            shapes.update({f"wall__{stage}__{k}": (n_bins,) for k in range(5)})
+            shapes.update({f"wallstress__{stage}__{k}": (n_bins,) for k in range(2)})
+            shapes.update({f"wallraw__{stage}__{k}": (n_bins,) for k in range(2)})
+            shapes.update({f"wallforces__{stage}__{k}": (n_bins,) for k in range(2)})
+            shapes[f"wallforces__{stage}__2"] = (2,)
+        readings = meta.get("readings", {})
+        if not isinstance(readings, dict):
+            fail("its readings are not a table")
+        for name, scalars in readings.items():
+            if name not in stages | {"check", "sample", "envelope"} or not (
+                    isinstance(scalars, dict) and all(is_number(v) for v in scalars.values())
+                    and is_number(scalars.get("t"))):
+                fail(f"its reading {str(name)[:40]!r} is not one of this run's")
+            for key, like in (("wall", self.state.wall_impulse),
+                              ("plate", self.state.plate_impulse),
+                              ("budget", self.state.momentum_budget)):
+                if f"reading__{name}__{key}" not in arrays:
+                    fail(f"array 'reading__{name}__{key}' is missing")
+                shapes[f"reading__{name}__{key}"] = np.shape(like)
+        sums = meta.get("stress_sums", {})
+        if not isinstance(sums, dict) or not all(
+                k in stages and isinstance(v, bool) for k, v in sums.items()):
+            fail("its stress sums name unknown stages")
+        shapes.update({f"stresssum__{stage}__{k}": (n_bins,) for stage, present in sums.items()
+                       if present for k in range(3)})
+        shapes["envelope"] = shapes["envelope_raw"] = (n_bins,)
+        state_arrays = set(vars(self.state))
+        for key, array in arrays.items():
+            if key in state_arrays:
+                continue
+            if key not in shapes:
+                fail(f"array {key[:60]!r} belongs to no stage, reading or sum of the metadata")
+            if array.shape != shapes[key]:
+                fail(f"array {key[:60]!r} has shape {array.shape}, expected {shapes[key]}")
+        if not all(is_number(t) for t in meta["schedules"]):
+            fail("its schedule times are not numbers")
 
     # -------------------------------------------------------------- results
     def summary(self) -> dict:

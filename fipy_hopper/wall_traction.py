@@ -120,15 +120,16 @@ def knots(stretch: WallStretch, spacing: float) -> np.ndarray:
     return np.concatenate([[inner[0]] * DEGREE, inner, [inner[-1]] * DEGREE])
 
 
-def basis(knot_vector: np.ndarray, s) -> np.ndarray:
-    """Values ``B_k(s)`` (len(s), n_basis) of the clamped B-splines; ``s`` is clipped onto
-    the stretch (a node just beyond a corner counts at the corner)."""
+def design(knot_vector: np.ndarray, s) -> sparse.csr_matrix:
+    """Values ``B_k(s)`` (len(s), n_basis, sparse: at most ``DEGREE + 1`` a row) of the
+    clamped B-splines; ``s`` is clipped onto the stretch (a node just beyond a corner counts at
+    the corner)."""
     lo, hi = knot_vector[DEGREE], knot_vector[-DEGREE - 1]
-    s = np.clip(np.asarray(s, float), lo, hi)
+    s = np.clip(np.asarray(s, float).ravel(), lo, hi)
     n_basis = len(knot_vector) - DEGREE - 1
     if len(s) == 0:
-        return np.zeros((0, n_basis))
-    return BSpline.design_matrix(s, knot_vector, DEGREE).toarray()
+        return sparse.csr_matrix((0, n_basis))
+    return sparse.csr_matrix(BSpline.design_matrix(s, knot_vector, DEGREE))
 
 
 def _pieces(edges_a: np.ndarray, edges_b: np.ndarray):
@@ -148,8 +149,8 @@ class StretchRecovery:
     """The linear maps of one stretch: node forces -> spline coefficients -> bin means.
 
     ``share`` (n_basis, n_entries, sparse): ``B_k(s_e)``; ``basis_area`` (n_basis,): ``A_k``;
-    ``bin_mean`` (n_bins, n_basis): ``int_bin B_k c ds / int_bin c ds``; ``raw`` (n_bins,
-    n_entries, sparse): 1 where the entry's wall point lies in the bin; ``bin_area``
+    ``bin_mean`` (n_bins, n_basis, sparse): ``int_bin B_k c ds / int_bin c ds``; ``raw``
+    (n_bins, n_entries, sparse): 1 where the entry's wall point lies in the bin; ``bin_area``
     (n_bins,).  ``entries``: the rows of the wall's entries that belong to the stretch."""
 
     stretch: WallStretch
@@ -158,7 +159,7 @@ class StretchRecovery:
     edges: np.ndarray
     share: sparse.csr_matrix
     basis_area: np.ndarray
-    bin_mean: np.ndarray
+    bin_mean: sparse.csr_matrix
     raw: sparse.csr_matrix
     bin_area: np.ndarray
 
@@ -172,18 +173,19 @@ class StretchRecovery:
         s_entries = np.asarray(s_entries, float)
         kv = knots(stretch, max(bin_width, knot_spacing or 0.0))
         edges = bin_edges(stretch, bin_width)
-        share = sparse.csr_matrix(basis(kv, s_entries).T)
-        s_q, w_q, lo = _pieces(kv[DEGREE:len(kv) - DEGREE], edges)
-        c_q = stretch.weight(s_q) * w_q                               # (pieces, q)
-        values = basis(kv, s_q.ravel()).reshape(s_q.shape + (-1,))   # (pieces, q, basis)
-        piece_basis = np.einsum("pq,pqk->pk", c_q, values)           # int over each piece
-        basis_area = piece_basis.sum(axis=0)
-        piece_bin = np.clip(np.searchsorted(edges, lo, side="right") - 1, 0, len(edges) - 2)
         n_bins = len(edges) - 1
-        bin_area = np.bincount(piece_bin, c_q.sum(axis=1), n_bins)
-        bin_mean = np.zeros((n_bins, len(basis_area)))
-        np.add.at(bin_mean, piece_bin, piece_basis)
-        bin_mean /= bin_area[:, None]
+        share = design(kv, s_entries).T.tocsr()
+        # Gauss points on the pieces between knots and bin edges: int_bin B_k c ds
+        s_q, w_q, lo = _pieces(kv[DEGREE:len(kv) - DEGREE], edges)
+        piece_bin = np.clip(np.searchsorted(edges, lo, side="right") - 1, 0, n_bins - 1)
+        weight = (stretch.weight(s_q) * w_q).ravel()
+        point_bin = np.repeat(piece_bin, s_q.shape[1])
+        gather = sparse.csr_matrix((weight, (point_bin, np.arange(len(weight)))),
+                                   shape=(n_bins, len(weight)))
+        bin_integral = gather @ design(kv, s_q)                   # (bins, basis)
+        bin_area = np.asarray(gather.sum(axis=1)).ravel()
+        basis_area = np.asarray(bin_integral.sum(axis=0)).ravel()
+        bin_mean = sparse.diags(1.0 / bin_area) @ bin_integral
         in_bin = np.clip(np.searchsorted(edges, s_entries, side="right") - 1, 0, n_bins - 1)
         raw = sparse.csr_matrix((np.ones(len(entries)), (in_bin, np.arange(len(entries)))),
                                 shape=(n_bins, len(entries)))
@@ -208,7 +210,7 @@ class StretchRecovery:
 
     def evaluate(self, force: np.ndarray, s) -> np.ndarray:
         """The recovered traction at arc lengths ``s`` (Pa)."""
-        return basis(self.knot_vector, s) @ self.coefficients(force)
+        return design(self.knot_vector, s) @ self.coefficients(force)
 
     @property
     def breakpoints(self) -> np.ndarray:
@@ -220,5 +222,5 @@ class StretchRecovery:
         inside = self.breakpoints[(self.breakpoints > a) & (self.breakpoints < b)]
         s_q, w_q, _ = _pieces(inside, np.array([a, b], float))
         c_q = (self.stretch.weight(s_q) * w_q).ravel()
-        values = basis(self.knot_vector, s_q.ravel()) @ self.coefficients(force)
+        values = design(self.knot_vector, s_q) @ self.coefficients(force)
         return float(np.sum(c_q * values) / np.sum(c_q))

@@ -352,6 +352,96 @@ def test_help_everywhere(argv, capsys):
     assert "fipy-hopper" in capsys.readouterr().out
 
 
+def test_force_leaves_nothing_of_the_earlier_run(run_dir, tmp_path, capsys):
+    """A directory with every picture the package draws (:data:`plotting.PICTURES`: the
+    discharge run's six and a Lagrangian mesh picture drawn into it), then ``--force`` with a
+    fill-only configuration, which draws fewer: the directory holds exactly what the same
+    run writes into an empty one (no picture, table or snapshot of the earlier run)."""
+    from fipy_hopper import plotting
+
+    old = tmp_path / "old"
+    shutil.copytree(run_dir, old)
+    plotting._save(plotting.lagrangian_mesh(old), old / "lagrangian_mesh.png")
+    every = {p.name for p in plotting.PICTURES}
+    assert every <= {p.name for p in old.iterdir()}
+    assert {"wall_forces.png", "lagrangian_mesh.png", "discharge.gif"} <= every
+    fill = tmp_path / "fill.toml"
+    fill.write_text(COARSE.replace("end_time = 0.2", "end_time = 0.0"))
+    assert main(["run", str(fill), "--out", str(old), "--force", "--quiet"]) == 0
+    fresh = tmp_path / "fresh"
+    assert main(["run", str(fill), "--out", str(fresh), "--quiet"]) == 0
+
+    def files(folder):
+        return sorted(str(p.relative_to(folder)) for p in folder.rglob("*"))
+
+    assert files(old) == files(fresh)
+    assert "discharge.png" not in files(fresh) and "wall_pressure.png" in files(fresh)
+    assert main(["plot", "--help"]) == 0
+    text = capsys.readouterr().out
+    for name in every:                              # the help names every picture
+        assert name in text, name
+
+
+def test_a_fill_only_run_draws_only_what_it_has(run_dir, tmp_path):
+    """``end_time = 0``: no ``discharge.png`` (there is no discharge: no empty axes), and a
+    ``wall_pressure.png`` of one panel (the overpressure panel needs a discharge envelope)
+    where a discharge run's has two."""
+    from fipy_hopper import plotting
+
+    fill = tmp_path / "fill.toml"
+    fill.write_text(COARSE.replace("end_time = 0.2", "end_time = 0.0"))
+    out = tmp_path / "fill"
+    assert main(["run", str(fill), "--out", str(out), "--quiet"]) == 0
+    pictures = {p.name for p in out.iterdir() if p.suffix in (".png", ".gif")}
+    assert pictures == {"wall_pressure.png", "wall_forces.png", "stress_pattern.png"}
+    fig = plotting.wall_pressure(out)
+    assert len(fig.axes) == 1 and fig.axes[0].get_lines()
+    assert fig.get_size_inches()[0] < 8
+    assert len(plotting.wall_pressure(run_dir).axes) == 2      # with a discharge: both
+
+
+def unsettled(tmp_path, end_time):
+    """The coarse hopper whose fill gives up (max_fill_time just past the gravity ramp)."""
+    path = tmp_path / f"unsettled_{end_time}.toml"
+    path.write_text(COARSE.replace("gravity_ramp_time = 0.05", "gravity_ramp_time = 0.05\n"
+                                   "max_fill_time = 0.06")
+                    .replace("end_time = 0.2", f"end_time = {end_time}")
+                    .replace("output_interval = 0.02", "output_interval = 0.01")
+                    .replace("field_interval = 0.05", "field_interval = 0.02"))
+    return path
+
+
+def test_a_fill_that_never_comes_to_rest_is_not_filled(tmp_path, capsys):
+    """A fill-only run whose fill gives up at numerics.max_fill_time: ``stop_reason``
+    ``"fill_not_at_rest"``, exit 1 and one error line naming the key (its outputs written);
+    a discharge started from it finishes with exit 0 and one warning line."""
+    out = tmp_path / "fill"
+    assert main(["run", str(unsettled(tmp_path, 0.0)), "--out", str(out), "--quiet"]) == 1
+    err = capsys.readouterr().err
+    lines = [line for line in err.splitlines() if "cells across the outlet" not in line]
+    assert len(lines) == 1 and lines[0].startswith("fipy-hopper: error: the fill did not come "
+                                                   "to rest"), err
+    assert "numerics.max_fill_time = 0.06 s" in lines[0] and str(out) in lines[0]
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["stop_reason"] == "fill_not_at_rest" and summary["fill_at_rest"] is False
+    assert (out / "wall_pressure.png").is_file()
+    out = tmp_path / "discharge"
+    assert main(["run", str(unsettled(tmp_path, 0.02)), "--out", str(out), "--quiet"]) == 0
+    lines = [line for line in capsys.readouterr().err.splitlines()
+             if "cells across the outlet" not in line]
+    assert len(lines) == 1 and lines[0].startswith("fipy-hopper: warning: the fill did not "
+                                                   "come to rest"), lines
+    assert json.loads((out / "summary.json").read_text())["stop_reason"] == "end_time"
+
+
+def test_the_description_names_silos_and_hoppers_of_every_shape(capsys):
+    """The program's description is not that of a conical hopper only: wedges run too."""
+    assert main(["--help"]) == 0
+    text = " ".join(capsys.readouterr().out.split())
+    assert "silos and hoppers" in text and "wedge" in text and "conical" in text
+    assert "from a conical hopper" not in text
+
+
 def test_usage_errors_exit_2(capsys):
     assert main([]) == 2
     assert main(["run"]) == 2                      # no configuration, no --out

@@ -79,3 +79,65 @@ def test_a_law_with_other_internal_variables_is_refused_clearly():
         HopperModel(CFG, law=law_of(DamageLaw))
     with pytest.raises(ValueError, match="material.density"):
         HopperModel(CFG, law=dataclasses.replace(CFG.material.law(), rho=1000.0))
+
+
+@dataclasses.dataclass(frozen=True)
+class ElasticLaw(MohrCoulomb):
+    """Linear elasticity: Mohr-Coulomb's elastic trial, never yielding (its own update)."""
+
+    def update_reference(self, sigma, d_eps, return_status=False):
+        from fipy_hopper.material import ELASTIC, elastic_trial
+
+        new = elastic_trial(sigma, d_eps, self)
+        out = (new, np.zeros_like(d_eps))
+        return out + (np.full(len(sigma), ELASTIC),) if return_status else out
+
+    update = update_reference
+
+
+class DuckLaw:
+    """A law of the protocol that is not a MohrCoulomb at all."""
+
+    def __init__(self, law):
+        self._law = law
+        self.rho, self.internal_variables = law.rho, law.internal_variables
+
+    def __getattr__(self, name):
+        return getattr(self._law, name)
+
+
+def test_a_law_with_its_own_update_runs_on_numpy_and_is_refused_on_numba():
+    """The compiled step fuses Mohr-Coulomb's return: a law whose stress update is its own
+    (or that is no MohrCoulomb) is refused on the numba backend in one line naming it and the
+    numpy backend, where its update is the one that runs: with the elastic law the filled
+    column carries stress the Mohr-Coulomb law would have yielded."""
+    for law in (law_of(ElasticLaw), law_of(HalfStepLaw), DuckLaw(CFG.material.law())):
+        with pytest.raises(NotImplementedError) as err:
+            HopperModel(CFG, law=law)
+        message = str(err.value)
+        assert type(law).__name__ in message and 'backend="numpy"' in message
+        assert "\n" not in message
+    results = {}
+    for name, law in (("elastic", law_of(ElasticLaw)), ("mohr_coulomb", None)):
+        model = HopperModel(CFG, backend="numpy", law=law)
+        state = model.initial_state()
+        model.advance(state, 400)
+        results[name] = state.eps_p.max(), np.abs(state.sigma).max()
+    assert results["elastic"][0] == 0.0 < results["mohr_coulomb"][0]
+    assert results["elastic"][1] != results["mohr_coulomb"][1]
+
+
+def test_a_law_that_changes_only_its_time_step_runs_compiled():
+    """A MohrCoulomb that keeps Mohr-Coulomb's stress update and changes its step is run by
+    the compiled backend as it says: half the step."""
+
+    @dataclasses.dataclass(frozen=True)
+    class HalfStep(MohrCoulomb):
+        def stable_time_step(self, h, safety):
+            return 0.5 * super().stable_time_step(h, safety)
+
+    model = HopperModel(CFG, law=law_of(HalfStep), threads=1)
+    assert model.dt == 0.5 * HopperModel(CFG, threads=1).dt
+    state = model.initial_state()
+    model.advance(state, 5)
+    assert state.step == 5 and state.t == pytest.approx(5 * model.dt)

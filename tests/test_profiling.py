@@ -135,10 +135,15 @@ def test_run_profile_writes_and_prints_where_the_time_went(tmp_path, capsys):
 
 
 def test_a_resumed_run_starts_without_the_profile_of_the_earlier_session(tmp_path):
+    """Opening the directory to resume keeps the earlier profile (a checkpoint refused after
+    that must leave the directory as it was); the run removes it once the checkpoint is
+    restored (``remove_profile``; end to end in test_resume.py)."""
     for name in ("config.toml", "checkpoint.npz", "profile.json"):
         (tmp_path / name).write_text("x")
     folder = io.RunDirectory(tmp_path, resume=True)
     try:
+        assert (tmp_path / "profile.json").exists()
+        folder.remove_profile()
         assert not (tmp_path / "profile.json").exists()
         assert (tmp_path / "checkpoint.npz").exists()
     finally:

@@ -133,6 +133,115 @@ def test_plot_on_a_foreign_directory_is_one_line(tmp_path, capsys, name, files):
     assert not (run / "discharge.png").exists()
 
 
+# ---------------------------------------------------------------- hostile TOML
+HOSTILE_TOML = [
+    ("a table nested 5,000 deep", "[run]\nend_time = " + "{a = " * 5000 + "1" + "}" * 5000,
+     ["nested too deeply", "line 2", "'run.end_time'"]),
+    ("an array nested 5,000 deep over many lines", "[run]\nx = [\n" + "[\n" * 5000
+     + "]\n" * 5001, ["nested too deeply", "'run.x'"]),
+    ("a 5,000-digit integer", "[hopper]\nbin_diameter = " + "7" * 5000,
+     ["line 2", "'hopper.bin_diameter'", "more than 4,300 digits"]),
+    ("a key set twice", "[hopper]\nbin_diameter = 0.3\nfill_height = 0.2\n"
+     "bin_diameter = 0.4\n", ["'hopper.bin_diameter' is set twice", "lines 2 and 4"]),
+    ("a dotted key set again in its table", "hopper.bin_diameter = 0.3\n[hopper]\n"
+     "bin_diameter = 0.4\n", ["'hopper.bin_diameter' is set twice", "lines 1 and 3"]),
+    ("a table declared twice", "[run]\nend_time = 1.0\n[hopper]\nfill_height = 0.2\n"
+     "[run]\nmax_time = 9.0\n", ["'[run]' is set twice", "lines 1 and 5"]),
+]
+
+
+@pytest.mark.parametrize("name, text, words", HOSTILE_TOML, ids=[c[0] for c in HOSTILE_TOML])
+def test_hostile_toml_is_one_line_naming_the_file_and_the_key(tmp_path, capsys, name, text,
+                                                              words):
+    """Deep nesting (a RecursionError in the parser), an integer beyond Python's digit limit
+    (a ValueError) and a key or table set twice: exit 2 with one line naming the file, the
+    line and the key, from ``validate``, ``run`` and ``plot`` (a run directory's config)."""
+    path = tmp_path / "hostile.toml"
+    path.write_text(text)
+    out = tmp_path / "run"
+    for argv in (["validate", str(path)], ["run", str(path), "--out", str(out), "--quiet"]):
+        assert main(argv) == 2
+        line = one_error_line(capsys.readouterr().err)
+        assert f"{path} is not valid TOML: " in line, line
+        for word in words:
+            assert word in line, (word, line)
+        assert len(line) < 300
+    assert not out.exists()
+    out.mkdir()
+    shutil.copy(path, out / "config.toml")
+    (out / "timeseries.csv").write_text("t_s,mass_in_hopper_kg,discharged_kg,"
+                                        "discharge_rate_kg_s\n")
+    assert main(["plot", str(out)]) == 2
+    assert words[0] in one_error_line(capsys.readouterr().err)
+
+
+# ---------------------------------------------------------------- messages
+def test_a_fill_only_run_gets_no_warning_about_field_snapshots(tmp_path, capsys):
+    """``end_time = 0`` has no discharge to sample: no SamplingWarning (a short discharge
+    still gets one)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", fconfig.SamplingWarning)
+        HopperConfig().replace(run={"end_time": 0.0})
+    with pytest.warns(fconfig.SamplingWarning, match="run.end_time = 0.01 s"):
+        HopperConfig().replace(run={"end_time": 0.01, "output_interval": 0.005})
+    path = tmp_path / "fill.toml"
+    path.write_text(COARSE.replace("end_time = 0.05", "end_time = 0.0"))
+    assert main(["validate", str(path)]) == 0
+    assert "snapshot" not in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("field, words", [
+    ("v", ["non-finite velocity", "node r = 0.05 m, z = 0.", "|v| = nan m/s"]),
+    ("sigma", ["non-finite material fraction or stress", "cell r = 0.055 m, z = 0."]),
+])
+def test_the_instability_after_a_transport_names_the_node_or_the_cell(tmp_path, field, words):
+    """A non-finite velocity names its node, a non-finite stress its cell (never ``[]``)."""
+    from fipy_hopper.model import HopperModel, InstabilityError
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model = HopperModel(HopperConfig.from_toml(coarse(tmp_path)), threads=1)
+    state = model.initial_state()
+    model.advance(state, 3)
+    j, i = [int(np.argmin(np.abs(model.grid.z_nodes - 0.1))),
+            int(np.argmin(np.abs(model.grid.r_nodes - 0.05)))]
+    if field == "v":
+        state.v[1, j, i] = np.nan
+    else:
+        state.sigma[j, i, 0] = np.inf
+    with pytest.raises(InstabilityError) as err:
+        model.transport_step(state)
+    message = str(err.value)
+    assert "[]" not in message
+    for word in words:
+        assert word in message, message
+
+
+@pytest.mark.parametrize("content", [b"junk", b"<?xml version='1.0'?>\n<VTKFile type=",
+                                     b"\x00\xff" * 100])
+def test_a_corrupt_snapshot_is_one_line_not_meshios_exit(tmp_path, capsys, content):
+    """meshio.read prints and calls ``sys.exit(1)`` on a file it cannot read: ``plot`` says so
+    in one line with exit 2 (nothing on stdout), :meth:`Results.field` raises the same
+    :class:`RunFileError` naming the file."""
+    from fipy_hopper.io import RunFileError
+
+    run = tmp_path / "run"
+    (run / "fields").mkdir(parents=True)
+    (run / "config.toml").write_text(HopperConfig().to_toml())
+    (run / "timeseries.csv").write_text("t_s,mass_in_hopper_kg,discharged_kg,"
+                                        "discharge_rate_kg_s\n0.0,1.0,0.0,0.0\n")
+    (run / "summary.json").write_text("{}")
+    (run / "fields" / "snapshots.csv").write_text(
+        "index,file,step,t_s,discharge_time_s,stage\n0,fields_0000.vtu,0,0.0,nan,filling\n")
+    (run / "fields" / "fields_0000.vtu").write_bytes(content)
+    assert main(["plot", str(run)]) == 2
+    captured = capsys.readouterr()
+    line = one_error_line(captured.err)
+    assert "fields_0000.vtu is not a readable VTU file" in line and captured.out == ""
+    with pytest.raises(RunFileError, match="fields_0000.vtu is not a readable VTU file"):
+        fh.read_results(run).field(0)
+
+
 # ---------------------------------------------------------------- size of a run
 @pytest.mark.parametrize("changes", [
     {},
@@ -209,6 +318,196 @@ def test_memory_estimate_bounds_the_measured_peak():
         tracemalloc.stop()
     per_cell = peak / cfg.n_cells
     assert 0.6 * MEMORY_PER_CELL < per_cell < MEMORY_PER_CELL, per_cell
+
+
+WALL_CASES = [
+    {"numerics": {"cell_size": 0.005}},
+    {"hopper": {"half_angle_deg": 90.0, "bin_diameter": 0.23}, "numerics": {"cell_size": 0.007}},
+    {"hopper": {"half_angle_deg": 60.0}, "numerics": {"cell_size": 0.004}},
+    {"hopper": {"shape": "wedge", "bin_width": 0.3, "outlet_width": 0.06},
+     "numerics": {"cell_size": 0.004}},
+]
+
+
+@pytest.mark.parametrize("sections", WALL_CASES)
+def test_the_wall_loads_estimate_bounds_the_wall_loads(sections):
+    """The estimate asks WallLoads for its size (``estimated_bytes``) on the bins of its
+    sampler and a bound of its contact entries, both from the configuration alone: the bins
+    are the run's, the bound is above the entries, and the bytes above what building the wall
+    loads allocates (tracemalloc) for a cone, a flat bottom, a shallow cone and a wedge."""
+    import tracemalloc
+
+    from fipy_hopper import resources
+    from fipy_hopper.diagnostics import WallLoads
+    from fipy_hopper.model import HopperModel
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        cfg = HopperConfig.from_dict(sections)
+    h = cfg.numerics.cell_size
+    model = HopperModel(cfg, threads=1)
+    tracemalloc.start()
+    try:
+        loads = WallLoads(model)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    bins, entries = resources.wall_bins(cfg, h), resources.wall_entry_bound(cfg, h)
+    assert bins == len(loads.centres)
+    assert len(loads.entries) <= entries < 2 * len(loads.entries)
+    assert peak <= WallLoads.estimated_bytes(len(loads.centres), len(loads.entries))
+    kept = sum(m.data.nbytes + m.indices.nbytes + m.indptr.nbytes for rec in loads.recoveries
+               for m in (rec.share, rec.raw, rec.bin_mean))
+    assert 0 < kept < WallLoads.estimated_bytes(bins, entries)
+
+
+def test_the_memory_estimate_bounds_what_a_run_allocates():
+    """A run of 72,346 cells (markers, wall loads), traced by ``tracemalloc`` (numpy's
+    allocations; the interpreter, the libraries and the compiler are MEMORY_BASE): the
+    model, the simulation with its wall loads, steps, a transport, a field snapshot and a
+    checkpoint stay below the estimate; the wall loads' own part of it (sparse maps, a few
+    hundred bytes a contact entry) is below 2 % of it."""
+    import tempfile
+    import tracemalloc
+
+    from fipy_hopper import resources
+    from fipy_hopper.config import MEMORY_BASE
+    from fipy_hopper.diagnostics import WallLoads
+    from fipy_hopper.io import FieldWriter
+    from fipy_hopper.model import HopperModel
+    from fipy_hopper.simulation import Simulation
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        cfg = HopperConfig().replace(numerics={"cell_size": 0.00125})
+    tracemalloc.start()
+    try:
+        model = HopperModel(cfg, threads=1)
+        sim = Simulation(model, progress=False)
+        model.advance(sim.state, 20)
+        model.transport_step(sim.state)
+        with tempfile.TemporaryDirectory() as folder:
+            FieldWriter(folder, model.grid).write(sim.state)
+            sim.checkpoint(os.path.join(folder, "checkpoint.npz"))
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    estimate = cfg.memory_estimate()
+    assert estimate == resources.memory_estimate(cfg)
+    assert peak < estimate - MEMORY_BASE, (peak, estimate)
+    wall = WallLoads.estimated_bytes(resources.wall_bins(cfg, cfg.numerics.cell_size),
+                                     resources.wall_entry_bound(cfg, cfg.numerics.cell_size))
+    assert 0 < wall < 0.02 * estimate
+
+
+def earlier_run(folder: Path) -> Path:
+    """A directory with the files of an earlier run (to see that a refusal keeps them)."""
+    out = folder / "run"
+    (out / "fields").mkdir(parents=True)
+    for name in ("config.toml", "summary.json", "profile.json", "discharge.png",
+                 "fields/fields_0000.vtu"):
+        (out / name).write_text(f"earlier {name}")
+    return out
+
+
+def test_a_run_that_needs_more_memory_than_there_is_is_refused(tmp_path, capsys, monkeypatch):
+    """Refused in one line before the directory is touched (with --force too): what the run
+    needs, what is available and a cell size that fits, which does."""
+    from fipy_hopper import resources
+    from fipy_hopper.config import MEMORY_BASE
+
+    path = tmp_path / "fine.toml"
+    path.write_text(COARSE.replace("cell_size = 0.01", "cell_size = 0.004"))
+    cfg = HopperConfig.from_toml(path)
+    have = MEMORY_BASE + 0.6 * (cfg.memory_estimate() - MEMORY_BASE)
+    monkeypatch.setattr(resources, "available_memory", lambda: have)
+    out = earlier_run(tmp_path)
+    before = {p: p.read_text() for p in out.rglob("*") if p.is_file()}
+    for argv in (["run", str(path), "--out", str(out), "--force"],
+                 ["run", str(path), "--out", str(tmp_path / "new")]):
+        assert main(argv) == 2
+        line = one_error_line(capsys.readouterr().err)
+        assert f"needs about {cfg.memory_estimate() / 1e9:.3g} GB" in line
+        assert f"the {have / 1e9:.3g} GB of memory available" in line
+        coarser = float(line.split("numerics.cell_size >= ")[1].split(" m")[0])
+        assert 0.004 < coarser and resources.memory_estimate(cfg, coarser) <= have
+    assert {p: p.read_text() for p in out.rglob("*") if p.is_file()} == before
+    assert not (out / ".lock").exists() and not (tmp_path / "new").exists()
+    with pytest.raises(ConfigError, match="GB of memory available"):
+        fh.run(cfg, tmp_path / "api")
+    assert not (tmp_path / "api").exists()
+
+
+def test_validate_says_whether_the_memory_a_run_needs_is_available(tmp_path, capsys,
+                                                                  monkeypatch):
+    from fipy_hopper import resources
+
+    path = coarse(tmp_path)
+    need = HopperConfig.from_toml(path).memory_estimate()
+    for have, words in ((2 * need, "GB available)"), (need / 2, "the run would be refused")):
+        monkeypatch.setattr(resources, "available_memory", lambda: have)
+        assert main(["validate", str(path)]) == 0
+        grid = [line for line in capsys.readouterr().out.splitlines() if "grid" in line][0]
+        assert f"about {need / 1e9:.2g} GB" in grid and words in grid, grid
+
+
+def test_threads_beyond_the_cores_are_refused_before_anything(tmp_path, capsys):
+    """``--threads`` above the cores this process may use (its CPU affinity, its cgroup's
+    quota, NUMBA_NUM_THREADS) or below 1: one line naming the range, nothing written."""
+    from fipy_hopper import resources
+
+    limit = resources.thread_limit()
+    assert limit <= len(os.sched_getaffinity(0))
+    out = earlier_run(tmp_path)
+    before = {p: p.read_text() for p in out.rglob("*") if p.is_file()}
+    for value in (limit + 1, 999, 0, -2):
+        assert main(["run", str(coarse(tmp_path)), "--out", str(out), "--force",
+                     "--threads", str(value)]) == 2
+        line = one_error_line(capsys.readouterr().err)
+        assert f"--threads = {value}: expected a number of threads in [1, {limit}]" in line
+    assert {p: p.read_text() for p in out.rglob("*") if p.is_file()} == before
+    with pytest.raises(ConfigError, match=rf"threads = {limit + 1}: expected"):
+        fh.run(coarse(tmp_path), tmp_path / "api", threads=limit + 1)
+    assert not (tmp_path / "api").exists()
+
+
+def test_the_input_configuration_in_the_run_directory_is_never_replaced(tmp_path, capsys,
+                                                                        monkeypatch):
+    """``--out . --force`` in the folder holding ``config.toml``: refused (the run would write
+    its resolved configuration over it), the file and the folder as they were."""
+    work = tmp_path / "work"
+    work.mkdir()
+    text = "# my hopper\n" + COARSE
+    (work / "config.toml").write_text(text)
+    (work / "summary.json").write_text("{}")
+    monkeypatch.chdir(work)
+    for argv in (["run", "config.toml", "--out", ".", "--force", "--quiet"],
+                 ["run", str(work / "config.toml"), "--out", str(work), "--force", "--quiet"]):
+        assert main(argv) == 2
+        line = one_error_line(capsys.readouterr().err)
+        assert "config.toml is the configuration being run" in line
+        assert "choose another run directory" in line
+    assert (work / "config.toml").read_text() == text
+    assert sorted(p.name for p in work.iterdir()) == ["config.toml", "summary.json"]
+
+
+def test_ctrl_c_while_the_pictures_are_drawn_advises_plot(tmp_path, capsys, monkeypatch):
+    """The run is finished and written when Ctrl-C stops its pictures: exit 130 and the
+    advice to draw them with ``fipy-hopper plot DIR``, not to start again with --force."""
+    from fipy_hopper import plotting
+
+    def interrupted(run):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(plotting, "plot_run", interrupted)
+    out = tmp_path / "run"
+    assert main(["run", str(coarse(tmp_path)), "--out", str(out), "--quiet"]) == 130
+    line = one_error_line(capsys.readouterr().err)
+    assert f"fipy-hopper plot {out}" in line and "complete" in line
+    assert "--force" not in line and "--resume" not in line
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["status"] == "finished" and (out / "summary.json").is_file()
+    assert not (out / ".lock").exists()
 
 
 def test_a_run_refused_for_its_size_leaves_no_directory(tmp_path, capsys):
@@ -546,6 +845,102 @@ def test_a_checkpoint_limit_fits_real_runs(checkpoint):
     path, shapes, optional, limit = checkpoint
     with zipfile.ZipFile(path) as zf:
         assert sum(i.file_size for i in zf.infolist()) < limit < 200e6
+
+
+# ---------------------------------------------------------------- the default threads
+@pytest.mark.parametrize("cores, others, threads", [
+    (2, 0.0, 2), (2, 0.25, 2), (2, 0.3, 1), (2, 1.0, 1), (2, 1.9, 1), (2, 3.0, 1),
+    (4, 1.0, 3), (4, 1.26, 2), (4, 2.5, 1), (1, 0.0, 1), (8, 0.1, 8), (8, 6.0, 2),
+])
+def test_the_threads_are_the_cores_other_processes_leave(cores, others, threads):
+    """A core counts as taken once other processes take more than a quarter of it."""
+    from fipy_hopper.resources import threads_for
+
+    assert threads_for(cores, others) == threads
+
+
+STAT = """cpu  {all} 0 0 0 0 0 0 0 0 0
+cpu0 {c0} 5 10 900 3 1 1 2 0 0
+cpu1 {c1} 0 0 100 0 0 0 0 0 0
+cpu2 {c2} 0 0 5 0 0 0 0 0 0
+intr 123 0 0
+ctxt 456
+"""
+
+
+def stat(c0, c1, c2):
+    return STAT.format(all=c0 + c1 + c2, c0=c0, c1=c1, c2=c2)
+
+
+def test_busy_time_counts_only_this_processes_cores():
+    """user, nice, system, irq, softirq and steal of the cores of the affinity set; not idle
+    and iowait, not other cores, not the total line."""
+    from fipy_hopper.resources import busy_seconds
+
+    text = stat(100, 40, 7)
+    assert busy_seconds(text, {0}, 0.01) == pytest.approx((100 + 5 + 10 + 1 + 1 + 2) * 0.01)
+    assert busy_seconds(text, {0, 2}, 0.01) == pytest.approx((119 + 7) * 0.01)
+    assert busy_seconds(text, {5}, 0.01) == 0.0
+
+
+def test_the_load_of_other_processes_is_the_busy_time_less_this_processes():
+    """Over 1 s, cores 0 and 1 were busy for 1.6 s of which this process took 0.9 s: other
+    processes took 0.7 of a core; a window below MIN_WINDOW waits for a longer one."""
+    from fipy_hopper.resources import CpuLoad
+
+    readings = {"stat": stat(0, 0, 0), "clock": 10.0, "own": 5.0}
+    load = CpuLoad(cores={0, 1}, read_stat=lambda: readings["stat"],
+                   clock=lambda: readings["clock"], own=lambda: readings["own"])
+    load.tick = 0.01
+    readings.update(stat=stat(81, 60, 500), clock=10.1, own=5.05)
+    assert load.others() is None                     # 0.1 s: too short, no reading used
+    readings.update(stat=stat(100 - 19, 80, 500), clock=11.0, own=5.9)
+    assert load.others() == pytest.approx((0.81 + 0.80 - 0.9) / 1.0)
+    readings.update(stat=stat(181, 180, 900), clock=13.0, own=7.9)   # this process alone
+    assert load.others() == 0.0
+    broken = CpuLoad(cores={0}, read_stat=lambda: (_ for _ in ()).throw(OSError("no /proc")))
+    assert broken.others() is None
+
+
+def test_the_governor_sets_the_models_threads_from_the_load():
+    from fipy_hopper.resources import ThreadGovernor
+
+    class Load:
+        values = [None, 0.0, 1.0, 0.1, None]
+
+        def others(self):
+            return self.values.pop(0)
+
+    sim = type("Sim", (), {})()
+    sim.model = type("Model", (), {"threads": 0})()
+    governor = ThreadGovernor(limit=2, load=Load())
+    seen = []
+    for _ in range(5):
+        governor(sim, None)
+        seen.append(sim.model.threads)
+    assert seen == [2, 2, 1, 2, 2]
+
+
+def test_a_run_without_threads_is_governed_and_one_with_threads_is_not(tmp_path):
+    """``threads=None`` (the CLI without --threads): a ThreadGovernor among the wall-time
+    callbacks, the model's threads its choice; ``threads=1``: none, and 1 thread."""
+    from fipy_hopper.resources import ThreadGovernor
+
+    seen = {}
+
+    def setup(sim):
+        governors = [e.fn for e in sim.wall_schedules if isinstance(e.fn, ThreadGovernor)]
+        seen[len(seen)] = (len(governors), sim.model.threads,
+                           governors[0].threads if governors else None)
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        cfg = HopperConfig.from_toml(coarse(tmp_path)).replace(run={"end_time": 0.0})
+        fh.run(cfg, tmp_path / "governed", plots=False, setup=setup)
+        fh.run(cfg, tmp_path / "fixed", plots=False, setup=setup, threads=1)
+    count, threads, chosen = seen[0]
+    assert count == 1 and threads == chosen and 1 <= threads
+    assert seen[1] == (0, 1, None)
 
 
 # ---------------------------------------------------------------- numba cache

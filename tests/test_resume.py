@@ -11,6 +11,7 @@ included, must be *bitwise* equal to the uninterrupted run's.
 """
 
 import json
+import shutil
 import warnings
 
 import meshio
@@ -253,3 +254,132 @@ def test_a_checkpoint_without_the_bin_ratio_resumes_with_it_unknown_before(setup
         value_a, value_b = summary_a.pop(key), summary_b.pop(key)
         assert key == "wall_time_s" or (value_a is None and value_b > 0)
     assert summary_a == summary_b
+
+
+# ---------------------------------------------------------------- crafted checkpoints
+@pytest.fixture(scope="module")
+def interrupted(setup_dirs):
+    """An interrupted run (during discharge) with its checkpoint and its profile.json."""
+    folder, config, _ = setup_dirs
+    out = folder / "interrupted"
+    condition = (lambda sim, st: st.stage == "discharge" and st.t - sim.t_open >= 0.05)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        with pytest.raises(KeyboardInterrupt):
+            api.run(config, out, setup=interrupt_when(condition, out), plots=False,
+                    profile=True)
+    assert (out / "profile.json").is_file() and (out / "summary.json").is_file()
+    return out
+
+
+def rewrite_checkpoint(path, change):
+    """Apply ``change(arrays, meta)`` to the checkpoint at ``path``, in place."""
+    with np.load(path) as data:
+        arrays = {k: data[k] for k in data.files}
+    meta = json.loads(str(arrays.pop("__meta__")))
+    change(arrays, meta)
+    with open(path, "wb") as fh:
+        np.savez(fh, __meta__=np.array(json.dumps(meta)), **arrays)
+
+
+def state(key, value):
+    return lambda arrays, meta: meta["state"].__setitem__(key, value)
+
+
+def record(key, value):
+    return lambda arrays, meta: meta["record"].__setitem__(key, value)
+
+
+CRAFTED = [
+    ("a step of 2**70", state("step", 2 ** 70), ["state step = 1180591620717411303424",
+                                                 "a whole number in [0, "]),
+    ("a step that is a bool", state("step", True), ["state step = True"]),
+    ("a time of 1e300 s", state("t", 1e300), ["state time t = 1e+300", "[0, "]),
+    ("a negative time", state("t", -1.0), ["state time t = -1.0"]),
+    ("a time as text", state("t", "0.3"), ["state time t = 0.3"]),
+    ("an unknown stage", state("stage", "emptying"), ["state stage = emptying"]),
+    ("a closed plate as a number", state("plate_closed", 1), ["plate_closed = 1", "bool"]),
+    ("an infinite discharged mass", state("discharged", float("inf")),
+     ["discharged = inf", "finite number"]),
+    ("a time series of text", record("t", ["a", "b"]), ["record's t"]),
+    ("a stop reason that is a number", record("stop_reason", 3), ["record's stop_reason"]),
+    ("a negative step count", record("steps", -5), ["record's steps"]),
+    ("an unknown record field", record("surprise", 1), ["unknown field 'surprise'"]),
+    ("time series of different lengths", lambda a, m: m["record"]["rate"].append(0.0),
+     ["different lengths"]),
+    ("an envelope of another length",
+     lambda a, m: a.update(envelope=np.zeros(5)), ["'envelope'", "shape (5,)"]),
+    ("a wall sample of another grid's bins",
+     lambda a, m: [a.__setitem__(f"wall__filling__{k}", np.zeros(3)) for k in range(5)],
+     ["'wall__filling__0'", "shape (3,)"]),
+    ("a reading of another contact count",
+     lambda a, m: a.update(reading__sample__wall=np.zeros((2, 2))),
+     ["'reading__sample__wall'", "shape"]),
+    ("an unknown stage of the wall samples",
+     lambda a, m: [m["wall_times"].__setitem__("flood", 0.0)]
+     + [a.__setitem__(f"wall__flood__{k}", a[f"wall__filling__{k}"]) for k in range(5)],
+     ["unknown stage 'flood'"]),
+    ("a schedule that is text", lambda a, m: m["schedules"].__setitem__(0, "soon"),
+     ["schedule times"]),
+    ("another run's fingerprint", lambda a, m: m.__setitem__("fingerprint", "0" * 64),
+     ["belongs to another run"]),
+    ("no fingerprint", lambda a, m: m.pop("fingerprint"), ["no fingerprint"]),
+]
+
+
+def snapshot_of(folder):
+    return {p.relative_to(folder): p.read_bytes() for p in sorted(folder.rglob("*"))
+            if p.is_file()}
+
+
+@pytest.mark.parametrize("name, change, words", CRAFTED, ids=[c[0] for c in CRAFTED])
+def test_a_crafted_checkpoint_is_refused_before_anything_is_touched(
+        interrupted, setup_dirs, tmp_path, capsys, name, change, words):
+    """Wrong types, absurd times and steps, another grid's measurements, another run: one
+    line naming the checkpoint and what is wrong, exit 2, and every file of the run directory
+    (summary.json, profile.json, the snapshots) as it was."""
+    _, config, _ = setup_dirs
+    out = tmp_path / "run"
+    shutil.copytree(interrupted, out)
+    rewrite_checkpoint(out / "checkpoint.npz", change)
+    before = snapshot_of(out)
+    assert main(["run", str(config), "--out", str(out), "--resume", "--quiet"]) == 2
+    err = capsys.readouterr().err
+    lines = [line for line in err.splitlines() if "warning:" not in line]
+    assert len(lines) == 1 and lines[0].startswith(
+        f"fipy-hopper: error: checkpoint {out / 'checkpoint.npz'}: "), err
+    for word in words:
+        assert word in lines[0], (word, lines[0])
+    assert snapshot_of(out) == before
+
+
+def test_another_runs_checkpoint_of_the_same_grid_is_refused(interrupted, setup_dirs, tmp_path,
+                                                             capsys):
+    """A checkpoint of a run of another material on the same grid (the arrays fit): refused
+    by the fingerprint of the configuration, before the mass check could notice."""
+    folder, config, _ = setup_dirs
+    other = tmp_path / "other.toml"
+    other.write_text(CONFIG.replace("[run]", "[material]\ndensity = 1400.0\n\n[run]"))
+    foreign = tmp_path / "foreign"
+    condition = (lambda sim, st: st.stage == "filling" and st.t >= 0.02)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        with pytest.raises(KeyboardInterrupt):
+            api.run(other, foreign, setup=interrupt_when(condition, foreign), plots=False)
+    out = tmp_path / "run"
+    shutil.copytree(interrupted, out)
+    shutil.copy(foreign / "checkpoint.npz", out / "checkpoint.npz")
+    before = snapshot_of(out)
+    assert main(["run", str(config), "--out", str(out), "--resume", "--quiet"]) == 2
+    assert "belongs to another run" in capsys.readouterr().err
+    assert snapshot_of(out) == before
+
+
+def test_a_good_checkpoint_still_resumes_and_drops_the_old_profile(interrupted, setup_dirs,
+                                                                    tmp_path):
+    _, config, reference = setup_dirs
+    out = tmp_path / "run"
+    shutil.copytree(interrupted, out)
+    assert main(["run", str(config), "--out", str(out), "--resume", "--quiet"]) == 0
+    assert not (out / "profile.json").exists()
+    assert_same_outputs(out, reference)

@@ -23,7 +23,7 @@ Modules:
 
 from . import mohr_coulomb
 from .element_tests import PATHS, ElementTestResult, drive, element_test
-from .law import ConstitutiveLaw, transported_fields
+from .law import ConstitutiveLaw, compiled_refusal, transported_fields
 from .mohr_coulomb import (APEX, ELASTIC, PLASTIC, MohrCoulomb, R_mc, R_mw, elastic_stiffness,
                            elastic_trial, equivalent_plastic_strain, flow_direction,
                            flow_potential, invariants, plastic_strain_from_stress,
@@ -31,5 +31,6 @@ from .mohr_coulomb import (APEX, ELASTIC, PLASTIC, MohrCoulomb, R_mc, R_mw, elas
 from .return_fast import update
 from .return_reference import update_reference
 
-__all__ = [*mohr_coulomb.__all__, "ConstitutiveLaw", "transported_fields", "update",
+__all__ = [*mohr_coulomb.__all__, "ConstitutiveLaw", "compiled_refusal", "transported_fields",
+           "update",
            "update_reference", "ElementTestResult", "PATHS", "drive", "element_test"]

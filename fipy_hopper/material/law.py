@@ -18,7 +18,10 @@ The model (:class:`fipy_hopper.model.HopperModel`) takes its time step, the fiel
 and its stress update from the law, and keeps what is not a property of the material to
 itself: the dense/loose rule (:mod:`fipy_hopper.dense_loose`) is a closure of the Eulerian
 mixture, applied around the law's update.  :class:`~fipy_hopper.material.MohrCoulomb` (the
-Abaqus form) is the law implemented; the compiled step is written for its internal variables.
+Abaqus form) is the law implemented; the compiled step is written for its internal variables
+and fuses its return mapping, so the compiled backend runs a law only when that is exactly
+its stress update (:func:`compiled_refusal`); any other law runs on the numpy backend, which
+calls the law's own ``update_reference``.
 """
 
 from __future__ import annotations
@@ -58,3 +61,25 @@ def transported_fields(law: ConstitutiveLaw, model_fields=("layer", "loose")) ->
     ``alpha``, the stress components, the law's internal variables, then the model's own
     (the layer tracer and the loose strain of the dense/loose rule)."""
     return ("alpha",) + STRESS_COMPONENTS + tuple(law.internal_variables) + tuple(model_fields)
+
+
+#: the methods of a law that make up its stress update; the compiled step fuses
+#: :class:`~fipy_hopper.material.MohrCoulomb`'s
+STRESS_UPDATE = ("update", "update_reference", "kernel_parameters")
+
+
+def compiled_refusal(law) -> str:
+    """Why the compiled step cannot run ``law`` ('' when it can): the step fuses Mohr-Coulomb's
+    return mapping on ``kernel_parameters()``, so it runs a
+    :class:`~fipy_hopper.material.MohrCoulomb` whose stress update (:data:`STRESS_UPDATE`) is
+    Mohr-Coulomb's own; a law that changes only its time step is run as it says."""
+    from .mohr_coulomb import MohrCoulomb
+
+    name = type(law).__name__
+    if not isinstance(law, MohrCoulomb):
+        return f"the law {name} is not a MohrCoulomb"
+    changed = [m for m in STRESS_UPDATE
+               if getattr(type(law), m) is not getattr(MohrCoulomb, m)]
+    if changed:
+        return f"the law {name} has its own {', '.join(changed)}"
+    return ""

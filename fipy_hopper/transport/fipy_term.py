@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .. import fipy_adapter
 from .geometry import TransportGeometry
 from .vanleer import cell_gradient
 
@@ -26,8 +27,9 @@ def _axisymmetric_term_class():
     if AxisymmetricVanLeerConvectionTerm is not None:
         return AxisymmetricVanLeerConvectionTerm
     import fipy
-    from fipy.terms.explicitUpwindConvectionTerm import ExplicitUpwindConvectionTerm
     from fipy.tools import numerix
+
+    from .. import fipy_adapter as fa
 
     class _Term(fipy.VanLeerConvectionTerm):
         """FiPy's ``VanLeerConvectionTerm`` with the bounded axisymmetric reconstruction.
@@ -47,23 +49,22 @@ def _axisymmetric_term_class():
                 raise ValueError("the term needs the mesh's axisymmetric TransportGeometry")
             self._planar = geometry
 
-        def _getOldAdjacentValues(self, oldArray, id1, id2, dt):
-            oldArray1, oldArray2 = ExplicitUpwindConvectionTerm._getOldAdjacentValues(
-                self, oldArray, id1, id2, dt)
+        def _getOldAdjacentValues(self, oldArray, id1, id2, dt):    # FiPy's own override
+            oldArray1, oldArray2 = fa.upwind_adjacent_values(self, oldArray, id1, id2, dt)
             mesh, geom = oldArray.mesh, self._planar
             interiorIDs = numerix.nonzero(mesh.interiorFaces)[0]
-            normals = numerix.take(mesh._orientedFaceNormals, interiorIDs, axis=-1)
-            interiorCFL = abs(numerix.take(self._getGeomCoeff(oldArray), interiorIDs)) * dt
-            gradUpwind = (oldArray2 - oldArray1) / numerix.take(mesh._cellDistances,
+            normals = numerix.take(fa.oriented_face_normals(mesh), interiorIDs, axis=-1)
+            interiorCFL = abs(numerix.take(fa.geom_coeff(self, oldArray), interiorIDs)) * dt
+            gradUpwind = (oldArray2 - oldArray1) / numerix.take(fa.cell_distances(mesh),
                                                                 interiorIDs)
             grad = cell_gradient(geom, np.asarray(oldArray.value, float)[None])[:, 0]
             vol1 = numerix.take(mesh.cellVolumes, id1)
-            oldArray1 += 0.5 * self._getGradient(
-                numerix.dot(numerix.take(grad, id1, axis=-1), normals), gradUpwind) \
+            oldArray1 += 0.5 * fa.limited_gradient(
+                self, numerix.dot(numerix.take(grad, id1, axis=-1), normals), gradUpwind) \
                 * (vol1 - interiorCFL) / geom.reach_1
             vol2 = numerix.take(mesh.cellVolumes, id2)
-            oldArray2 += 0.5 * self._getGradient(
-                numerix.dot(numerix.take(grad, id2, axis=-1), -normals), -gradUpwind) \
+            oldArray2 += 0.5 * fa.limited_gradient(
+                self, numerix.dot(numerix.take(grad, id2, axis=-1), -normals), -gradUpwind) \
                 * (vol2 - interiorCFL) / geom.reach_2
             return oldArray1, oldArray2
 
@@ -135,7 +136,7 @@ class FiPyTransport:
             phi.setValue(np.asarray(fields[name], dtype=float))
             phi.updateOld()
             # FiPy's own face values (the term's explicit arithmetic), for the face fluxes
-            phi1, phi2 = self.terms[name]._getOldAdjacentValues(phi.old, id1, id2, dt)
+            phi1, phi2 = fipy_adapter.adjacent_values(self.terms[name], phi.old, id1, id2, dt)
             self.equations[name].solve(var=phi, dt=dt, solver=self._solver)
             new = np.array(phi.value, dtype=float)
             flux = np.zeros(geom.n_faces)

@@ -13,6 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .. import fipy_adapter
+
 __all__ = ["TransportGeometry", "KAPPA_FLOOR"]
 
 #: Floor of the open fraction used in the time derivative of (2) (``kappa_eff = max(kappa,
@@ -70,7 +72,8 @@ class TransportGeometry:
         n_cells, n_faces = mesh.numberOfCells, mesh.numberOfFaces
         kappa = np.clip(np.asarray(kappa, dtype=float).reshape(n_cells), 0.0, 1.0)
         aperture = np.clip(np.asarray(aperture, dtype=float).reshape(n_faces), 0.0, 1.0)
-        id1, id2 = (np.asarray(ids, dtype=np.int64) for ids in mesh._adjacentCellIDs)
+        id1, id2 = (np.asarray(ids, dtype=np.int64)
+                    for ids in fipy_adapter.adjacent_cell_ids(mesh))
         solid = kappa < kappa_floor
         aperture = np.where(solid[id1] | solid[id2], 0.0, aperture)
         exterior = np.asarray(mesh.exteriorFaces.value, dtype=bool)
@@ -82,10 +85,10 @@ class TransportGeometry:
             raise ValueError("outflow_faces must be exterior faces")
         interior = np.flatnonzero(~exterior).astype(np.int64)
         volume = np.asarray(mesh.cellVolumes, dtype=float)
-        face_area = np.asarray(mesh._faceAreas, dtype=float)
+        face_area = np.asarray(fipy_adapter.face_areas(mesh), dtype=float)
         normal = np.asarray(mesh.faceNormals, dtype=float)
         if scheme == "fipy":
-            gradient_projection = np.asarray(mesh._areaProjections, dtype=float)
+            gradient_projection = np.asarray(fipy_adapter.area_projections(mesh), dtype=float)
             gradient_volume = volume
             reach_1 = reach_2 = face_area[interior]
         else:
@@ -94,7 +97,7 @@ class TransportGeometry:
             length = np.hypot(*(vertices[:, ends[1]] - vertices[:, ends[0]]))
             gradient_projection = normal * length
             gradient_volume = _planar_cell_areas(mesh)
-            to_cell = np.ma.filled(mesh._faceToCellDistances, 0.0)[:, interior]
+            to_cell = np.ma.filled(fipy_adapter.face_to_cell_distances(mesh), 0.0)[:, interior]
             reach_1 = volume[id1[interior]] / (2.0 * to_cell[0])
             reach_2 = volume[id2[interior]] / (2.0 * to_cell[1])
         return cls(
@@ -108,12 +111,12 @@ class TransportGeometry:
             face_normal=np.ascontiguousarray(normal),
             face_cell_1=id1,
             face_cell_2=id2,
-            face_ratio=np.asarray(mesh._faceToCellDistanceRatio, dtype=float),
+            face_ratio=np.asarray(fipy_adapter.face_to_cell_distance_ratio(mesh), dtype=float),
             cell_faces=np.ascontiguousarray(np.ma.filled(mesh.cellFaceIDs, 0).astype(np.int64)),
             cell_face_sign=np.ascontiguousarray(
-                np.ma.filled(mesh._cellToFaceOrientations, 0).astype(float)),
+                np.ma.filled(fipy_adapter.cell_to_face_orientations(mesh), 0).astype(float)),
             interior=interior,
-            interior_distance=np.asarray(mesh._cellDistances, dtype=float)[interior],
+            interior_distance=np.asarray(fipy_adapter.cell_distances(mesh), dtype=float)[interior],
             outflow=np.flatnonzero(outflow_mask).astype(np.int64),
             outflow_mask=outflow_mask,
             scheme=scheme,
@@ -139,7 +142,7 @@ class TransportGeometry:
 def _planar_cell_areas(mesh):
     """Area of every cell in the (r, z) plane (shoelace over its ordered vertices), m^2."""
     vertices = np.asarray(mesh.vertexCoords, dtype=float)
-    ids = np.ma.filled(mesh._orderedCellVertexIDs, -1)
+    ids = np.ma.filled(fipy_adapter.ordered_cell_vertex_ids(mesh), -1)
     x, y = vertices[0][ids], vertices[1][ids]                   # (M, nCells)
     valid = ids >= 0
     x_next, y_next = np.roll(x, -1, axis=0), np.roll(y, -1, axis=0)
