@@ -174,7 +174,7 @@ def _flow_mode_wedges(s):
 def _rate_beverloo(s):
     m = s.finding(r"Mean \|difference\| from Beverloo x Rose-Tanaka .*? over (\d+) cases: "
                   r"([\d.]+) %")
-    return (f"mean difference {m[2]} % over {m[1]} hoppers",
+    return (f"mean absolute difference {m[2]} % over {m[1]} hoppers",
             {"mean_abs_diff_pct": float(m[2]), "cases": int(m[1])})
 
 
@@ -206,7 +206,7 @@ def _rate_cells(s):
 def _rate_stiffness(s):
     m = s.finding(r"Steady rate by E: ([\d.]+) MPa .*?, ([\d.]+) MPa [\d.]+ kg/s; "
                   r"spread ([\d.]+) %")
-    return (f"{m[3]} % over E = {m[1]}–{m[2]} MPa",
+    return (f"spread {m[3]} % over E = {m[1]}–{m[2]} MPa",
             {"spread_pct": float(m[3]), "E_MPa": [float(m[1]), float(m[2])]})
 
 
