@@ -20,7 +20,7 @@ gravity ramp; 0: at once): Jenike's critical outlet is a static criterion, and a
 at once breaks near-critical arches by its dynamics, more easily at lower E (measured: the 20
 deg cone at 80 mm arched up to 90.3 mm at E = 2 and 5 MPa and up to 99.6 mm at 20 MPa when
 opened at once; opened over ten periods, the three moduli arched at 97.9 mm and flowed at
-102.9 mm; ``docs/validation.md``).
+102.9 mm; ``docs/notes.md``).
 
 Outcome of a run (``summary.json``; the discharge runs with ``end_time = "empty"`` and is
 capped at ``max_discharge_time`` (default 1.2 s) after the outlet is fully open):

@@ -13,9 +13,15 @@ validation results.
 The figures are copied next to the report (``report_figures/<study>/``) so that the report and
 its pictures travel together; ``--no-copy`` links the study outputs in place instead.
 
+Written to the default ``studies/REPORT.md``, the report is then read by
+``studies/headline.py``, which writes ``studies/headline.json`` (the numbers the front door
+publishes, with their studies' commits) and fills the generated regions of ``README.md`` and
+``docs/validation.md`` from it (``--no-headline``: the report alone).
+
 Usage::
 
     python studies/make_report.py [--root studies/output] [--out studies/REPORT.md] [--no-copy]
+                                  [--no-headline]
 """
 
 from __future__ import annotations
@@ -243,11 +249,21 @@ def main(argv=None) -> int:
     parser.add_argument("--no-copy", dest="copy", action="store_false",
                         help="link the figures in place instead of copying them next to the "
                              "report")
+    parser.add_argument("--no-headline", dest="headline", action="store_false",
+                        help="do not rewrite studies/headline.json and the README's and "
+                             "docs' generated regions from the report (they are rewritten "
+                             "only when the report is the default studies/REPORT.md)")
     args = parser.parse_args(argv)
     result = build(args.root, args.out, args.copy)
     print(f"report written to {result['path']}: {len(result['present'])} studies "
           f"({', '.join(result['present']) or 'none'}); missing: "
           f"{', '.join(result['missing']) or 'none'}")
+    if args.headline and Path(args.out).resolve() == DEFAULT_OUT:
+        if str(HERE) not in sys.path:
+            sys.path.insert(0, str(HERE))
+        import headline
+
+        return headline.main([])
     return 0
 
 

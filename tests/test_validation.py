@@ -1,8 +1,9 @@
-"""Validation: the README's headline numbers, each held by a reduced ("sandglass") case.
+"""Validation: the published headline numbers, each held by a reduced ("sandglass") case.
 
-Every claim of the README's Validation section is measured at full size by a study
-(``studies/``, reported in ``studies/REPORT.md``); here each is held by the smallest run that
-still shows it, with a tolerance whose reason is stated beside it.  A claim held elsewhere:
+Every claim of ``studies/headline.json`` (the README's validation table, ``docs/validation.md``)
+is measured at full size by a study (``studies/``, reported in ``studies/REPORT.md``); here
+each is held by the smallest run that still shows it, with a tolerance whose reason is
+stated beside it (``docs/validation.md`` quotes these docstrings).  A claim held elsewhere:
 
 - the rate does not depend on the fill height: ``test_discharge.py::
   test_hourglass_rate_independent_of_fill_height``;
@@ -75,7 +76,7 @@ def beverloo_rose_tanaka(theta, d0):
 
 
 def test_rate_against_beverloo_times_rose_tanaka(outlet_sweep):
-    """README: within 4.8 % of Beverloo x Rose-Tanaka on average over the study's 11 hoppers.
+    """The rate against Beverloo x Rose-Tanaka (headline ``rate_beverloo_rose_tanaka``).
 
     Here 4 of them: the mean |difference| below 7 % and each below 12 %.  Why so wide:
     Beverloo's C is 0.55-0.65 over the cohesionless materials it was fitted to (+-8 % about
@@ -91,7 +92,7 @@ def test_rate_against_beverloo_times_rose_tanaka(outlet_sweep):
 
 
 def test_outlet_exponent_and_beverloo_constant(outlet_sweep):
-    """README: W ~ D0^2.62 with Beverloo's C = 0.546 (30 deg cone, five outlets at 5 mm).
+    """The outlet exponent and Beverloo's C (headline ``outlet_exponent``).
 
     Over three outlets the exponent is 2.5 +- 0.25 (Beverloo's 5/2 is exact for a continuum,
     which has no particle size; the under-resolved smallest outlet steepens the fit by about
@@ -117,7 +118,7 @@ def convergence_rates():
 
 
 def test_rate_converges_with_the_cell_size(convergence_rates):
-    """README: the rate changes by +3.8 and +3.0 % from 7.5 to 5 and 3.75 mm.
+    """The rate converges with the cell size (headline ``rate_cell_size``).
 
     Held: the change from 5 to 3.75 mm is below 3.5 % and smaller than the one before it
     (a first-order scheme at the free surfaces and the wall halves its error with the cell
@@ -131,7 +132,7 @@ def test_rate_converges_with_the_cell_size(convergence_rates):
 
 
 def test_rate_does_not_depend_on_the_stiffness(convergence_rates):
-    """README: the rate changes by 1.3 % over E = 2-20 MPa (5 mm).
+    """The rate does not depend on the stiffness (headline ``rate_stiffness``).
 
     Held at 7.5 mm: the spread (max - min) / mean over E = 2, 5 and 20 MPa is below 2 %.  A
     rate-independent continuum has no time scale from E in its discharge rate; what is left
@@ -163,7 +164,7 @@ def filled_reference():
 
 
 def test_filled_cone_pressure_against_walker(filled_reference):
-    """README: the cone's filled pressure is within 3 % of Walker's slice method (5 mm).
+    """The cone's filled pressure against Walker's slice method (headline ``cone_walker``).
 
     Held on every grid from 7.5 to 2.5 mm: the mean wall pressure over the cone within 5 % of
     Walker's filling solution started from Janssen's vertical stress at the transition
@@ -184,8 +185,8 @@ def test_filled_cone_pressure_against_walker(filled_reference):
 
 
 def test_filled_wall_pressure_converges_with_the_cell_size(filled_reference):
-    """README: the filled profile's relative L2 changes are 10.8, 6.0 and 4.2 % from 7.5 to 5,
-    3.75 and 2.5 mm (over the whole wall, the outlet lip included, on 45 mm bins).
+    """The filled wall profile converges with the cell size (headline ``wall_convergence``;
+    over the whole wall, the outlet lip included, on 45 mm bins).
 
     Held: the successive changes decrease and the last is below 5 % (the wall-load
     convergence criterion of the wall-pressure study).  The bins are common to every grid and

@@ -204,7 +204,7 @@ def bin_switch(wall_friction_deg):
 
 def test_the_bins_switch_comes_from_the_wall_friction():
     """In discharge the cells along a rough wall yield and their plastic flow squeezes the
-    elastic plug (``docs/validation.md``): with the wall's friction at 15 deg the bin's K
+    elastic plug (``docs/notes.md``): with the wall's friction at 15 deg the bin's K
     doubles (measured at 1 cm and E = 5 MPa: 0.43 at rest, a late mean of 0.96; 0.89 and 0.99
     at E = 2 and 20 MPa), with a nearly frictionless wall (1 deg) it stays near the fill's
     (0.44 and 0.49; 0.50 and 0.51): the bounds, 1.25 and 1.6 times the value at rest, lie

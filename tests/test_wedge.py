@@ -176,8 +176,9 @@ def test_slot_rate_scales_as_beverloo_for_slots():
     Beverloo's slot rate with C' = 1.03 (a coefficient quoted from memory [M]: the test holds
     the level loosely, the exponent tightly).  Measured on this 0.3 m bin with the summary's
     plateau: n = 1.503, W' / Beverloo 1.03-1.08.  The cells do move it: in a wide bin, with one
-    time window for every slot, studies/plane_flow.py measures n = 1.69 at 5 mm and 1.60 at
-    2.5 mm (60-100 mm slots), so this case's agreement owes something to its narrow bin."""
+    time window for every slot, studies/plane_flow.py measures a steeper exponent at 5 mm that
+    falls at 2.5 mm (headline ``slot_exponent``, 60-100 mm slots), so this case's agreement
+    owes something to its narrow bin."""
     from fipy_hopper.diagnostics import fit_power_law
     slots, rates = (0.04, 0.06, 0.08), []
     for b0 in slots:

@@ -120,7 +120,7 @@ class NeighbourGraph:
     ``faces`` (nPairs,), optional: the face of each pair, to report face transfers.  Besides
     the edge lists (``source``, ``target``, ``along_normal``, ``faces``) it keeps them sorted
     by source cell (CSR: ``indptr``, ``neighbour``, ``edge_pair``, ``edge_sign``) for the
-    compiled kernels, and their scratch arrays (``work``, made on first use; one graph is
+    compiled kernels, and their work arrays (``work``, made on first use; one graph is
     not for concurrent calls from several threads).
     """
 
@@ -141,7 +141,7 @@ class NeighbourGraph:
         self.neighbour = np.ascontiguousarray(self.target[order])
         self.edge_pair = np.ascontiguousarray(np.tile(np.arange(n_pairs), 2)[order])
         self.edge_sign = np.ascontiguousarray(self.along_normal[order])
-        self.work = None            # scratch of the compiled redistribution, made on first use
+        self.work = None            # work arrays of the compiled redistribution, made on first use
 
     def hops_to(self, cells):
         """Number of open-face hops from every cell to the nearest of ``cells`` (inf: none)."""
@@ -281,7 +281,7 @@ def _relieve_kernel(upper, c, full, slack, significant, is_open, fields, kappa_v
 
     Returns ``(n_groups, n_transfers, out, under)``: ``out`` whether the pass ran, ``under``
     whether any open cell was below ``-slack`` at the start.  ``work`` (4, nCells) floats
-    (must be zero on entry, left so) and ``index_work`` (4, nCells) ints are scratch.  One
+    (must be zero on entry, left so) and ``index_work`` (4, nCells) ints are work space.  One
     scan of all cells per call; the rest only visits the cells concerned.  The breadth-first
     search from every seed (in index order) starts at its level 1, the cells without room
     next to a seed, put in the order that search would find them (by the edge from their
@@ -529,7 +529,7 @@ def _redistribute_kernel(alpha, fields, kappa_volume, alpha_max, tol, room_min, 
     inline in these loops: numba's reference counting of array arguments costs more than the
     transfers themselves.)
 
-    The scratch arrays are kept from call to call (``_RedistributionWork``: fresh large
+    The work arrays are kept from call to call (``_RedistributionWork``: fresh large
     arrays cost page faults every call) and set here, nothing is assumed of their contents:
     ``cell_work`` (4, nCells), ``is_open`` and ``touched`` (nCells,), ``work`` and
     ``index_work`` (4, nCells), and the log arrays, which are returned grown if they had to

@@ -6,8 +6,9 @@ as configured, and 2.5 mm), in this process, with everything a run does: markers
 snapshots, time series, checkpoints and the pictures.  ``extra_info`` records the simulation's
 own wall time (``summary.json``), the rest (pictures and the writing at the end), the steps,
 the cells, the threads, the peak resident memory of the process and the headline results.
-Under the default ``--benchmark-disable`` a small hopper on a 1 cm grid runs instead, as a
-plain test.
+``python studies/performance.py`` runs it and writes what it measured to ``docs/performance.md``
+(the README quotes its time and memory from there).  Under the default ``--benchmark-disable``
+a small hopper on a 1 cm grid runs instead, as a plain test.
 """
 
 import json

@@ -3,10 +3,9 @@ at least 30 cases in under 30 minutes on 2 cores).
 
 ``pytest tests/benchmarks/test_bench_flow_mode_map.py --benchmark-enable`` runs
 ``studies/flow_mode_map.py`` with its defaults (30 cases, 5 mm cells, 0.8 s of discharge) on a
-Dask ``LocalCluster`` with one worker per core, once (``pedantic``, one round): measured
-161.6 s on 2 cores (2026-11-22) with every case drawing its own pictures; 153.9 s with them and
-108.6 s without them (the default since) on 2026-12-02; 144-148 s in a slow hour and 78.5 s
-in a quiet one on 2026-12-03 (the cases' own wall times 145 s in all).  Under the default
+Dask ``LocalCluster`` with one worker per core, once (``pedantic``, one round); what it
+measured, with the date, the machine and the commit, is in ``docs/performance.md`` (written by
+``python studies/performance.py``, which runs this benchmark).  Under the default
 ``--benchmark-disable`` the same code runs a 2-case map on the quick setting, serially, as a
 plain test.  ``FLOW_MODE_MAP_OUT=DIR`` keeps
 the measured map's outputs in ``DIR`` (a fresh folder: finished cases there are not rerun),

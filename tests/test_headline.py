@@ -1,0 +1,116 @@
+"""The published numbers are written once: by the studies, into ``studies/REPORT.md``.
+
+``studies/headline.py`` reads the claims out of the committed report into
+``studies/headline.json`` and fills the README's validation table and ``docs/validation.md``'s
+claims from it; ``studies/demo_picture.py`` fills the README's picture caption from the
+picture's own text fields.  These tests fail when a generated file or region is not what its
+generator makes from what is committed (a hand edit, or a report regenerated without
+``python studies/headline.py``), and show that the generator reads the report's numbers
+(change one in the report and the table changes) and names what it cannot find.
+"""
+
+import importlib.util
+import json
+import pathlib
+import re
+import sys
+
+import pytest
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+STUDIES = ROOT / "studies"
+
+
+def load(name):
+    if str(STUDIES) not in sys.path:
+        sys.path.insert(0, str(STUDIES))
+    spec = importlib.util.spec_from_file_location(f"{name}_under_test", STUDIES / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module           # dataclasses look their module up there
+    spec.loader.exec_module(module)
+    return module
+
+
+headline = load("headline")
+REPORT_TEXT = headline.REPORT.read_text(encoding="utf-8")
+
+
+def test_committed_files_are_what_the_report_makes():
+    files = headline.outputs(REPORT_TEXT)
+    stale = [str(p.relative_to(ROOT)) for p in headline.stale(files)]
+    assert not stale, f"not as generated from studies/REPORT.md: {stale}; run " \
+                      f"'python studies/headline.py'"
+
+
+def test_headline_json_names_its_report_and_each_studys_commit():
+    data = json.loads(headline.HEADLINE.read_text(encoding="utf-8"))
+    assert data["made_by"] == "python studies/headline.py"
+    assert re.search(rf"\(git {re.escape(data['report_commit'])}\)", REPORT_TEXT)
+    for claim in data["claims"]:
+        assert claim["study_commit"] and claim["study_created"], claim["key"]
+        assert f"## {claim['section']}\n" in REPORT_TEXT, claim["key"]
+
+
+def test_the_flow_mode_map_count_is_read_from_the_report():
+    """The map's agreement comes from its table's rows: one row flipped, one fewer."""
+    before = {c["key"]: c for c in headline.build(REPORT_TEXT)["claims"]}["flow_mode_cones"]
+    agree, cases = before["values"]["agree"], before["values"]["cases"]
+    row = "| 40 | 15 | 36.9 | funnel | mass | 0.22 | 0 | no |"
+    assert row in REPORT_TEXT
+    flipped = REPORT_TEXT.replace("| 10 | 10 | 44.8 | mass | mass | 0.87 | 0 | yes |",
+                                  "| 10 | 10 | 44.8 | mass | funnel | 0.87 | 0 | no |", 1)
+    after = {c["key"]: c for c in headline.build(flipped)["claims"]}["flow_mode_cones"]
+    assert after["values"] == {"agree": agree - 1, "cases": cases}
+    assert after["result"] == f"{agree - 1} of {cases} cases agree"
+    table = headline.readme_table({**headline.build(flipped), "claims": [after]})
+    assert f"| {agree - 1} of {cases} cases agree |" in table
+
+
+def test_a_hand_edit_of_the_readme_table_is_found(tmp_path):
+    files = headline.outputs(REPORT_TEXT)
+    readme = files[headline.README]
+    body = headline._docs.region(readme, "headline")
+    first = re.search(r"\| (\d+) of (\d+) cases agree \|", body)
+    edited = readme.replace(first[0], f"| {int(first[1]) + 1} of {first[2]} cases agree |", 1)
+    (tmp_path / "README.md").write_text(edited, encoding="utf-8")
+    (tmp_path / "docs").mkdir()
+    (tmp_path / "docs" / "validation.md").write_text(files[headline.VALIDATION],
+                                                     encoding="utf-8")
+    (tmp_path / "studies").mkdir()
+    (tmp_path / "studies" / "headline.json").write_text(files[headline.HEADLINE],
+                                                        encoding="utf-8")
+    made = headline.outputs(REPORT_TEXT, root=tmp_path)
+    assert headline.stale(made) == [tmp_path / "README.md"]
+
+
+def test_a_finding_the_claims_cannot_read_is_named():
+    broken = REPORT_TEXT.replace("Mean |difference| from Beverloo x Rose-Tanaka",
+                                 "Mean |difference| from Beverloo times Rose-Tanaka")
+    with pytest.raises(headline.HeadlineError, match="study 'discharge_rate': no finding"):
+        headline.build(broken)
+
+
+def test_a_missing_region_writes_nothing(tmp_path):
+    (tmp_path / "README.md").write_text("# no regions\n", encoding="utf-8")
+    with pytest.raises(headline._docs.RegionError, match="README.md.*headline"):
+        headline.outputs(REPORT_TEXT, root=tmp_path)
+
+
+def test_every_claim_names_tests_that_exist():
+    for claim in headline.CLAIMS:
+        assert claim.tests, claim.key
+        for nodeid in claim.tests:
+            kind, text = headline.test_statement(nodeid)
+            assert text, nodeid
+    with pytest.raises(headline.HeadlineError, match="does not exist"):
+        headline.test_statement("tests/test_validation.py::test_no_such_test")
+
+
+def test_readme_picture_caption_is_the_pictures_own_record():
+    picture = load("demo_picture")
+    fields = picture.fields_of()
+    assert re.fullmatch(r"[0-9a-f]{7,}", fields["fipy_hopper:commit"]), fields
+    assert "demo" in fields["fipy_hopper:command"]
+    assert picture.readme_text() == picture.README.read_text(encoding="utf-8"), \
+        "README.md's picture caption is not the picture's: run 'python studies/demo_picture.py'"
+    assert picture.PICTURE.stat().st_size < 400_000
