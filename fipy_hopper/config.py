@@ -195,7 +195,7 @@ class HopperGeometry:
     shorthands' sizes of a profile are derived: ``bin_diameter`` twice the widest ``x`` of
     the wall (a full section: the widest span between the walls), ``outlet_diameter`` twice
     the lip's ``x`` (the outlet's width), ``half_angle_deg`` the lowest sloping segment's
-    angle from the vertical, :attr:`cone_height` the bottom of the wall's top vertical
+    angle from the vertical (to 1e-9 deg), :attr:`cone_height` the bottom of the wall's top vertical
     stretch (the bin; the top if the top segment slopes), ``bin_height`` and ``fill_height``
     above it (the latter may be negative), :attr:`top` the wall's highest point.  The boundary
     itself is :attr:`boundary`.
@@ -510,8 +510,8 @@ def _check_profile(geom: "HopperGeometry") -> None:
     nxt = wall[wall.index(slope) + 1]
     cone = _bin_bottom(wall)
     for key, value in (("bin_diameter", width), ("outlet_diameter", outlet),
-                       ("half_angle_deg", math.degrees(math.atan2(abs(nxt[0] - slope[0]),
-                                                                  nxt[1] - slope[1]))),
+                       ("half_angle_deg", round(math.degrees(math.atan2(
+                           abs(nxt[0] - slope[0]), nxt[1] - slope[1])), 9)),
                        ("bin_height", top - cone), ("fill_height", level - cone),
                        ("bin_width", None), ("outlet_width", None)):
         object.__setattr__(geom, key, value)
