@@ -7,7 +7,7 @@
     fipy-hopper demo [--out DIR] [--force] [--resume] [--quiet] [--checkpoint-interval S]
                      [--threads N] [--profile]
     fipy-hopper plot DIR
-    fipy-hopper validate CONFIG.toml
+    fipy-hopper validate CONFIG.toml [--out DIR]
 
 Exit codes: 0 success; 2 bad input (a configuration error, a missing or non-TOML file, an
 output directory that would be overwritten or that another run is using, a path the system
