@@ -31,7 +31,7 @@ The compiled marker and Lagrangian code take :meth:`Boundary.kernel_arrays` and
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from functools import cached_property
 from typing import Optional, Sequence
 

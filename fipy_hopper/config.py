@@ -191,14 +191,16 @@ class HopperGeometry:
     ``"plane"`` (per metre of length); ``section`` ``"half"`` (default: mirrored about
     ``x = 0``, every ``x > 0``) or ``"full"`` (plane only: ``left_wall`` too, any outlet
     position); ``fill_level`` (m above the outlet plane).  ``inserts`` (any shape): closed
-    polygons (:class:`InsertConfig`), inside the walls, above the outlet plane.  The
-    shorthands' sizes of a profile are derived: ``bin_diameter`` twice the widest ``x`` of
-    the wall (a full section: the widest span between the walls), ``outlet_diameter`` twice
-    the lip's ``x`` (the outlet's width), ``half_angle_deg`` the lowest sloping segment's
-    angle from the vertical (to 1e-9 deg), :attr:`cone_height` the bottom of the wall's top vertical
-    stretch (the bin; the top if the top segment slopes), ``bin_height`` and ``fill_height``
-    above it (the latter may be negative), :attr:`top` the wall's highest point.  The boundary
-    itself is :attr:`boundary`.
+    polygons (:class:`InsertConfig`), inside the walls, above the outlet plane.
+
+    A profile's shorthand sizes, which the rest of the code reads, are derived:
+    ``bin_diameter`` is twice the wall's widest ``x`` (a full section: the rightmost ``x``
+    of ``wall`` less the leftmost of ``left_wall``), ``outlet_diameter`` twice the lip's ``x``
+    (a full section: the outlet's width), ``half_angle_deg`` the angle from the vertical of
+    the lowest sloping segment of ``wall`` (to 1e-9 deg), :attr:`cone_height` the bottom of
+    the top vertical stretch of ``wall`` (its top if the top segment slopes), ``bin_height``
+    and ``fill_height`` are above it (the latter negative for a fill below it), :attr:`top`
+    is the lower of the walls' tops.  The boundary itself is :attr:`boundary`.
     """
 
     bin_diameter: float = 0.3
