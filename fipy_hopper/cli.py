@@ -7,7 +7,7 @@
     fipy-hopper demo [--out DIR] [--force] [--resume] [--quiet] [--checkpoint-interval S]
                      [--threads N] [--profile]
     fipy-hopper plot DIR
-    fipy-hopper validate CONFIG.toml
+    fipy-hopper validate CONFIG.toml [--out DIR]
 
 Exit codes: 0 success; 2 bad input (a configuration error, a missing or non-TOML file, an
 output directory that would be overwritten or that another run is using, a path the system
@@ -102,8 +102,12 @@ def _parser() -> argparse.ArgumentParser:
 
     q = sub.add_parser("validate", help="check a configuration and print derived quantities",
                        description="Check CONFIG.toml and print the grid, the time step, the "
-                       "wave speed, the fill mass, Beverloo's rate and Jenike's critical angle.")
+                       "wave speed, the fill mass, Beverloo's rate, Jenike's critical angle "
+                       "and the boundary (walls, corners, outlet, fill), drawn to "
+                       "geometry.png beside CONFIG.toml or in --out DIR.")
     q.add_argument("config", metavar="CONFIG.toml", help="configuration file (TOML)")
+    q.add_argument("--out", metavar="DIR", default=None,
+                   help="directory for geometry.png (default: the configuration's)")
     return p
 
 
@@ -179,6 +183,15 @@ def _validate(args) -> int:
         lines[-1:-1] = _cohesion_lines(cfg, e)
     if cfg.numerics.formulation == "lagrangian":
         lines[1], lines[3] = _lagrangian_lines(cfg)
+    picture = Path(args.out if args.out is not None else Path(args.config).parent)
+    try:
+        picture.mkdir(parents=True, exist_ok=True)
+        picture = picture / "geometry.png"
+        cfg.boundary.draw(picture)
+    except OSError as exc:
+        return _error(f"cannot write {_short(picture)}: {exc.strerror or exc}", EXIT_BAD_INPUT)
+    lines.append(f"  boundary           drawn to {_short(picture)}")
+    lines += ["    " + line for line in cfg.boundary.describe(cfg.material.density).split("\n")]
     print("\n".join(lines))
     return EXIT_OK
 

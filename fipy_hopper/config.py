@@ -4,10 +4,13 @@ All values are SI (m, s, kg, Pa); angles are given in degrees at this boundary o
 Every check names the TOML key, the value and the allowed range, and runs before anything
 is computed.  The public TOML contract (sections and keys) is::
 
-    [hopper]    bin_diameter, half_angle_deg, outlet_diameter, bin_height, fill_height
+    [hopper]    shape = "conical": bin_diameter, half_angle_deg, outlet_diameter,
+                bin_height, fill_height ("wedge": bin_width, outlet_width);
+                shape = "profile": symmetry, section, wall, left_wall, fill_level;
+                inserts (any shape: [[hopper.inserts]] outline, friction_angle_deg)
     [material]  density, youngs_modulus, poisson_ratio, friction_angle_deg,
                 dilation_angle_deg, cohesion
-    [wall]      friction_angle_deg
+    [wall]      friction_angle_deg, segment_friction_deg
     [numerics]  cell_size, ...
     [run]       end_time (seconds or "empty"), ...
 """
@@ -21,8 +24,11 @@ import re
 import sys
 import warnings
 from dataclasses import dataclass, field, fields
+from functools import cached_property
 from pathlib import Path
 from typing import Any, Optional, Union
+
+import numpy as np
 
 try:  # Python >= 3.11
     import tomllib
@@ -118,8 +124,16 @@ def _check_int(key: str, value: Any, low: int, high: int) -> int:
 #: Hopper lengths (m): below 1 mm a continuum of grains is meaningless; no silo is 100 m wide
 #: or tall.
 LENGTH_RANGE = (1e-3, 100.0)
-#: Hopper shapes: a cone (axisymmetric) or a wedge with a slot outlet (plane strain).
-SHAPES = ("conical", "wedge")
+#: Hopper shapes: a cone (axisymmetric), a wedge with a slot outlet (plane strain), or a wall
+#: profile drawn as points (either symmetry; a full plane section with both walls).
+SHAPES = ("conical", "wedge", "profile")
+#: A profile's symmetry (hopper.symmetry) and section (hopper.section).
+SYMMETRIES = ("axisymmetric", "plane")
+SECTIONS = ("half", "full")
+#: The keys of the shorthands (a profile derives them from hopper.wall), and of a profile.
+SHORTHAND_KEYS = ("bin_diameter", "half_angle_deg", "outlet_diameter", "bin_height",
+                  "fill_height", "bin_width", "outlet_width")
+PROFILE_KEYS = ("wall", "left_wall", "fill_level")
 #: the models a run can use (numerics.formulation)
 FORMULATIONS = ("eulerian", "lagrangian")
 #: Bulk density (kg/m3): the lightest powders (aerogel, ~10) to beyond tungsten (~19,300).
@@ -154,19 +168,45 @@ MAX_STEPS = 1e9
 
 
 @dataclass(frozen=True)
+class InsertConfig:
+    """An insert (``[[hopper.inserts]]``): a closed polygon ``outline`` ``[[x, z], ...]`` (m;
+    a body of revolution, or a long bar in plane flow) and its wall friction angle
+    ``friction_angle_deg`` (deg; None: the wall's, ``wall.friction_angle_deg``)."""
+
+    outline: tuple = ()
+    friction_angle_deg: Optional[float] = None
+
+
+@dataclass(frozen=True)
 class HopperGeometry:
-    """A hopper below a bin; the outlet plane is ``z = 0``, ``z`` upward.
+    """A silo's section; the outlet plane is ``z = 0``, ``z`` upward.
 
     ``shape``: ``"conical"`` (default: a cone below a cylindrical bin, axisymmetric, sized by
-    ``bin_diameter`` and ``outlet_diameter``) or ``"wedge"`` (a plane-flow hopper: a wedge
+    ``bin_diameter`` and ``outlet_diameter``), ``"wedge"`` (a plane-flow hopper: a wedge
     below a bin of parallel walls with a slot outlet, long in the third direction, sized by
-    ``bin_width`` and ``outlet_width``; every result is per metre of length).  For a wedge,
-    ``bin_diameter`` and ``outlet_diameter`` hold the two widths (the section is the same
-    half-section in ``(x, z)`` as the cone's in ``(r, z)``).  ``fill_height`` and
-    ``bin_height`` are measured above the transition.  ``half_angle_deg`` is the hopper's
-    half-angle from the vertical, in ``(0, 90]``; 90 is a flat bottom.  Lengths are in
-    ``[1 mm, 100 m]`` (:data:`LENGTH_RANGE`), the hopper's height too (which bounds how steep
-    a narrow-outlet hopper can be).
+    ``bin_width`` and ``outlet_width``; every result is per metre of length) or ``"profile"``
+    (any wall drawn as points, below).  For a wedge, ``bin_diameter`` and ``outlet_diameter``
+    hold the two widths (the section is the same half-section in ``(x, z)`` as the cone's in
+    ``(r, z)``).  ``fill_height`` and ``bin_height`` are measured above the transition.
+    ``half_angle_deg`` is the hopper's half-angle from the vertical, in ``(0, 90]``; 90 is a
+    flat bottom.  Lengths are in ``[1 mm, 100 m]`` (:data:`LENGTH_RANGE`), the hopper's height
+    too (which bounds how steep a narrow-outlet hopper can be).
+
+    A profile: ``wall`` ``[[x, z], ...]`` (m) from the outlet lip (``z = 0``) up to the top,
+    never descending; ``symmetry`` ``"axisymmetric"`` (default; ``x`` is the radius) or
+    ``"plane"`` (per metre of length); ``section`` ``"half"`` (default: mirrored about
+    ``x = 0``, every ``x > 0``) or ``"full"`` (plane only: ``left_wall`` too, any outlet
+    position); ``fill_level`` (m above the outlet plane).  ``inserts`` (any shape): closed
+    polygons (:class:`InsertConfig`), inside the walls, above the outlet plane.
+
+    A profile's shorthand sizes, which the rest of the code reads, are derived:
+    ``bin_diameter`` is twice the wall's widest ``x`` (a full section: the rightmost ``x``
+    of ``wall`` less the leftmost of ``left_wall``), ``outlet_diameter`` twice the lip's ``x``
+    (a full section: the outlet's width), ``half_angle_deg`` the angle from the vertical of
+    the lowest sloping segment of ``wall`` (to 1e-9 deg), :attr:`cone_height` the bottom of
+    the top vertical stretch of ``wall`` (its top if the top segment slopes), ``bin_height``
+    and ``fill_height`` are above it (the latter negative for a fill below it), :attr:`top`
+    is the lower of the walls' tops.  The boundary itself is :attr:`boundary`.
     """
 
     bin_diameter: float = 0.3
@@ -177,12 +217,56 @@ class HopperGeometry:
     shape: str = "conical"
     bin_width: Optional[float] = None
     outlet_width: Optional[float] = None
+    symmetry: Optional[str] = None
+    section: str = "half"
+    wall: Optional[tuple] = None
+    left_wall: Optional[tuple] = None
+    fill_level: Optional[float] = None
+    inserts: tuple = ()
 
     def __post_init__(self):
         lo, hi = LENGTH_RANGE
         if not isinstance(self.shape, str) or self.shape not in SHAPES:
             raise ConfigError(f"hopper.shape = {_show(self.shape)}: expected one of "
                               f"{', '.join(repr(s) for s in SHAPES)}")
+        self._check_section()
+        if self.shape == "profile":
+            _check_profile(self)
+        else:
+            self._check_shorthand(lo, hi)
+            object.__setattr__(self, "fill_level", self.cone_height + self.fill_height)
+        _check_inserts(self)
+
+    def _check_section(self) -> None:
+        implied = {"conical": "axisymmetric", "wedge": "plane"}.get(self.shape)
+        symmetry = self.symmetry if self.symmetry is not None else (implied or SYMMETRIES[0])
+        if not isinstance(symmetry, str) or symmetry not in SYMMETRIES:
+            raise ConfigError(f"hopper.symmetry = {_show(symmetry)}: expected one of "
+                              f"{', '.join(repr(s) for s in SYMMETRIES)}")
+        if implied and symmetry != implied:
+            raise ConfigError(f'hopper.symmetry = "{symmetry}" does not fit hopper.shape = '
+                              f'"{self.shape}" ({implied}); draw the wall as shape = "profile"')
+        object.__setattr__(self, "symmetry", symmetry)
+        if not isinstance(self.section, str) or self.section not in SECTIONS:
+            raise ConfigError(f"hopper.section = {_show(self.section)}: expected one of "
+                              f"{', '.join(repr(s) for s in SECTIONS)}")
+        if self.section == "full" and symmetry == "axisymmetric":
+            raise ConfigError('hopper.section = "full" is for hopper.symmetry = "plane"; an '
+                              'axisymmetric silo is computed as its half-section ("half")')
+        if self.section == "full" and self.shape != "profile":
+            raise ConfigError(f'hopper.section = "full" needs hopper.shape = "profile" with '
+                              f'both walls (hopper.wall, hopper.left_wall), not "{self.shape}"')
+        if self.section == "half" and self.left_wall is not None:
+            raise ConfigError('hopper.left_wall is for hopper.section = "full" (both walls '
+                              'drawn); a half-section has the axis x = 0 on its left')
+        if self.section == "full" and self.left_wall is None:
+            raise ConfigError('hopper.left_wall is required for hopper.section = "full" '
+                              '([[x, z], ...] in m, from its lip on z = 0 up to its top)')
+
+    def _check_shorthand(self, lo: float, hi: float) -> None:
+        if self.wall is not None:
+            raise ConfigError(f'hopper.wall is for shape = "profile"; the {self.shape} '
+                              f'shorthand is sized by hopper.{self.size_keys[0]}')
         if self.shape == "wedge":
             for key in ("bin_width", "outlet_width"):
                 if getattr(self, key) is None:
@@ -221,14 +305,50 @@ class HopperGeometry:
 
     @property
     def axisymmetric(self) -> bool:
-        """True for a cone (axisymmetric), False for a wedge (plane strain, per metre)."""
-        return self.shape == "conical"
+        """True for an axisymmetric silo (a cone), False in plane flow (per metre)."""
+        return self.symmetry == "axisymmetric"
+
+    @property
+    def full_section(self) -> bool:
+        """True for a full plane section (both walls drawn, no axis)."""
+        return self.section == "full"
 
     @property
     def size_keys(self) -> tuple:
         """The names of the bin's and the outlet's size: diameters, or widths for a wedge."""
         return (("bin_diameter", "outlet_diameter") if self.axisymmetric
                 else ("bin_width", "outlet_width"))
+
+    @property
+    def wall_points(self) -> tuple:
+        """The wall ``((x, z), ...)`` (m) from the lip up: a profile's ``wall``, or the
+        shorthand's ``(R0, 0), (R, cone_height), (R, top)``."""
+        if self.shape == "profile":
+            return self.wall
+        return ((self.outlet_radius, 0.0), (self.bin_radius, self.cone_height),
+                (self.bin_radius, self.top))
+
+    @property
+    def n_wall_segments(self) -> int:
+        """Segments of the (right) wall: one per ``wall.segment_friction_deg`` value."""
+        return len(self.wall_points) - 1
+
+    @property
+    def x_extent(self) -> tuple:
+        """``(x_min, x_max)`` (m) of the section: the axis to the widest point, or the two
+        walls' extremes in a full section (the width the grid must span)."""
+        if not self.full_section:
+            return 0.0, self.bin_radius
+        return (min(x for x, _ in self.left_wall), max(x for x, _ in self.wall))
+
+    @cached_property
+    def boundary(self):
+        """The boundary (:class:`fipy_hopper.boundary.Boundary`), built once; its walls'
+        friction is left to ``[wall]`` (nan: see :attr:`HopperConfig.boundary`)."""
+        from .boundary import build
+        return build(self.wall_points, symmetry=self.symmetry, left_wall=self.left_wall,
+                     inserts=[(i.outline, i.friction_angle_deg) for i in self.inserts],
+                     fill_level=self.fill_level)
 
     @property
     def bin_radius(self) -> float:
@@ -247,7 +367,9 @@ class HopperGeometry:
     @property
     def cone_height(self) -> float:
         """Height of the cone-cylinder transition above the outlet, ``(R - R0) / tan(theta)``
-        (zero for a flat-bottomed bin)."""
+        (zero for a flat-bottomed bin); a profile's: the bottom of its top vertical stretch."""
+        if self.shape == "profile":
+            return _bin_bottom(self.wall)
         if self.half_angle_deg >= 90.0:
             return 0.0
         return (self.bin_radius - self.outlet_radius) / math.tan(self.half_angle)
@@ -255,21 +377,252 @@ class HopperGeometry:
     @property
     def top(self) -> float:
         """Height of the top of the bin above the outlet plane."""
+        if self.shape == "profile":
+            return min(c[-1][1] for c in (self.wall, self.left_wall) if c is not None)
         return self.cone_height + self.bin_height
-
-    @property
-    def fill_level(self) -> float:
-        """Height of the levelled fill surface above the outlet plane."""
-        return self.cone_height + self.fill_height
 
     def fill_volume(self) -> float:
         """Volume of the filled material: frustum plus cylinder (m^3); for a wedge, trapezoid
-        plus rectangle per metre of length (m^3/m)."""
+        plus rectangle per metre of length (m^3/m); a profile or inserts: the boundary's
+        (:meth:`fipy_hopper.boundary.Boundary.fill_volume`)."""
+        if self.shape == "profile" or self.inserts:
+            return self.boundary.fill_volume()
         r0, r1, h = self.outlet_radius, self.bin_radius, self.cone_height
         if not self.axisymmetric:
             return (r0 + r1) * h + 2.0 * r1 * self.fill_height
         cone = math.pi * h / 3.0 * (r0 * r0 + r0 * r1 + r1 * r1)
         return cone + math.pi * r1 * r1 * self.fill_height
+
+
+def _bin_bottom(wall) -> float:
+    """The height (m) where the wall's top vertical stretch starts (its top if it slopes)."""
+    k = len(wall) - 1
+    while k > 0 and wall[k - 1][0] == wall[k][0]:
+        k -= 1
+    return wall[k][1]
+
+
+def _point_text(p) -> str:
+    return f"[{p[0]:g}, {p[1]:g}]"
+
+
+def _points(key: str, value, least: int) -> tuple:
+    """``value`` as points ``((x, z), ...)`` (m), each two numbers within 100 m."""
+    what = f"expected a list of at least {least} points [x, z] in m"
+    if isinstance(value, (str, bytes, dict)) or not isinstance(value, (list, tuple)):
+        raise ConfigError(f"{key} = {_show(value)}: {what}")
+    if len(value) < least:
+        raise ConfigError(f"{key} has {len(value)} point{'s' * (len(value) != 1)}: {what}")
+    hi = LENGTH_RANGE[1]
+    out = []
+    for i, p in enumerate(value):
+        if not isinstance(p, (list, tuple)) or len(p) != 2:
+            raise ConfigError(f"{key}[{i}] = {_show(p)}: expected a point [x, z] of two "
+                              f"numbers in m")
+        x = _check_range(f"{key}[{i}] x", p[0], -hi, hi, unit=" m")
+        z = _check_range(f"{key}[{i}] z", p[1], -hi, hi, unit=" m")
+        if out and (x, z) == out[-1]:
+            raise ConfigError(f"{key}[{i}] = {_point_text((x, z))}: repeats the previous point")
+        out.append((x, z))
+    return tuple(out)
+
+
+def _check_wall(key: str, wall: tuple, half: bool) -> None:
+    """A wall: its lip on ``z = 0``, never descending, not crossing the axis or itself."""
+    from .boundary import self_crossing
+
+    if wall[0][1] != 0.0:
+        raise ConfigError(f"{key}[0] = {_point_text(wall[0])}: the lip must lie on the outlet "
+                          f"plane, z = 0")
+    for i, p in enumerate(wall):
+        if half and p[0] <= 0.0:
+            raise ConfigError(f"{key}[{i}] = {_point_text(p)}: x = {p[0]:g} m crosses the "
+                              f"axis; in a half-section (hopper.section = \"half\") every x "
+                              f"must be > 0")
+        if i and p[1] < wall[i - 1][1]:
+            raise ConfigError(f"{key}[{i}] = {_point_text(p)}: z = {p[1]:g} m is below the "
+                              f"previous point's {wall[i - 1][1]:g} m; the wall must not "
+                              f"descend from the lip to the top")
+    crossing = self_crossing(wall, closed=False)
+    if crossing:
+        i, j = crossing
+        raise ConfigError(f"{key} crosses itself: its segment {i} {_point_text(wall[i])}-"
+                          f"{_point_text(wall[i + 1])} meets segment {j} "
+                          f"{_point_text(wall[j])}-{_point_text(wall[j + 1])}")
+
+
+def _wall_x_at(wall: tuple, z: float) -> float:
+    """The wall's ``x`` (m) at height ``z`` (:func:`fipy_hopper.boundary.wall_x`)."""
+    from .boundary import profile_rows, wall_x
+    return float(wall_x(z, profile_rows(wall), wall[0][0]))
+
+
+def _check_profile(geom: "HopperGeometry") -> None:
+    """Check a profile's walls and fill level; set its points and derived sizes."""
+    from .boundary import segments_meet
+
+    if geom.wall is None:
+        raise ConfigError('hopper.wall is required for shape = "profile" ([[x, z], ...] in m, '
+                          'from the outlet lip on z = 0 up to the top)')
+    wall = _points("hopper.wall", geom.wall, 2)
+    _check_wall("hopper.wall", wall, half=not geom.full_section)
+    object.__setattr__(geom, "wall", wall)
+    width, outlet = 2.0 * max(x for x, _ in wall), 2.0 * wall[0][0]
+    if geom.full_section:
+        left = _points("hopper.left_wall", geom.left_wall, 2)
+        _check_wall("hopper.left_wall", left, half=False)
+        object.__setattr__(geom, "left_wall", left)
+        if left[0][0] >= wall[0][0]:
+            raise ConfigError(f"hopper.left_wall[0] = {_point_text(left[0])}: the left lip is "
+                              f"not left of the right one, hopper.wall[0] = "
+                              f"{_point_text(wall[0])}: the outlet has no width")
+        for key, points, other, sign in (("hopper.left_wall", left, wall, 1.0),
+                                         ("hopper.wall", wall, left, -1.0)):
+            for i, (x, z) in enumerate(points):
+                x_other = _wall_x_at(other, z)
+                if sign * (x_other - x) <= 0.0:
+                    raise ConfigError(
+                        f"{key}[{i}] = {_point_text((x, z))}: "
+                        f"{'right' if sign > 0 else 'left'} of (or on) the "
+                        f"{'right' if sign > 0 else 'left'} wall, at x = {x_other:g} m at "
+                        f"z = {z:g} m; the left wall must stay left of the right wall")
+        top = max(wall[-1][1], left[-1][1])
+        tall = [p + ((p[-1][0], top),) for p in (left, wall)]
+        for i in range(len(tall[0]) - 1):
+            for j in range(len(tall[1]) - 1):
+                if segments_meet(*tall[0][i:i + 2], *tall[1][j:j + 2]):
+                    raise ConfigError(
+                        f"hopper.left_wall crosses hopper.wall: its segment from "
+                        f"{_point_text(tall[0][i])} meets the right wall's from "
+                        f"{_point_text(tall[1][j])}; the left wall must stay left of it")
+        width = max(x for x, _ in wall) - min(x for x, _ in left)
+        outlet = wall[0][0] - left[0][0]
+    elif geom.left_wall is not None:    # (refused by _check_section)
+        raise AssertionError
+    if outlet >= width:
+        raise ConfigError(f"hopper.wall: the outlet ({outlet:g} m) is as wide as the silo's "
+                          f"widest span ({width:g} m); it must be narrower")
+    top = geom.top
+    if geom.fill_level is None:
+        raise ConfigError('hopper.fill_level is required for shape = "profile" (m above the '
+                          'outlet plane, up to the top of the wall)')
+    level = _check_number("hopper.fill_level", geom.fill_level,
+                          _interval(LENGTH_RANGE[0], top, unit=" m"))
+    if level > top:
+        raise ConfigError(f"hopper.fill_level = {level:g} m is above the top of the wall, "
+                          f"z = {top:g} m; allowed range is "
+                          f"{_interval(LENGTH_RANGE[0], top, unit=' m')}")
+    _check_range("hopper.fill_level", level, LENGTH_RANGE[0], top, unit=" m")
+    object.__setattr__(geom, "fill_level", level)
+    slope = next(p for p, q in zip(wall, wall[1:]) if p[0] != q[0])
+    nxt = wall[wall.index(slope) + 1]
+    cone = _bin_bottom(wall)
+    angle = round(math.degrees(math.atan2(abs(nxt[0] - slope[0]), nxt[1] - slope[1])), 9)
+    if angle <= 0.0:
+        raise ConfigError(f"hopper.wall: the wall rises vertically from the lip at "
+                          f"{_point(wall[0])} (its first slope, {_point(slope)} to "
+                          f"{_point(nxt)}, is vertical to round-off): give the hopper or the "
+                          f"floor a slope")
+    for key, value in (("bin_diameter", width), ("outlet_diameter", outlet),
+                       ("half_angle_deg", angle),
+                       ("bin_height", top - cone), ("fill_height", level - cone),
+                       ("bin_width", None), ("outlet_width", None)):
+        object.__setattr__(geom, key, value)
+
+
+def _point(p) -> str:
+    """A point ``(x, z)`` for a message."""
+    return f"({p[0]:g}, {p[1]:g})"
+
+
+def _check_inserts(geom: "HopperGeometry") -> None:
+    """Each insert: a table of ``outline`` (a closed polygon inside the walls, above the
+    outlet plane, apart from the other inserts) and ``friction_angle_deg``."""
+    from .boundary import polygon_integrals, segments_meet, self_crossing
+
+    value = geom.inserts
+    if isinstance(value, (str, bytes, dict)) or not isinstance(value, (list, tuple)):
+        raise ConfigError(f"hopper.inserts = {_show(value)}: expected a list of tables "
+                          f"([[hopper.inserts]] with outline and friction_angle_deg)")
+    half = not geom.full_section
+    walls = [("hopper.wall", geom.wall_points)] + (
+        [] if half else [("hopper.left_wall", geom.left_wall)])
+    top, done = geom.top, []
+    allowed = [f.name for f in fields(InsertConfig)]
+    for m, item in enumerate(value):
+        key = f"hopper.inserts[{m}]"
+        if isinstance(item, InsertConfig):
+            item = dataclasses.asdict(item)
+        if not isinstance(item, dict):
+            raise ConfigError(f"{key} = {_show(item)}: expected a table with outline = "
+                              f"[[x, z], ...] and friction_angle_deg")
+        for name in item:
+            if name not in allowed:
+                raise ConfigError(_unknown_message(f"key in {key}", str(name), allowed,
+                                                   prefix=f"{key}."))
+        if item.get("outline") is None:
+            raise ConfigError(f"{key}.outline is required: a closed polygon [[x, z], ...] in m")
+        pts = list(_points(f"{key}.outline", item["outline"], 3))
+        if len(pts) > 3 and pts[-1] == pts[0]:
+            pts.pop()                                    # closed by repeating the first
+        if len(pts) < 3:
+            raise ConfigError(f"{key}.outline has {len(pts)} distinct points: a closed "
+                              f"polygon needs at least 3")
+        friction = item.get("friction_angle_deg")
+        if friction is not None:
+            friction = _check_range(f"{key}.friction_angle_deg", friction, 0, 90,
+                                    high_open=True, unit=" deg")
+        outline = f"{key}.outline"
+        if polygon_integrals(pts)[0] == 0.0:
+            raise ConfigError(f"{outline} encloses no area (its points are on one line): "
+                              f"expected a closed polygon")
+        crossing = self_crossing(pts, closed=True)
+        if crossing:
+            i, j = crossing
+            raise ConfigError(f"{outline} crosses itself: its edge from {_point_text(pts[i])} "
+                              f"meets the edge from {_point_text(pts[j])}")
+        for i, (x, z) in enumerate(pts):
+            where = f"{outline}[{i}] = {_point_text((x, z))}"
+            if z < 0.0:
+                raise ConfigError(f"{where}: z = {z:g} m is below the outlet plane, z = 0")
+            if z > top:
+                raise ConfigError(f"{where}: z = {z:g} m is above the top of the wall, "
+                                  f"z = {top:g} m")
+            if half and x < 0.0:
+                raise ConfigError(f"{where}: x = {x:g} m crosses the axis; in a half-section "
+                                  f"an insert lies at x >= 0 (a body of revolution, or a bar "
+                                  f"on the mid-plane)")
+            for wkey, wall in walls:
+                x_wall = _wall_x_at(wall, z)
+                if (x - x_wall) * (1.0 if wkey == "hopper.wall" else -1.0) >= 0.0:
+                    raise ConfigError(f"{where}: in or on the wall ({wkey} is at x = "
+                                      f"{x_wall:g} m at z = {z:g} m); an insert lies inside "
+                                      f"the walls")
+        edges = list(zip(pts, pts[1:] + pts[:1]))
+        if half and sum(p[0] == 0.0 and q[0] == 0.0 for p, q in edges) > 1:
+            raise ConfigError(f"{outline} lies along the axis with more than one edge; at "
+                              f"most one")
+        for wkey, wall in walls:
+            for p, q in edges:
+                for k in range(len(wall) - 1):
+                    if segments_meet(p, q, wall[k], wall[k + 1]):
+                        raise ConfigError(f"{outline} cuts {wkey}: its edge from "
+                                          f"{_point_text(p)} to {_point_text(q)} meets the "
+                                          f"wall's segment {k}")
+        from .boundary import inside_polygon
+        for n, other in done:
+            if (any(segments_meet(p, q, r, s) for p, q in edges
+                    for r, s in zip(other, other[1:] + other[:1]))
+                    or inside_polygon(pts[0][0], pts[0][1], np.asarray(other))
+                    or inside_polygon(other[0][0], other[0][1], np.asarray(pts))):
+                raise ConfigError(f"{outline} overlaps hopper.inserts[{n}]; inserts must lie "
+                                  f"apart")
+        done.append((m, pts))
+    object.__setattr__(geom, "inserts", tuple(
+        InsertConfig(tuple(pts), None if item.get("friction_angle_deg") is None else
+                     float(item["friction_angle_deg"]))
+        for (_, pts), item in zip(done, [i if isinstance(i, dict) else dataclasses.asdict(i)
+                                         for i in value])))
 
 
 @dataclass(frozen=True)
@@ -314,13 +667,28 @@ class MaterialConfig:
 
 @dataclass(frozen=True)
 class WallConfig:
-    """Hopper wall: Coulomb friction angle between material and wall (degrees)."""
+    """Hopper wall: Coulomb friction angle between material and wall (degrees), and
+    optionally one per segment of ``hopper.wall`` from the lip up (``segment_friction_deg``:
+    a lined hopper under a rough bin; the shorthands' wall has two segments, the cone or
+    floor and the bin).  The left wall of a full section and inserts without an angle of
+    their own take ``friction_angle_deg``."""
 
     friction_angle_deg: float = 15.0
+    segment_friction_deg: Optional[tuple] = None
 
     def __post_init__(self):
         _check_range("wall.friction_angle_deg", self.friction_angle_deg, 0, 90, high_open=True,
                      unit=" deg")
+        angles = self.segment_friction_deg
+        if angles is None:
+            return
+        if isinstance(angles, (str, bytes, dict)) or not isinstance(angles, (list, tuple)) \
+                or not angles:
+            raise ConfigError(f"wall.segment_friction_deg = {_show(angles)}: expected a list "
+                              f"of angles in [0, 90) deg, one per segment of hopper.wall")
+        object.__setattr__(self, "segment_friction_deg", tuple(
+            _check_range(f"wall.segment_friction_deg[{i}]", a, 0, 90, high_open=True,
+                         unit=" deg") for i, a in enumerate(angles)))
 
     @property
     def friction_coefficient(self) -> float:
@@ -587,6 +955,19 @@ class HopperConfig:
         if self.numerics.formulation == "lagrangian" and not self.hopper.axisymmetric:
             raise ConfigError('numerics.formulation = "lagrangian" models conical hoppers only; '
                               'a wedge (hopper.shape = "wedge") runs with "eulerian"')
+        if self.numerics.formulation == "lagrangian" and (self.hopper.shape == "profile"
+                                                          or self.hopper.inserts):
+            raise ConfigError('numerics.formulation = "lagrangian" models the conical '
+                              'shorthand without inserts only (hopper.shape = "conical"); a '
+                              'profile or an insert runs with "eulerian"')
+        angles = self.wall.segment_friction_deg
+        if angles is not None and len(angles) != self.hopper.n_wall_segments:
+            what = ("hopper.wall has" if self.hopper.shape == "profile" else
+                    f"the {self.hopper.shape} shorthand's wall has (the hopper, the bin)")
+            raise ConfigError(f"wall.segment_friction_deg has {len(angles)} value"
+                              f"{'s' * (len(angles) != 1)}; {what} "
+                              f"{self.hopper.n_wall_segments} segments: one angle per segment, "
+                              f"from the lip up")
         if self.numerics.formulation == "lagrangian" and self.run.opening_time > 0.0:
             raise ConfigError(f"run.opening_time = {self.run.opening_time:g} s applies to "
                               'numerics.formulation = "eulerian" only; allowed range with '
@@ -621,6 +1002,14 @@ class HopperConfig:
             warnings.warn(f"only {cells_across_outlet:.1f} cells across the outlet {across}; "
                           "6 or more are recommended for a discharge rate", ResolutionWarning,
                           stacklevel=3)
+
+    @cached_property
+    def boundary(self):
+        """The boundary (:class:`fipy_hopper.boundary.Boundary`) with every segment's wall
+        friction: ``wall.segment_friction_deg`` or ``wall.friction_angle_deg`` on the walls,
+        an insert's own angle or the wall's, 0 on the free-fall tubes.  Built once."""
+        return self.hopper.boundary.with_friction(self.wall.friction_angle_deg,
+                                                  self.wall.segment_friction_deg)
 
     # ------------------------------------------------------------ size of a run
     def grid_shape(self, cell_size: float = None) -> tuple:
@@ -758,12 +1147,8 @@ class HopperConfig:
                 if key not in allowed:
                     raise ConfigError(_unknown_message(f"key in [{name}]", key, allowed,
                                                        prefix=f"{name}."))
-            if name == "hopper" and values.get("shape") == "wedge":
-                for key in ("bin_diameter", "outlet_diameter"):
-                    if key in values:
-                        raise ConfigError(
-                            f"hopper.{key} is for a conical hopper; a wedge (shape = "
-                            f"\"wedge\") takes hopper.{key.replace('diameter', 'width')}")
+            if name == "hopper":
+                _check_shape_keys(values)
             sections[name] = kind(**values)
         return cls(**sections)
 
@@ -796,13 +1181,24 @@ class HopperConfig:
 
     def to_dict(self) -> dict:
         """The sections as dictionaries; the hopper's sizes under the keys its shape takes
-        (diameters for a cone, widths for a wedge), so that the dictionary reads back."""
-        out = dataclasses.asdict(self)
+        (diameters for a cone, widths for a wedge, the points of a profile), so that the
+        dictionary reads back; points as lists, keys left at None out."""
+        out = _plain(dataclasses.asdict(self))
         hopper = out["hopper"]
-        unused = (("bin_width", "outlet_width") if self.hopper.axisymmetric
-                  else ("bin_diameter", "outlet_diameter"))
-        for key in unused:
+        geom = self.hopper
+        if geom.shape == "profile":
+            unused = SHORTHAND_KEYS + (("left_wall",) if geom.left_wall is None else ())
+        else:
+            unused = PROFILE_KEYS + ("symmetry", "section") + (
+                ("bin_width", "outlet_width") if geom.shape == "conical"
+                else ("bin_diameter", "outlet_diameter"))
+        for key in unused + (() if geom.inserts else ("inserts",)):
             del hopper[key]
+        for item in hopper.get("inserts", ()):
+            if item["friction_angle_deg"] is None:
+                del item["friction_angle_deg"]
+        if self.wall.segment_friction_deg is None:
+            del out["wall"]["segment_friction_deg"]
         return out
 
     def to_toml(self) -> str:
@@ -827,6 +1223,8 @@ class HopperConfig:
                 if key not in allowed:
                     raise ConfigError(_unknown_message(f"key in [{name}]", str(key), allowed,
                                                        prefix=f"{name}."))
+            if name == "hopper" and change:
+                _check_shape_keys({"shape": current.shape, **change})
             new[name] = dataclasses.replace(current, **change) if change else current
         if sections:
             raise ConfigError(_unknown_message("section", next(iter(sections)), list(_SECTIONS)))
@@ -839,6 +1237,39 @@ def _ceil_digits(x: float, digits: int = 3) -> float:
     return float(f"{math.ceil(x / step * (1 - 1e-12)) * step:.{digits}g}")
 
 
+def _check_shape_keys(values: dict) -> None:
+    """Refuse the keys of another shape in a ``[hopper]`` table (before any is used)."""
+    shape = values.get("shape", "conical")
+    if shape == "wedge":
+        for key in ("bin_diameter", "outlet_diameter"):
+            if key in values:
+                raise ConfigError(
+                    f"hopper.{key} is for a conical hopper; a wedge (shape = "
+                    f"\"wedge\") takes hopper.{key.replace('diameter', 'width')}")
+    if shape == "profile":
+        for key in SHORTHAND_KEYS:
+            if values.get(key) is not None:
+                raise ConfigError(f"hopper.{key} is for the conical and wedge shorthands; a "
+                                  f"profile (shape = \"profile\") takes its sizes from "
+                                  f"hopper.wall")
+    elif shape in SHAPES:
+        for key in PROFILE_KEYS:
+            if values.get(key) is not None:
+                instead = (" (a shorthand takes hopper.fill_height, above the transition)"
+                           if key == "fill_level" else "")
+                raise ConfigError(f"hopper.{key} is for shape = \"profile\", not "
+                                  f"\"{shape}\"{instead}")
+
+
+def _plain(value):
+    """Tuples as lists, recursively (for TOML and JSON)."""
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    return value
+
+
 def _grid_shape(geom: HopperGeometry, num: NumericsConfig, h: float) -> tuple:
     """``(nr, nz)`` by the rules of :func:`fipy_hopper.mesh.build_grid` for cell size ``h``."""
     nr, n_below, n_above = grid_rows(geom, num, h)
@@ -846,9 +1277,11 @@ def _grid_shape(geom: HopperGeometry, num: NumericsConfig, h: float) -> tuple:
 
 
 def grid_rows(geom: HopperGeometry, num: NumericsConfig, h: float) -> tuple:
-    """``(nr, n_below, n_above)``: the columns of the grid, its rows below the outlet plane
-    and above it, by the rules of :func:`fipy_hopper.mesh.build_grid` for cell size ``h``."""
-    nr = int(math.ceil(geom.bin_radius / h - 1e-9)) + 2
+    """``(nr, n_below, n_above)``: the columns of the grid (across
+    :attr:`HopperGeometry.x_extent`), its rows below the outlet plane and above it, by the
+    rules of :func:`fipy_hopper.mesh.build_grid` for cell size ``h``."""
+    x_min, x_max = geom.x_extent
+    nr = int(math.ceil((x_max - x_min) / h - 1e-9)) + 2
     n_below = max(int(math.ceil(num.free_fall_depth * geom.outlet_diameter / h - 1e-9)), 3)
     n_above = int(math.ceil(geom.top / h - 1e-9)) + 1
     return nr, n_below, n_above
@@ -936,6 +1369,10 @@ def _toml_value(value) -> str:
         return f'"{value}"'
     if isinstance(value, bool):
         return "true" if value else "false"
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    if isinstance(value, dict):         # an inline table
+        return "{" + ", ".join(f"{k} = {_toml_value(v)}" for k, v in value.items()) + "}"
     return repr(value)
 
 

@@ -21,7 +21,6 @@ from dataclasses import dataclass
 import numpy as np
 from fipy import CylindricalGrid2D
 
-from . import geometry
 from .fipy_adapter import UniformGrid2D
 from .config import HopperConfig
 
@@ -73,9 +72,9 @@ class HopperGrid:
         return self.face_aperture[self.n_zfaces:].reshape(self.nz, self.nr + 1)
 
 
-def _open_fraction_cells(geom, r_nodes, z_nodes, n_sub):
+def _open_fraction_cells(boundary, r_nodes, z_nodes, n_sub):
     """Open fraction of each cell (r-weighted for an axisymmetric grid), by ``n_sub x n_sub``
-    midpoint sub-sampling."""
+    midpoint sub-sampling of ``boundary.in_solid`` (:class:`fipy_hopper.boundary.Boundary`)."""
     nr, nz = len(r_nodes) - 1, len(z_nodes) - 1
     h_r, h_z = np.diff(r_nodes), np.diff(z_nodes)
     t = (np.arange(n_sub) + 0.5) / n_sub
@@ -83,24 +82,23 @@ def _open_fraction_cells(geom, r_nodes, z_nodes, n_sub):
     zs = z_nodes[:-1, None] + h_z[:, None] * t[None, :]          # (nz, n_sub)
     R = rs[None, :, None, :]                                      # (1, nr, 1, s)
     Z = zs[:, None, :, None]                                      # (nz, 1, s, 1)
-    open_ = ~geometry.in_solid(R, Z, geom)                        # (nz, nr, s, s)
-    weight = np.broadcast_to(R if geom.axisymmetric else np.ones_like(R), open_.shape)
+    open_ = ~boundary.in_solid(R, Z)                              # (nz, nr, s, s)
+    weight = np.broadcast_to(boundary.section.weight(R), open_.shape)
     return (open_ * weight).sum(axis=(2, 3)) / weight.sum(axis=(2, 3))
 
 
-def _open_fraction_faces(geom, r_nodes, z_nodes, n_sub):
+def _open_fraction_faces(boundary, r_nodes, z_nodes, n_sub):
     """Apertures of z-normal faces (nz+1, nr) and r-normal faces (nz, nr+1)."""
     t = (np.arange(n_sub) + 0.5) / n_sub
     h_r, h_z = np.diff(r_nodes), np.diff(z_nodes)
     rs = r_nodes[:-1, None] + h_r[:, None] * t[None, :]          # (nr, s)
     zs = z_nodes[:-1, None] + h_z[:, None] * t[None, :]          # (nz, s)
     # z-faces: area weight r (axisymmetric) or uniform (plane)
-    open_z = ~geometry.in_solid(rs[None, :, :], z_nodes[:, None, None] + 1e-12, geom)
-    w = np.broadcast_to(rs[None, :, :] if geom.axisymmetric else np.ones_like(rs)[None],
-                        open_z.shape)
+    open_z = ~boundary.in_solid(rs[None, :, :], z_nodes[:, None, None] + 1e-12)
+    w = np.broadcast_to(boundary.section.weight(rs[None, :, :]), open_z.shape)
     a_z = (open_z * w).sum(axis=2) / w.sum(axis=2)
     # r-faces: uniform weight along z
-    open_r = ~geometry.in_solid(r_nodes[None, :, None], zs[:, None, :], geom)
+    open_r = ~boundary.in_solid(r_nodes[None, :, None], zs[:, None, :])
     a_r = open_r.mean(axis=2)
     return a_z, a_r
 
@@ -123,8 +121,9 @@ def build_grid(cfg: HopperConfig, n_sub: int = 16) -> HopperGrid:
     z_nodes = z_bottom + h * np.arange(nz + 1)
     z_nodes[n_below] = 0.0
 
-    kappa = _open_fraction_cells(geom, r_nodes, z_nodes, n_sub)
-    a_z, a_r = _open_fraction_faces(geom, r_nodes, z_nodes, n_sub)
+    boundary = geom.boundary
+    kappa = _open_fraction_cells(boundary, r_nodes, z_nodes, n_sub)
+    a_z, a_r = _open_fraction_faces(boundary, r_nodes, z_nodes, n_sub)
     closed = kappa < num.min_open_fraction
     kappa = np.where(closed, 0.0, kappa)
     # a face is closed if either neighbour cell is closed (or it is an exterior wall face)
@@ -137,8 +136,8 @@ def build_grid(cfg: HopperConfig, n_sub: int = 16) -> HopperGrid:
     face_aperture = np.concatenate([a_z.ravel(), a_r.ravel()])
 
     RN, ZN = np.meshgrid(r_nodes, z_nodes)
-    node_distance = geometry.signed_distance(RN, ZN, geom)
-    node_normal = np.stack(geometry.wall_normal(RN, ZN, geom))
+    node_distance = boundary.signed_distance(RN, ZN)
+    node_normal = np.stack(boundary.wall_normal(RN, ZN))
 
     n_zfaces = nr * (nz + 1)
     outflow = np.zeros(len(face_aperture), dtype=bool)

@@ -85,6 +85,21 @@ CASES = [
      ["numerics.gravity_ramp_time", "numerics.max_fill_time = 2", "[0, 2] s"]),
     ("a string of a thousand characters", '[material]\ndensity = "' + "x" * 1000 + '"\n',
      ["material.density", "expected a number"]),
+    # a wall profile (shape = "profile"; tests/test_boundary.py has every case)
+    ("a profile wall that descends", '[hopper]\nshape = "profile"\nfill_level = 0.1\n'
+     "wall = [[0.03, 0.0], [0.1, 0.2], [0.15, 0.1]]\n",
+     ["hopper.wall[2] = [0.15, 0.1]", "must not descend"]),
+    ("a left wall in a half-section", '[hopper]\nshape = "profile"\nfill_level = 0.3\n'
+     "wall = [[0.03, 0.0], [0.15, 0.2], [0.15, 0.6]]\n"
+     "left_wall = [[-0.03, 0.0], [-0.15, 0.2], [-0.15, 0.6]]\n",
+     ["hopper.left_wall", 'hopper.section = "full"']),
+    ("an insert reaching below the outlet plane", '[hopper]\nshape = "profile"\n'
+     "fill_level = 0.3\nwall = [[0.03, 0.0], [0.15, 0.2], [0.15, 0.6]]\n"
+     "[[hopper.inserts]]\noutline = [[0.0, 0.05], [0.02, -0.01], [0.0, -0.02]]\n",
+     ["hopper.inserts[0].outline[1] = [0.02, -0.01]", "below the outlet plane"]),
+    ("a segment friction list of the wrong length",
+     "[wall]\nsegment_friction_deg = [15.0, 20.0, 25.0]\n",
+     ["wall.segment_friction_deg has 3 values", "2 segments"]),
 ]
 
 

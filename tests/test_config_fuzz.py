@@ -9,7 +9,10 @@ and sections, and sections that are not tables.  A configuration that passes mus
 numbers ``fipy-hopper validate`` prints (:func:`fipy_hopper.api.expected_quantities`, the
 grid size, the time step) without an exception, finite where they are defined, and must
 survive its own TOML round trip.  The same inputs written as TOML files go through
-``fipy-hopper validate`` itself: exit 0, or exit 2 with one line and no traceback.
+``fipy-hopper validate`` itself: exit 0, or exit 2 with one line and no traceback (its
+picture, ``geometry.png``, is stood in for: tests/test_boundary.py draws it).  The ``[hopper]``
+tables mostly hold the keys of the shape drawn (a profile's walls, fill level, inserts; a
+shorthand's sizes), sometimes the other shape's too.
 
 Only configuration parsing and validation run here (no grid, no simulation): 2,000 cases in
 a few seconds.  ``FUZZ_EXAMPLES=N`` runs N cases of each test with fresh random seeds.
@@ -23,6 +26,7 @@ import os
 import tempfile
 import warnings
 from dataclasses import fields
+from unittest import mock
 
 import pytest
 
@@ -36,6 +40,7 @@ except ModuleNotFoundError:  # Python 3.10
     import tomli as tomllib
 
 from fipy_hopper import config as fconfig  # noqa: E402
+from fipy_hopper.boundary import Boundary  # noqa: E402
 from fipy_hopper.api import expected_quantities  # noqa: E402
 from fipy_hopper.cli import main  # noqa: E402
 from fipy_hopper.config import ConfigError, HopperConfig  # noqa: E402
@@ -70,17 +75,42 @@ def near(low, high, integer=False):
     return inside, st.one_of(edges, wide, huge_ints, any_float, any_value)
 
 
+def walls(sign=1.0):
+    """``(inside, wild)``: walls from a lip on ``z = 0`` up, never descending, mostly outward
+    (``sign = -1``: a left wall); they may still cross, or be too narrow for the outlet."""
+    coordinate = st.floats(0.0, 1.5) | st.floats(0.0, 1.5).map(lambda x: float(f"{x:.2g}"))
+    steps = st.lists(st.tuples(coordinate, coordinate), min_size=1, max_size=4)
+    inside = st.tuples(st.floats(0.01, 0.2), steps).map(lambda w: [
+        [sign * (w[0] + sum(dx for dx, _ in w[1][:k])), sum(dz for _, dz in w[1][:k])]
+        for k in range(len(w[1]) + 1)])
+    return inside, st.one_of(any_value, st.lists(st.lists(near(-2.0, 2.0)[1], max_size=3),
+                                                 max_size=4))
+
+
+point = st.tuples(st.floats(0.0, 0.4), st.floats(0.0, 1.5)).map(list)
+insert = st.fixed_dictionaries({"outline": st.lists(point, min_size=3, max_size=5)},
+                               optional={"friction_angle_deg": near(0.0, 45.0)[0]})
+
 PLAUSIBLE = {
     "hopper": {"bin_diameter": near(0.2, 3.0), "half_angle_deg": near(5.0, 90.0),
                "outlet_diameter": near(0.02, 0.15), "bin_height": near(0.5, 5.0),
                "fill_height": near(0.02, 1.0),
-               "shape": (st.sampled_from(["conical", "wedge"]),
+               "shape": (st.sampled_from(["conical", "wedge", "profile"]),
                          st.sampled_from(["", "Wedge", "cylinder"]) | any_value),
-               "bin_width": near(0.2, 3.0), "outlet_width": near(0.02, 0.15)},
+               "bin_width": near(0.2, 3.0), "outlet_width": near(0.02, 0.15),
+               "symmetry": (st.sampled_from(["axisymmetric", "plane"]),
+                            st.sampled_from(["", "Plane", "cylindrical"]) | any_value),
+               "section": (st.sampled_from(["half", "full"]),
+                           st.sampled_from(["", "Full", "both"]) | any_value),
+               "wall": walls(), "left_wall": walls(-1.0), "fill_level": near(0.05, 1.5),
+               "inserts": (st.lists(insert, max_size=2),
+                           any_value | st.lists(any_value | insert, max_size=2))},
     "material": {"density": near(100.0, 5000.0), "youngs_modulus": near(1e4, 1e9),
                  "poisson_ratio": near(-0.5, 0.49), "friction_angle_deg": near(5.0, 60.0),
                  "dilation_angle_deg": near(0.0, 30.0), "cohesion": near(0.0, 1e4)},
-    "wall": {"friction_angle_deg": near(0.0, 45.0)},
+    "wall": {"friction_angle_deg": near(0.0, 45.0),
+             "segment_friction_deg": (st.lists(near(0.0, 45.0)[0], min_size=1, max_size=4),
+                                      any_value | st.lists(near(0.0, 45.0)[1], max_size=4))},
     "numerics": {"cell_size": near(0.002, 0.02), "dt_safety": near(0.05, 1.0),
                  "transport_cfl": near(0.05, 0.5),
                  "max_transport_interval": near(1, 200, integer=True),
@@ -103,7 +133,9 @@ PLAUSIBLE = {
             "max_time": near(0.1, 120.0), "empty_fraction": near(0.001, 0.5),
             "wall_time_limit": near(0.0, 1e4), "output_interval": near(1e-3, 1.0),
             "field_interval": near(1e-2, 5.0), "markers_per_side": near(0, 6, integer=True),
-            "opening_time": near(0.0, 1.0)},
+            "opening_time": near(0.0, 1.0),
+            "wall_bin_width": (near(1e-3, 0.1)[0] | st.just("auto"),
+                               near(1e-3, 0.1)[1] | st.sampled_from(["", "Auto", "fine"]))},
 }
 
 
@@ -126,6 +158,18 @@ def configurations(draw):
             data[name] = draw(any_value)                # anything, a table or not
             continue
         present = draw(st.lists(st.sampled_from(sorted(keys)), unique=True))
+        if name == "hopper":            # mostly the keys of the shape drawn
+            shape = draw(keys["shape"][0])
+            other = (fconfig.SHORTHAND_KEYS if shape == "profile" else
+                     fconfig.PROFILE_KEYS + ("symmetry", "section"))
+            if draw(st.integers(0, 9)):
+                present = [key for key in present if key not in other]
+            if shape == "profile":
+                present = list(dict.fromkeys(present + ["wall", "fill_level"]))
+            present = [key for key in present if key != "shape"] + ["shape"]
+            data[name] = {key: draw(keys[key][0]) for key in present[:-1]}
+            data[name]["shape"] = shape
+            continue
         data[name] = {key: draw(keys[key][0]) for key in present}
     sections = [n for n in data if isinstance(data[n], dict)]
     for _ in range((0, 0, 0, 1, 1, 2)[draw(st.integers(0, 5))] if sections else 0):
@@ -240,8 +284,11 @@ def test_validate_command_exits_0_or_2_with_one_line(folder, data):
     with open(path, "w", encoding="utf-8") as fh:
         fh.write(toml_text(data))
     out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+    drawn = []              # geometry.png: stood in for (tests/test_boundary.py draws)
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err), \
+            mock.patch.object(Boundary, "draw", lambda self, p: drawn.append(p)):
         code = main(["validate", path])
+    assert len(drawn) == (code == 0)
     errors = [line for line in err.getvalue().splitlines() if "warning:" not in line]
     if code == 0:
         assert not errors and out.getvalue().startswith(f"{path}: valid"), err.getvalue()
