@@ -292,7 +292,8 @@ def _summary(sim, cfg, reason: str) -> dict:
     except Exception:  # a run that failed before it measured anything
         rec = sim.record
         summary = {"steady_discharge_rate_kg_s": math.nan, "flow_mode": "unknown",
-                   "mass_flow_index": math.nan, "initial_mass_kg": rec.initial_mass,
+                   "mass_flow_index": math.nan, "wall_slip_ratio": math.nan,
+                   "wall_slip_fraction": math.nan, "initial_mass_kg": rec.initial_mass,
                    "remaining_mass_kg": math.nan, "mass_balance_error": math.nan,
                    "discharge_time_s": rec.t[-1] if rec.t else 0.0,
                    "cells": sim.model.n_cells, "steps": sim.state.step,

@@ -64,7 +64,8 @@ PathLike = Union[str, os.PathLike]
 
 #: Columns of ``timeseries.csv`` (the first four are the public contract).
 TIMESERIES_COLUMNS = ("t_s", "mass_in_hopper_kg", "discharged_kg", "discharge_rate_kg_s",
-                      "mass_flow_index", "stagnant_fraction", "bin_lateral_stress_ratio")
+                      "mass_flow_index", "stagnant_fraction", "bin_lateral_stress_ratio",
+                      "wall_slip_ratio", "wall_slip_fraction")
 #: Columns of ``wall_pressure.csv`` (public contract).
 WALL_PRESSURE_COLUMNS = ("stage", "t_s", "s_m", "r_m", "z_m", "p_n_Pa", "tau_Pa",
                          "p_n_stress_Pa", "tau_stress_Pa", "window_s", "hoop_force_N_m",
@@ -230,14 +231,17 @@ def write_timeseries(path: PathLike, record, axisymmetric: bool = True) -> None:
     ``t_s`` is the time since the outlet opened (s); masses are for the full 3D hopper (kg);
     ``discharge_rate_kg_s`` is the mass through the outlet over the preceding sample interval;
     ``bin_lateral_stress_ratio`` the bin's ``sigma_rr / sigma_zz``
-    (:func:`fipy_hopper.diagnostics.bin_lateral_stress_ratio`).
+    (:func:`fipy_hopper.diagnostics.bin_lateral_stress_ratio`); ``wall_slip_ratio`` and
+    ``wall_slip_fraction`` the slip along the hopper wall of
+    :class:`fipy_hopper.diagnostics.FlowModeRule`.
     A wedge's masses and rates are per metre of length and named so (``mass_in_hopper_kg_m``,
     ``discharge_rate_kg_s_m``, :func:`result_columns`).
     """
     n = len(record.t)
     rows = ([_num(record.t[i]), _num(record.mass_in_hopper[i]), _num(record.discharged[i]),
              _num(record.rate[i]), _num(record.mass_flow_index[i]),
-             _num(record.stagnant_fraction[i]), _num(record.bin_lateral_stress_ratio[i])]
+             _num(record.stagnant_fraction[i]), _num(record.bin_lateral_stress_ratio[i]),
+             _num(record.wall_slip_ratio[i]), _num(record.wall_slip_fraction[i])]
             for i in range(n))
     _write_csv(path, result_columns(TIMESERIES_COLUMNS, axisymmetric), rows)
 

@@ -430,6 +430,14 @@ class HopperModel:
         w = np.where(alpha > 0.5, (state.alpha * self.open_volume).ravel()[cells], 0.0)
         return s, w, state.sigma.reshape(-1, 4)[cells]
 
+    def contact_slip(self, state: State) -> tuple:
+        """``(slip, axis_speed)`` (m/s) of every entry of ``contact_list``: the slip speed
+        down the wall of the entry's node (its velocity in ``state.v``, after the step's
+        contact) and the downward speed of the axis node of the same row."""
+        from . import diagnostics
+        j, i, normals, _ = self.contact_list
+        return diagnostics.entry_slip(state.v[:, j, i].T, normals), -state.v[1, j, 0]
+
     def flow_mode_measures(self, state: State, rule) -> tuple:
         from . import diagnostics
         return diagnostics.flow_mode_measures(self, state, rule)
