@@ -116,11 +116,32 @@ def test_flow_mode_map_classifies_the_two_clear_cases(flow_map):
     assert data["setting"] == "quick"
     assert data["numbers"]["agreement_fraction"] == 1.0
     assert data["numbers"]["classified"] == 2
-    for name in ("flow_mode_map.png", "mass_flow_index.png", "thumbnails.png"):
+    for name in ("flow_mode_map.png", "wall_slip.png", "thumbnails.png"):
         assert_png(flow_map / name)
     for case in ("theta15_wall12", "theta60_wall25"):     # ordinary run directories
         assert (flow_map / "cases" / case / "summary.json").is_file()
         assert (flow_map / "cases" / case / "config.toml").is_file()
+
+
+def test_flow_mode_map_grid_check_reruns_the_cases_near_the_boundary():
+    """The cases within 6 deg of Jenike's boundary (and no others) get a rerun on 2.5 mm
+    cells; the analysis sets each against its map case and counts the cases beyond 4 deg."""
+    study = load("flow_mode_map")
+    setup = study.setup(pairs=((40.0, 10.0), (20.0, 10.0), (30.0, 30.0)))
+    names = [c["name"] for c in setup["cases"]]
+    assert names == ["theta40_wall10", "theta40_wall10_fine", "theta20_wall10",
+                     "theta30_wall30"]
+    fine = setup["cases"][1]
+    assert fine["config"]["numerics"]["cell_size"] == 0.0025 and fine["params"]["grid_check"]
+    rows = [{"case": c["name"], **c["params"], "flow_mode": mode, "wall_slip_ratio": x}
+            for c, mode, x in zip(setup["cases"], ("mass", "funnel", "mass", "funnel"),
+                                  (0.25, 0.15, 0.6, 0.05))]
+    numbers = study.analyse(rows, setup["options"])
+    assert numbers["classified"] == 3 and numbers["agreeing"] == 3
+    assert numbers["cases_beyond_4deg"] == 3 and numbers["funnel_at_rough_walls"]
+    assert numbers["grid_checked"] == 1 and numbers["grid_same_call"] == 0
+    assert numbers["grid_changed"] == ["theta40_wall10_fine"]
+    assert "mass / funnel" in study.grid_check_finding(rows, numbers, setup["options"])
 
 
 def test_case_pictures_are_the_study_setting_unless_asked_for():
