@@ -281,9 +281,12 @@ def make_model(cfg: HopperConfig, threads: Optional[int] = None):
 
 
 def _write_tables(rundir, record, axisymmetric: bool = True) -> None:
+    from .diagnostics import FlowModeRule
+
     fio.write_timeseries(rundir / rundir.TIMESERIES, record, axisymmetric)
     fio.write_wall_pressure(rundir / rundir.WALL_PRESSURE, record)
     fio.write_loads(rundir / rundir.LOADS, record, axisymmetric)
+    fio.write_wall_slip(rundir / rundir.WALL_SLIP, record, FlowModeRule().slip_ratio)
 
 
 def _summary(sim, cfg, reason: str) -> dict:

@@ -147,23 +147,28 @@ def normal_load(impulse, normals):
 
 def wall_slip_measures(model, state, previous_impulse=None,
                        rule: FlowModeRule = FlowModeRule()):
-    """``(ratio, fraction, stretch ratios)`` of :class:`FlowModeRule` from a model's wall
-    contact: the smallest wall slip ratio over the hopper stretches, the slip fraction of that
-    stretch, and every stretch's ratio.  The loads are ``state.wall_impulse`` less
-    ``previous_impulse`` (its value at the previous sample; ``None``: since the start), the
-    slip and axis speeds the model's :meth:`contact_slip` (read from the state, which is left
-    as it is)."""
+    """``(ratio, fraction, stretch ratios, profile)`` of :class:`FlowModeRule` from a model's
+    wall contact: the smallest wall slip ratio over the hopper stretches, the slip fraction of
+    that stretch, every stretch's ratio, and the loaded hopper contacts as rows
+    ``(s, r, z, u/U)`` (their wall point, m, and slip ratio; (0, 4) when none).  The loads are
+    ``state.wall_impulse`` less ``previous_impulse`` (its value at the previous sample;
+    ``None``: since the start), the slip and axis speeds the model's :meth:`contact_slip`
+    (read from the state, which is left as it is)."""
     s, normals, segment = model.wall_entries()
     impulse = state.wall_impulse if previous_impulse is None else (
         state.wall_impulse - previous_impulse)
     slip, axis_speed = model.contact_slip(state)
     stretch = hopper_stretches(segment, s, 2.0 * model.cell_size)
-    ratios, fractions = wall_slip(normal_load(impulse, normals), slip, axis_speed, s, stretch,
-                                  rule)
+    load = normal_load(impulse, normals)
+    ratios, fractions = wall_slip(load, slip, axis_speed, s, stretch, rule)
+    on = np.flatnonzero((stretch >= 0) & (load > 0.0) & (axis_speed > 0.0) & np.isfinite(slip))
+    on = on[np.argsort(s[on], kind="stable")]
+    r_w, z_w, _, _ = geometry.wall_point(s[on], model.cfg.hopper)
+    profile = np.column_stack([s[on], r_w, z_w, slip[on] / axis_speed[on]])
     if not np.isfinite(ratios).any():
-        return math.nan, math.nan, ratios
+        return math.nan, math.nan, ratios, profile
     worst = int(np.nanargmin(ratios))
-    return float(ratios[worst]), float(fractions[worst]), ratios
+    return float(ratios[worst]), float(fractions[worst]), ratios, profile
 
 
 def flow_mode_measures(model, state, rule: FlowModeRule = FlowModeRule()):

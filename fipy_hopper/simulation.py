@@ -198,6 +198,9 @@ class RunRecord:
     stagnant_fraction: list = field(default_factory=list)
     wall_slip_ratio: list = field(default_factory=list)      # -, FlowModeRule, per sample
     wall_slip_fraction: list = field(default_factory=list)   # -, share of the hopper wall
+    # rows (s, r, z, slip / axis speed) of the loaded hopper-wall contacts at the last sample
+    # of the flow-mode window (wall_slip.csv, the flow-pattern picture)
+    wall_slip_profile: list = field(default_factory=list)
     bin_lateral_stress_ratio: list = field(default_factory=list)   # -, in the bin's full cells
     # stage -> (t since the outlet opened, s, r, z, p_n, tau): the reaction estimate per bin
     wall: dict = field(default_factory=dict)
@@ -497,10 +500,13 @@ class Simulation:
         rec.mass_flow_index.append(index)
         rec.stagnant_fraction.append(stagnant)
         previous = self._readings.get("sample")     # the wall's impulse at the last sample
-        slip, share, _ = diagnostics.wall_slip_measures(
+        slip, share, _, profile = diagnostics.wall_slip_measures(
             m, st, previous["wall"] if previous is not None else None, self.flow_rule)
         rec.wall_slip_ratio.append(slip)
         rec.wall_slip_fraction.append(share)
+        if len(rec.t) > 1 and _before_flow_window_end(t, mass, rec.initial_mass) \
+                and len(profile):
+            rec.wall_slip_profile = profile.tolist()
         rec.bin_lateral_stress_ratio.append(m.bin_lateral_stress_ratio(st))
 
     def _load_sample(self, stage: str):
@@ -707,7 +713,7 @@ class Simulation:
         t = np.asarray(rec.t)
         masses = np.asarray(rec.mass_in_hopper)
         m0 = rec.initial_mass
-        window = (masses <= 0.9 * m0) & (masses >= 0.4 * m0) & (t > 0.1)
+        window = (masses <= 0.9 * m0) & _before_flow_window_end(t, masses, m0)
         index, stagnant, slip, share = (
             _window_median(getattr(rec, name), window) for name in (
                 "mass_flow_index", "stagnant_fraction", "wall_slip_ratio", "wall_slip_fraction"))
@@ -765,3 +771,10 @@ def _window_median(values, window) -> float:
     values = np.asarray(values, float)
     chosen = values[window] if window.any() else values[1:]
     return float(np.nanmedian(chosen)) if np.isfinite(chosen).any() else math.nan
+
+
+def _before_flow_window_end(t, mass, m0):
+    """Whether samples lie at or before the end of the flow-mode window: at least 0.1 s after
+    the opening with at least 40 % of the initial mass ``m0`` left (the window also needs at
+    most 90 % left, :meth:`Simulation.summary`)."""
+    return (np.asarray(t) > 0.1) & (np.asarray(mass) >= 0.4 * m0)

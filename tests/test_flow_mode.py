@@ -73,9 +73,11 @@ def test_measure_on_a_vertical_plug_flow_is_the_cos_of_the_half_angle():
     so S = cos(theta) and the whole wall slides (theta = 20 deg: mass)."""
     model, state, _, _ = _loaded_eulerian(20.0)
     before = state.copy()
-    ratio, fraction, per_stretch = wall_slip_measures(model, state)
+    ratio, fraction, per_stretch, profile = wall_slip_measures(model, state)
     assert ratio == pytest.approx(math.cos(math.radians(20.0)), rel=1e-12)
     assert fraction == 1.0 and len(per_stretch) == 1
+    assert np.allclose(profile[:, 3], math.cos(math.radians(20.0)), rtol=1e-12)
+    assert np.all(np.diff(profile[:, 0]) >= 0) and np.all(profile[:, 2] >= 0.0)
     assert diagnostics.classify_flow_mode(ratio) == "mass"
     for key, value in before.__dict__.items():      # the measurement read the state only
         assert np.array_equal(getattr(state, key), value), key
@@ -90,7 +92,7 @@ def test_measure_of_a_wall_that_sticks_on_its_upper_half():
     upper = (segment == 1) & (z > 0.5 * model.cfg.hopper.cone_height)
     state.v[:, j[upper], i[upper]] = 0.0
     state.v[1, :, 0] = -1.0                          # the axis still moves
-    ratio, fraction, _ = wall_slip_measures(model, state)
+    ratio, fraction, _, _ = wall_slip_measures(model, state)
     hopper = segment == 1
     lower = hopper & ~upper
     assert ratio == pytest.approx(lower.sum() / hopper.sum()
@@ -118,7 +120,7 @@ def test_lagrangian_stations_measure_the_same_plug_flow():
     slip, axis = model.contact_slip(state)
     cone_stations = segment == 1
     assert np.isfinite(slip[cone_stations]).mean() > 0.5
-    ratio, fraction, _ = wall_slip_measures(model, state)
+    ratio, fraction, _, _ = wall_slip_measures(model, state)
     assert ratio == pytest.approx(math.cos(math.radians(20.0)), rel=1e-9)
     assert fraction == 1.0
     assert np.allclose(axis[cone_stations], 1.0)
