@@ -57,7 +57,7 @@ __all__ = [
     "atomic_write_text", "write_json", "write_timeseries", "write_wall_pressure", "read_csv",
     "environment_versions", "code_commit", "grid_points_and_quads", "cell_fields", "marker_file",
     "write_markers", "read_markers",
-    "TIMESERIES_COLUMNS", "WALL_PRESSURE_COLUMNS",
+    "TIMESERIES_COLUMNS", "WALL_PRESSURE_COLUMNS", "WALL_SLIP_COLUMNS", "write_wall_slip",
 ]
 
 PathLike = Union[str, os.PathLike]
@@ -70,6 +70,9 @@ TIMESERIES_COLUMNS = ("t_s", "mass_in_hopper_kg", "discharged_kg", "discharge_ra
 WALL_PRESSURE_COLUMNS = ("stage", "t_s", "s_m", "r_m", "z_m", "p_n_Pa", "tau_Pa",
                          "p_n_stress_Pa", "tau_stress_Pa", "window_s", "hoop_force_N_m",
                          "meridional_force_N_m")
+#: Columns of ``wall_slip.csv``: the loaded contacts of the hopper wall at the last sample of
+#: the flow-mode window (:class:`fipy_hopper.diagnostics.FlowModeRule`).
+WALL_SLIP_COLUMNS = ("s_m", "r_m", "z_m", "slip_ratio", "sliding")
 #: Columns of ``loads.csv`` (public contract): the vertical momentum balance of the grid over
 #: each interval, as mean forces (N, 3D, upward positive; ``weight`` positive).
 LOADS_COLUMNS = ("stage", "t_s", "weight_N", "wall_vertical_N", "outlet_N", "damping_N",
@@ -279,6 +282,17 @@ def write_wall_pressure(path: PathLike, record) -> None:
     _write_csv(path, WALL_PRESSURE_COLUMNS, rows)
 
 
+def write_wall_slip(path: PathLike, record, slip_ratio: float) -> None:
+    """``wall_slip.csv``: one row per loaded contact of the hopper wall at the last sample of
+    the flow-mode window (``RunRecord.wall_slip_profile``): its wall point (arc length
+    ``s_m`` from the outlet lip, ``r_m``, ``z_m``), its slip speed down the wall over the axis
+    speed at its height (``slip_ratio``) and whether that reaches the rule's ``slip_ratio``
+    (``sliding``, 1 or 0).  No rows when nothing was measured."""
+    rows = ([_num(s), _num(r), _num(z), _num(x), int(x >= slip_ratio)]
+            for s, r, z, x in getattr(record, "wall_slip_profile", []))
+    _write_csv(path, WALL_SLIP_COLUMNS, rows)
+
+
 def write_loads(path: PathLike, record, axisymmetric: bool = True) -> None:
     """``loads.csv``: the vertical momentum balance of the grid over each output interval
     (:meth:`fipy_hopper.diagnostics.WallLoads.balance`), filling and discharge; ``t_s`` the
@@ -314,6 +328,7 @@ class RunDirectory:
     TIMESERIES = "timeseries.csv"
     WALL_PRESSURE = "wall_pressure.csv"
     LOADS = "loads.csv"
+    WALL_SLIP = "wall_slip.csv"
     CHECKPOINT = "checkpoint.npz"
     FIELDS = "fields"
     ERROR_LOG = "error.log"
@@ -471,7 +486,7 @@ class RunDirectory:
 
     def _remove_outputs(self) -> None:
         names = (self.CONFIG, self.MANIFEST, self.SUMMARY, self.PROFILE, self.TIMESERIES,
-                 self.WALL_PRESSURE, self.LOADS, self.CHECKPOINT, self.ERROR_LOG) + self.FIGURES
+                 self.WALL_PRESSURE, self.LOADS, self.WALL_SLIP, self.CHECKPOINT, self.ERROR_LOG) + self.FIGURES
         for name in names:
             with contextlib.suppress(FileNotFoundError):
                 (self.path / name).unlink()
