@@ -156,3 +156,21 @@ def test_shallow_rough_wedge_is_funnel_flow():
     assert s["flow_mode"] == "funnel"
     assert s["wall_slip_ratio"] < 0.05 and s["wall_slip_fraction"] < 0.1
     assert s["stagnant_fraction"] > 0.2
+
+
+def test_the_slip_measurement_does_not_change_the_run(monkeypatch):
+    """A short coarse discharge with the wall-slip measurement at every sample and one without
+    it (the measurement replaced by NaNs) end in the same state, to the bit."""
+    def run():
+        sim = Simulation(HopperModel(cone(30.0)), end_time=0.1, progress=False)
+        sim.run()
+        return sim
+
+    measured = run()
+    assert np.isfinite(measured.record.wall_slip_ratio[1:]).all()
+    monkeypatch.setattr(diagnostics, "wall_slip_measures",
+                        lambda *a, **k: (math.nan, math.nan, np.zeros(0), np.zeros((0, 4))))
+    plain = run()
+    assert np.isnan(plain.record.wall_slip_ratio).all()
+    for key, value in measured.state.__dict__.items():
+        assert np.array_equal(getattr(plain.state, key), value), key
