@@ -486,7 +486,8 @@ class RunDirectory:
 
     def _remove_outputs(self) -> None:
         names = (self.CONFIG, self.MANIFEST, self.SUMMARY, self.PROFILE, self.TIMESERIES,
-                 self.WALL_PRESSURE, self.LOADS, self.WALL_SLIP, self.CHECKPOINT, self.ERROR_LOG) + self.FIGURES
+                 self.WALL_PRESSURE, self.LOADS, self.WALL_SLIP, self.CHECKPOINT,
+                 self.ERROR_LOG) + self.FIGURES
         for name in names:
             with contextlib.suppress(FileNotFoundError):
                 (self.path / name).unlink()

@@ -17,7 +17,8 @@ the grid).  ``fine_cell_size = 0`` leaves it out.
 Written to ``--out`` (default ``studies/output/flow_mode_map``):
 
 * ``results.csv``: one row per case (angles, theta_c, both classifications, the wall slip
-  ratio and fraction, the index and stagnant fraction, the steady rate, timing) and ``study.json`` (settings, numbers, findings);
+  ratio and fraction, the index and stagnant fraction, the steady rate, timing; the grid
+  check's runs flagged ``grid_check``) and ``study.json`` (settings, numbers, findings);
 * ``flow_mode_map.png``: the cases on the (phi_w, theta) plane over Jenike's curve;
 * ``wall_slip.png``: the wall slip ratio and fraction against the distance from Jenike's
   boundary, at both cell sizes where the grid check ran;
