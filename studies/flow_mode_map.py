@@ -449,7 +449,7 @@ def write_outputs(out, rows, numbers, options, setting, argv=None) -> list:
                                   f"wall slip ratio >= {FlowModeRule().slip_ratio:g})")
     _sweep.write_study_json(out, NAME, TITLE, setting, settings,
                             {k: v for k, v in numbers.items()}, findings, figures, [table],
-                            rows, argv)
+                            everything, argv)
     return figures
 
 
