@@ -236,9 +236,11 @@ class HopperModel:
         self.hourglass_base = (cfg.numerics.hourglass_coefficient * self.rho
                                * math.sqrt(GRAVITY * g.h)
                                * self.open_volume / g.h)
-        #: grid viscosity ``eta = b rho sqrt(g h) h`` (Pa s; ``numerics.grid_viscosity`` b)
-        self.viscosity = (cfg.numerics.grid_viscosity * self.rho * math.sqrt(GRAVITY * g.h)
-                          * g.h)
+        #: grid viscosity ``eta = b rho sqrt(g l) l`` (Pa s; ``numerics.grid_viscosity`` b, the
+        #: length ``l`` ``numerics.viscosity_length``, the cell size when 0)
+        length = cfg.numerics.viscosity_length or g.h
+        self.viscosity = (cfg.numerics.grid_viscosity * self.rho * math.sqrt(GRAVITY * length)
+                          * length)
         # mass-proportional damping during filling only: critical for the column's lowest mode
         column = max(cfg.hopper.fill_level, g.h)
         self.fill_damping = math.pi * self.c_p / (2.0 * column)
