@@ -1,8 +1,12 @@
 """Funnel flow under refinement: the flow channel's edge and the rate, phase by phase.
 
 The funnel-flow hopper of ``robustness.py`` (the reference hopper with a 60 deg cone and
-phi_w = 25 deg, E = 5 MPa) is discharged for ``end_time`` (3 s) at the cell sizes
-``cell_sizes`` (7.5, 5 and 3.75 mm).  Measured from each run directory:
+phi_w = 25 deg, E = 5 MPa) and the reference hopper itself (20 deg, phi_w = 15 deg, mass flow)
+are discharged for ``end_time`` (3 s) at the cell sizes ``cell_sizes`` (7.5, 5 and 3.75 mm),
+each as the package runs by default (``plain``) and with a viscosity of fixed size
+(``viscous``: ``numerics.grid_viscosity`` b = 0.25 over ``numerics.viscosity_length`` l = 5 mm,
+``eta = b rho sqrt(g l) l = 0.41 Pa s`` on every grid, the order of a 1 mm sand's rate
+dependence in the mu(I) law).  Measured from each run directory:
 
 * the rate ``W(t)`` (``timeseries.csv``) and the mass discharged in ``end_time``;
 * the mean rate over ``early`` (0.5-1.5 s) and ``late`` (2.5 s to the end) from the
@@ -46,7 +50,8 @@ NAME = "funnel_channel"
 TITLE = "Funnel flow under refinement: the flow channel's edge and the rate"
 _REF = HopperConfig()
 DEFAULTS = {
-    "half_angle": 60.0, "wall_friction": 25.0,
+    "hoppers": {"funnel": (60.0, 25.0), "reference": (20.0, 15.0)},   # (theta, phi_w) deg
+    "variants": {"plain": {}, "viscous": {"grid_viscosity": 0.25, "viscosity_length": 0.005}},
     "cell_sizes": (0.0075, 0.005, 0.00375),
     "end_time": 3.0, "field_interval": 0.25,
     "early": (0.5, 1.5), "late_from": 2.5,
@@ -55,7 +60,8 @@ DEFAULTS = {
     "fill_height": _REF.hopper.fill_height, "bin_height": _REF.hopper.bin_height,
     "case_plots": False,
 }
-QUICK = {"cell_sizes": (0.01, 0.0075), "end_time": 0.6, "field_interval": 0.2,
+QUICK = {"hoppers": {"funnel": (60.0, 25.0)}, "variants": {"plain": {}},
+         "cell_sizes": (0.01, 0.0075), "end_time": 0.6, "field_interval": 0.2,
          "early": (0.2, 0.4), "late_from": 0.4, "edge_time": 0.4, "bin_diameter": 0.16,
          "fill_height": 0.1, "bin_height": 0.12, "edge_top": 0.1, "core_rows_from": 0.05}
 
@@ -64,20 +70,23 @@ def setup(quick: bool = False, **options) -> dict:
     """The cases and options (``{"options", "cases", "setting"}``); unknown options raise."""
     opts = _sweep.resolve_options(DEFAULTS, options, QUICK if quick else None)
     cases = []
-    for h in opts["cell_sizes"]:
+    for (hopper, (theta, wall)), (variant, numerics), h in (
+            (a, b, c) for a in opts["hoppers"].items() for b in opts["variants"].items()
+            for c in opts["cell_sizes"]):
         config = {"hopper": {"bin_diameter": opts["bin_diameter"],
                              "outlet_diameter": opts["outlet_diameter"],
-                             "half_angle_deg": opts["half_angle"],
+                             "half_angle_deg": float(theta),
                              "fill_height": opts["fill_height"],
                              "bin_height": opts["bin_height"]},
                   "material": {"youngs_modulus": 5.0e6},
-                  "wall": {"friction_angle_deg": opts["wall_friction"]},
-                  "numerics": {"cell_size": float(h)},
+                  "wall": {"friction_angle_deg": float(wall)},
+                  "numerics": {"cell_size": float(h), **numerics},
                   "run": {"end_time": opts["end_time"], "output_interval": 0.05,
                           "field_interval": opts["field_interval"]}}
-        cases.append(_sweep.make_case(f"cell{_sweep.fmt(round(1000 * h, 4))}mm",
-                                      {"cell_size_mm": 1000 * float(h)}, config,
-                                      plots=opts["case_plots"]))
+        cases.append(_sweep.make_case(
+            f"{hopper}_{variant}_cell{_sweep.fmt(round(1000 * h, 4))}mm",
+            {"hopper": hopper, "variant": variant, "cell_size_mm": 1000 * float(h)}, config,
+            plots=opts["case_plots"]))
     return {"options": opts, "cases": cases, "setting": _sweep.setting_label(quick, options)}
 
 
@@ -140,9 +149,22 @@ def mean_rate(t, discharged, start, end):
     return float((np.interp(end, t, m) - np.interp(start, t, m)) / (end - start))
 
 
+def groups(rows):
+    """``{(hopper, variant): rows from the coarsest to the finest cells}``."""
+    out = {}
+    for r in rows:
+        out.setdefault((r.get("hopper", "funnel"), r.get("variant", "plain")), []).append(r)
+    return {k: sorted(v, key=lambda r: -r["cell_size_mm"]) for k, v in out.items()}
+
+
+RATES = ("steady_discharge_rate_kg_s", "discharged_in_run_kg", "early_rate_kg_s",
+         "late_rate_kg_s")
+
+
 def analyse(rows, options):
-    """Adds the rates, the edge angle and ``core_open_s`` to each row; returns the changes
-    under refinement (each relative to the finer grid) of every rate."""
+    """Adds the rates, the edge angle and ``core_open_s`` to each row; returns, per hopper
+    and variant (``"<hopper>_<variant>"``), every rate by cell size and its changes under
+    refinement (each relative to the finer grid), the edge angles and the core times."""
     from fipy_hopper.io import read_csv
 
     channel = []
@@ -156,85 +178,95 @@ def analyse(rows, options):
         r["late_rate_kg_s"] = mean_rate(t, out, options["late_from"], options["end_time"])
         edges, r["edge_angle_deg"], r["core_open_s"] = channel_of(r["run_dir"], options)
         channel += [{"case": r["case"], "cell_size_mm": r["cell_size_mm"], **e} for e in edges]
-    done = sorted((r for r in rows if "early_rate_kg_s" in r), key=lambda r: -r["cell_size_mm"])
     numbers = {}
-    for key in ("steady_discharge_rate_kg_s", "discharged_in_run_kg", "early_rate_kg_s",
-                "late_rate_kg_s"):
-        numbers[key] = [_r(r.get(key), 4) for r in done]
-        numbers[f"{key}_changes"] = [
-            _r(abs(b[key] - a[key]) / abs(b[key]), 4) if _sweep.finite(a.get(key))
-            and _sweep.finite(b.get(key)) else None for a, b in zip(done, done[1:])]
-    numbers["cell_sizes_mm"] = [r["cell_size_mm"] for r in done]
-    numbers["edge_angle_deg"] = [_r(r["edge_angle_deg"], 1) for r in done]
-    numbers["core_open_s"] = [_r(r["core_open_s"], 2) for r in done]
+    for (hopper, variant), members in groups(rows).items():
+        done = [r for r in members if "early_rate_kg_s" in r]
+        entry = {"cell_sizes_mm": [r["cell_size_mm"] for r in done]}
+        for key in RATES:
+            entry[key] = [_r(r.get(key), 4) for r in done]
+            entry[f"{key}_changes"] = [
+                _r(abs(b[key] - a[key]) / abs(b[key]), 4) if _sweep.finite(a.get(key))
+                and _sweep.finite(b.get(key)) else None for a, b in zip(done, done[1:])]
+        entry["edge_angle_deg"] = [_r(r["edge_angle_deg"], 1) for r in done]
+        entry["core_open_s"] = [_r(r["core_open_s"], 2) for r in done]
+        numbers[f"{hopper}_{variant}"] = entry
     return numbers, channel
 
 
 def plot(rows, channel, options):
     from fipy_hopper.io import read_csv
 
-    fig = _sweep.figure(11.0, 4.2)
-    ax_w, ax_e = fig.subplots(1, 2)
-    for k, r in enumerate(sorted((r for r in rows if r.get("run_dir") and not r.get("error")),
-                                 key=lambda r: -r["cell_size_mm"])):
-        ts = read_csv(Path(r["run_dir"]) / "timeseries.csv")
-        ax_w.step(ts["t_s"], ts["discharge_rate_kg_s"], where="pre", color=f"C{k}",
-                  label=f"{r['cell_size_mm']:g} mm")
-        mine = [c for c in channel if c["case"] == r["case"]]
-        times = sorted({c["t_s"] for c in mine})
-        if times:
-            t1 = min(times, key=lambda t: abs(t - options["edge_time"]))
-            sel = [c for c in mine if c["t_s"] == t1]
-            z = [c["z_m"] for c in sel]
-            ax_e.plot([c["r_half_m"] for c in sel], z, "--", color=f"C{k}")
-            ax_e.plot([c["r_tenth_m"] for c in sel], z, "-", color=f"C{k}",
-                      label=f"{r['cell_size_mm']:g} mm, t = {t1:.2f} s")
-    ax_w.set_xlabel("time since the outlet opened (s)")
-    ax_w.set_ylabel("discharge rate W (kg/s)")
-    ax_w.legend(fontsize=7)
-    ax_e.set_xlabel("radius where the speed falls to 1/10 (solid), 1/2 (dashed) of the axis's (m)")
-    ax_e.set_ylabel("z (m)")
-    ax_e.legend(fontsize=7)
+    funnel = {k: v for k, v in groups(rows).items() if k[0] == "funnel"}
+    fig = _sweep.figure(11.0, 4.2 * max(1, len(funnel)))
+    axes = fig.subplots(max(1, len(funnel)), 2, squeeze=False)
+    for (ax_w, ax_e), ((hopper, variant), members) in zip(axes, funnel.items()):
+        for k, r in enumerate(r for r in members if r.get("run_dir") and not r.get("error")):
+            ts = read_csv(Path(r["run_dir"]) / "timeseries.csv")
+            ax_w.step(ts["t_s"], ts["discharge_rate_kg_s"], where="pre", color=f"C{k}",
+                      label=f"{r['cell_size_mm']:g} mm")
+            mine = [c for c in channel if c["case"] == r["case"]]
+            times = sorted({c["t_s"] for c in mine})
+            if times:
+                t1 = min(times, key=lambda t: abs(t - options["edge_time"]))
+                sel = [c for c in mine if c["t_s"] == t1]
+                z = [c["z_m"] for c in sel]
+                ax_e.plot([c["r_half_m"] for c in sel], z, "--", color=f"C{k}")
+                ax_e.plot([c["r_tenth_m"] for c in sel], z, "-", color=f"C{k}",
+                          label=f"{r['cell_size_mm']:g} mm, t = {t1:.2f} s")
+        ax_w.set_title(f"{hopper} hopper, {variant}", fontsize=9)
+        ax_e.set_title(f"{hopper} hopper, {variant}: the flow channel's edge", fontsize=9)
+        ax_w.set_xlabel("time since the outlet opened (s)")
+        ax_w.set_ylabel("discharge rate W (kg/s)")
+        ax_w.legend(fontsize=7)
+        ax_e.set_xlabel("radius where the speed falls to 1/10 (solid), 1/2 (dashed) of the "
+                        "axis's (m)")
+        ax_e.set_ylabel("z (m)")
+        ax_e.legend(fontsize=7)
     return fig
 
 
 def write_outputs(out, rows, numbers, channel, options, setting, argv=None):
     out = Path(out)
     _sweep.write_rows_csv(out / "results.csv", rows, first=(
-        "case", "cell_size_mm", "steady_discharge_rate_kg_s", "discharged_in_run_kg",
-        "early_rate_kg_s", "late_rate_kg_s", "edge_angle_deg", "core_open_s", "error"))
+        "case", "hopper", "variant", "cell_size_mm", "steady_discharge_rate_kg_s",
+        "discharged_in_run_kg", "early_rate_kg_s", "late_rate_kg_s", "edge_angle_deg",
+        "core_open_s", "error"))
     _sweep.write_rows_csv(out / "channel.csv", channel)
     _sweep.save(plot(rows, channel, options), out / "funnel_channel.png")
     figures = [{"file": "funnel_channel.png",
-                "caption": "Left: W(t) of the funnel hopper at each cell size. Right: the flow "
-                           "channel's edge (where the speed falls to a tenth, solid, and half, "
-                           "dashed, of the axis's) at the snapshot nearest "
-                           f"{options['edge_time']:g} s."}]
+                "caption": "The funnel hopper, plain and with the viscosity of fixed size: "
+                           "W(t) at each cell size (left) and the flow channel's edge, where "
+                           "the speed falls to a tenth (solid) and half (dashed) of the axis's, "
+                           f"at the snapshot nearest {options['edge_time']:g} s (right)."}]
+    findings = []
+    for name, entry in numbers.items():
+        def listed(key, scale=1.0, spec=".3f", entry=entry):
+            return ", ".join("n/a" if v is None else format(scale * v, spec)
+                             for v in entry[key])
 
-    def listed(key, scale=1.0, spec=".3f"):
-        return ", ".join("n/a" if v is None else format(scale * v, spec) for v in numbers[key])
-
-    sizes = ", ".join(f"{h:g}" for h in numbers["cell_sizes_mm"])
-    findings = [
-        f"Cell sizes {sizes} mm: steady rate (summary, median over the plateau) "
-        f"{listed('steady_discharge_rate_kg_s')} kg/s, changes "
-        f"{listed('steady_discharge_rate_kg_s_changes', 100, '.1f')} %.",
-        f"Mass discharged in {options['end_time']:g} s {listed('discharged_in_run_kg')} kg, "
-        f"changes {listed('discharged_in_run_kg_changes', 100, '.1f')} %.",
-        f"Mean rate {options['early'][0]:g}-{options['early'][1]:g} s "
-        f"{listed('early_rate_kg_s')} kg/s (changes "
-        f"{listed('early_rate_kg_s_changes', 100, '.1f')} %); from {options['late_from']:g} s "
-        f"{listed('late_rate_kg_s')} kg/s (changes "
-        f"{listed('late_rate_kg_s_changes', 100, '.1f')} %).",
-        f"The channel's edge (a tenth of the axis speed) leans {listed('edge_angle_deg', 1, '.1f')}"
-        f" deg from the vertical at {options['edge_time']:g} s; the axis column has emptied "
-        f"from the top down to {options['core_rows_from']:g} m at "
-        f"{listed('core_open_s', 1, '.2f')} s (NaN: not in the run).",
-    ]
-    table = {"title": "Runs", "columns": ["cell (mm)", "steady W (kg/s)", "out (kg)",
-                                         "early W (kg/s)", "late W (kg/s)", "edge angle (deg)",
-                                         "core open (s)"],
-             "rows": [[r["cell_size_mm"], _r(r.get("steady_discharge_rate_kg_s"), 4),
+        sizes = ", ".join(f"{h:g}" for h in entry["cell_sizes_mm"])
+        text = (f"{name.replace('_', ', ')} ({sizes} mm): steady rate (summary, median over the "
+                f"plateau) {listed('steady_discharge_rate_kg_s')} kg/s, changes "
+                f"{listed('steady_discharge_rate_kg_s_changes', 100, '.1f')} %; out in "
+                f"{options['end_time']:g} s {listed('discharged_in_run_kg')} kg, changes "
+                f"{listed('discharged_in_run_kg_changes', 100, '.1f')} %; mean rate "
+                f"{options['early'][0]:g}-{options['early'][1]:g} s "
+                f"{listed('early_rate_kg_s')} kg/s (changes "
+                f"{listed('early_rate_kg_s_changes', 100, '.1f')} %), from "
+                f"{options['late_from']:g} s {listed('late_rate_kg_s')} kg/s (changes "
+                f"{listed('late_rate_kg_s_changes', 100, '.1f')} %)")
+        if name.startswith("funnel"):
+            text += (f"; the channel's edge (a tenth of the axis speed) leans "
+                     f"{listed('edge_angle_deg', 1, '.1f')} deg from the vertical at "
+                     f"{options['edge_time']:g} s, and the axis column has emptied from the "
+                     f"top down to {options['core_rows_from']:g} m at "
+                     f"{listed('core_open_s', 1, '.2f')} s (n/a: not in the run)")
+        findings.append(text + ".")
+    table = {"title": "Runs", "columns": ["hopper", "variant", "cell (mm)", "steady W (kg/s)",
+                                         "out (kg)", "early W (kg/s)", "late W (kg/s)",
+                                         "edge angle (deg)", "core open (s)"],
+             "rows": [[r.get("hopper"), r.get("variant"), r["cell_size_mm"],
+                       _r(r.get("steady_discharge_rate_kg_s"), 4),
                        _r(r.get("discharged_in_run_kg"), 3), _r(r.get("early_rate_kg_s"), 4),
                        _r(r.get("late_rate_kg_s"), 4), _r(r.get("edge_angle_deg"), 1),
                        _r(r.get("core_open_s"), 2)] for r in rows]}

@@ -331,10 +331,10 @@ def test_funnel_channel_edge_on_a_constructed_speed_profile():
 
 def test_funnel_channel_study_writes_its_outputs(root):
     out = run_quick(root, "funnel_channel")
-    data = study_json(out)
-    assert data["numbers"]["cell_sizes_mm"] == [10.0, 7.5]
-    assert all(math.isfinite(x) for x in data["numbers"]["early_rate_kg_s"])
-    assert all(x is not None for x in data["numbers"]["edge_angle_deg"])
+    numbers = study_json(out)["numbers"]["funnel_plain"]
+    assert numbers["cell_sizes_mm"] == [10.0, 7.5]
+    assert all(math.isfinite(x) for x in numbers["early_rate_kg_s"])
+    assert all(x is not None for x in numbers["edge_angle_deg"])
     assert_png(out / "funnel_channel.png")
     assert len(rows_of(out / "channel.csv")) > 10
 
