@@ -352,9 +352,12 @@ def _check_runnable(cfg: HopperConfig) -> None:
 
 
 def _write_tables(rundir, record, axisymmetric: bool = True) -> None:
+    from .diagnostics import FlowModeRule
+
     fio.write_timeseries(rundir / rundir.TIMESERIES, record, axisymmetric)
     fio.write_wall_pressure(rundir / rundir.WALL_PRESSURE, record)
     fio.write_loads(rundir / rundir.LOADS, record, axisymmetric)
+    fio.write_wall_slip(rundir / rundir.WALL_SLIP, record, FlowModeRule().slip_ratio)
 
 
 def _summary(sim, cfg, reason: str) -> dict:
@@ -363,7 +366,8 @@ def _summary(sim, cfg, reason: str) -> dict:
     except Exception:  # a run that failed before it measured anything
         rec = sim.record
         summary = {"steady_discharge_rate_kg_s": math.nan, "flow_mode": "unknown",
-                   "mass_flow_index": math.nan, "initial_mass_kg": rec.initial_mass,
+                   "mass_flow_index": math.nan, "wall_slip_ratio": math.nan,
+                   "wall_slip_fraction": math.nan, "initial_mass_kg": rec.initial_mass,
                    "remaining_mass_kg": math.nan, "mass_balance_error": math.nan,
                    "discharge_time_s": rec.t[-1] if rec.t else 0.0,
                    "cells": sim.model.n_cells, "steps": sim.state.step,

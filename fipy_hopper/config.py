@@ -718,6 +718,11 @@ class NumericsConfig:
       ``eta`` vanishes as ``h^1.5`` under refinement.  At 5 mm, ``b = 0.25`` gives ``eta =
       0.41 Pa s``, the order of the rate dependence of a 1 mm sand (``mu(I)``).  Eulerian
       formulation only.
+    - ``viscosity_length`` ``l`` (m, 0: the cell size, the default): the length in ``eta``,
+      ``eta = b rho sqrt(g l) l``: a viscosity of fixed size, a material's rate dependence,
+      the same on every grid (it gives a shear band, such as the edge of a funnel's flow
+      channel, a width that does not shrink with the cells; ``docs/physics_and_numerics.md``
+      section 4).
     - ``bulk_viscosity`` ``b_1`` (dimensionless, 0: off; ``"auto"``, the default, is
       :data:`DEFAULT_BULK_VISCOSITY` with the Eulerian formulation and 0 with the Lagrangian
       one, see :attr:`HopperConfig.bulk_viscosity`): a viscous pressure ``eta_b tr(D)``
@@ -758,6 +763,7 @@ class NumericsConfig:
     max_transport_interval: int = 50
     hourglass_coefficient: float = 0.1
     grid_viscosity: float = 0.0
+    viscosity_length: float = 0.0
     bulk_viscosity: Union[float, str] = "auto"
     alpha_min: float = 1.0e-3
     free_fall_depth: float = 1.0
@@ -779,6 +785,7 @@ class NumericsConfig:
         _check_int("numerics.max_transport_interval", self.max_transport_interval, 1, 100_000)
         _check_range("numerics.hourglass_coefficient", self.hourglass_coefficient, 0, 100)
         _check_range("numerics.grid_viscosity", self.grid_viscosity, 0, 10)
+        _check_range("numerics.viscosity_length", self.viscosity_length, 0, 1, unit=" m")
         if self.bulk_viscosity != "auto":
             _check_range("numerics.bulk_viscosity", self.bulk_viscosity, 0, 1,
                          unit='; or "auto"')

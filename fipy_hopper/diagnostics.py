@@ -3,7 +3,8 @@ state, never change it.
 
 - discharge rate ``W`` from the mass booked through the outlet faces (the same face values the
   transport uses, so ``M(t) + discharged(t) = M(0)`` to round-off), and its steady value;
-- the mass-flow index and stagnant fraction of the cone, and the ``mass``/``funnel`` call;
+- the ``mass``/``funnel`` call from the slip of the material along the hopper wall (the wall
+  slip ratio and fraction), beside the mass-flow index and stagnant fraction of the cone;
   once the flow has stopped, ``no_flow`` (an arch) or ``rathole`` (:class:`OutcomeRule`);
 - the normal wall pressure ``p_n = -n.sigma.n`` and shear ``tau = t.sigma.n`` along the wall.
 """
@@ -57,20 +58,117 @@ def fit_power_law(x, y):
 # ---------------------------------------------------------------- flow mode
 @dataclass(frozen=True)
 class FlowModeRule:
-    """Mass/funnel classification (stated rule).
+    """Mass/funnel classification (stated rule): mass flow is flow that slides along the
+    whole hopper wall (Jenike), so the call is read from the wall contact.
 
-    At heights ``z/h_c`` in ``heights`` within the cone, the mass-flow index is the mean ratio of
-    the downward speed next to the wall (cells whose centre is 1 to 2.5 cells from the wall) to
-    the downward speed at the axis (first two cell columns).  The stagnant fraction is the share
-    of the cone's material (``alpha > 1/2``) moving slower than ``stagnant_speed`` times the mean
-    downward speed of the cone's material.  Mass flow when ``index >= index_threshold`` and
-    ``stagnant <= stagnant_threshold``; funnel flow otherwise.
+    For every loaded contact of a stretch of hopper wall (a contact entry whose normal impulse
+    since the previous sample is compressive, ``N_e > 0``), the slip ratio is
+    ``u_e / U_e``: its slip speed down the wall (the tangential speed of the node after the
+    step's Coulomb contact, m/s) over the downward speed at the axis at the same height (m/s).
+    The stretch's **wall slip ratio** is the load-weighted mean
+
+        S = sum_e N_e (u_e / U_e) / sum_e N_e,
+
+    i.e. the wall's friction power ``sum mu N_e u_e`` over what it would be if the material
+    slid along the wall at the axis speed.  Its **wall slip fraction** is the share of its
+    loaded contact length (each contact standing for the wall between the midpoints to its
+    neighbours) with ``u_e >= slip_ratio U_e``.  Mass flow when every hopper stretch has
+    ``S >= slip_ratio``, funnel flow otherwise; ``slip_ratio`` is the rule's one threshold
+    (docs/physics_and_numerics.md, section 8).
+
+    Reported beside it (not used for the call): the mass-flow index, the mean ratio of the
+    downward speed of the cells 1 to 2.5 cells from the wall to the speed at the axis at the
+    heights ``z/h_c`` in ``heights``; and the stagnant fraction, the share of the cone's
+    material (``alpha > 1/2``) moving slower than ``stagnant_speed`` times its mean downward
+    speed (the stagnant zone's extent from the velocity field).
     """
 
+    slip_ratio: float = 0.2
     heights: tuple = (0.3, 0.5, 0.7)
-    index_threshold: float = 0.2
     stagnant_speed: float = 0.05
-    stagnant_threshold: float = 0.15
+
+
+def hopper_stretches(segment, s, gap: float):
+    """Labels ``0, 1, ...`` of the stretches of hopper wall (``segment == 1``) that the
+    contact entries belong to, ``-1`` for the other entries: the hopper entries sorted by
+    their arc length ``s`` (m) split where two neighbours lie more than ``gap`` (m) apart."""
+    segment, s = np.asarray(segment), np.asarray(s, float)
+    label = np.full(len(s), -1)
+    hopper = np.flatnonzero(segment == 1)
+    if hopper.size:
+        order = hopper[np.argsort(s[hopper], kind="stable")]
+        label[order] = np.concatenate([[0], np.cumsum(np.diff(s[order]) > gap)])
+    return label
+
+
+def wall_slip(load, slip, axis_speed, s, stretch, rule: FlowModeRule = FlowModeRule()):
+    """``(ratio, fraction)`` arrays, one entry per stretch label ``0..max(stretch)``: the wall
+    slip ratio ``S`` and the wall slip fraction of :class:`FlowModeRule` from every contact
+    entry's normal load ``load`` (its normal impulse since the previous sample, > 0 when
+    pressed, any unit), slip speed ``slip`` down the wall and the axis's downward speed
+    ``axis_speed`` at its height (m/s), arc length ``s`` (m) and stretch label (-1: not hopper
+    wall).  A stretch with no loaded contact under a moving axis gives NaN."""
+    load, slip, axis_speed, s = (np.asarray(a, float) for a in (load, slip, axis_speed, s))
+    stretch = np.asarray(stretch)
+    n = int(stretch.max()) + 1 if stretch.size else 0
+    ratio, fraction = np.full(n, math.nan), np.full(n, math.nan)
+    for k in range(n):
+        on = np.flatnonzero((stretch == k) & (load > 0.0) & (axis_speed > 0.0)
+                            & np.isfinite(slip))
+        if on.size == 0:
+            continue
+        on = on[np.argsort(s[on], kind="stable")]
+        r = slip[on] / axis_speed[on]
+        w = load[on]
+        ratio[k] = float(np.sum(w * r) / np.sum(w))
+        x = s[on]
+        edges = np.concatenate([x[:1], 0.5 * (x[1:] + x[:-1]), x[-1:]])
+        length = np.diff(edges)
+        total = float(np.sum(length))
+        sliding = r >= rule.slip_ratio
+        fraction[k] = (float(np.sum(length[sliding]) / total) if total > 0
+                       else float(np.mean(sliding)))
+    return ratio, fraction
+
+
+def entry_slip(v, normals):
+    """Slip speed down the wall (m/s) of contact entries with velocities ``v`` (n, 2) and
+    normals into the wall ``normals`` (n, 2): ``-v . t`` with ``t = (-n_z, n_r)`` the
+    tangent pointing up the wall."""
+    v, normals = np.asarray(v, float), np.asarray(normals, float)
+    return -(-v[:, 0] * normals[:, 1] + v[:, 1] * normals[:, 0])
+
+
+def normal_load(impulse, normals):
+    """The compressive normal impulse of each contact entry, ``-I . n`` (positive when the
+    wall pushes the material out of it), from impulses ``impulse`` (n, 2)."""
+    return -np.einsum("ec,ec->e", np.asarray(impulse, float), np.asarray(normals, float))
+
+
+def wall_slip_measures(model, state, previous_impulse=None,
+                       rule: FlowModeRule = FlowModeRule()):
+    """``(ratio, fraction, stretch ratios, profile)`` of :class:`FlowModeRule` from a model's
+    wall contact: the smallest wall slip ratio over the hopper stretches, the slip fraction of
+    that stretch, every stretch's ratio, and the loaded hopper contacts as rows
+    ``(s, r, z, u/U)`` (their wall point, m, and slip ratio; (0, 4) when none).  The loads are
+    ``state.wall_impulse`` less ``previous_impulse`` (its value at the previous sample;
+    ``None``: since the start), the slip and axis speeds the model's :meth:`contact_slip`
+    (read from the state, which is left as it is)."""
+    s, normals, segment = model.wall_entries()
+    impulse = state.wall_impulse if previous_impulse is None else (
+        state.wall_impulse - previous_impulse)
+    slip, axis_speed = model.contact_slip(state)
+    stretch = hopper_stretches(segment, s, 2.0 * model.cell_size)
+    load = normal_load(impulse, normals)
+    ratios, fractions = wall_slip(load, slip, axis_speed, s, stretch, rule)
+    on = np.flatnonzero((stretch >= 0) & (load > 0.0) & (axis_speed > 0.0) & np.isfinite(slip))
+    on = on[np.argsort(s[on], kind="stable")]
+    r_w, z_w, _, _ = geometry.wall_point(s[on], model.cfg.hopper)
+    profile = np.column_stack([s[on], r_w, z_w, slip[on] / axis_speed[on]])
+    if not np.isfinite(ratios).any():
+        return math.nan, math.nan, ratios, profile
+    worst = int(np.nanargmin(ratios))
+    return float(ratios[worst]), float(fractions[worst]), ratios, profile
 
 
 def flow_mode_measures(model, state, rule: FlowModeRule = FlowModeRule()):
@@ -128,13 +226,10 @@ def bin_lateral_stress_ratio(model, state) -> float:
     return float(np.sum(weights * state.sigma[..., 0][band])) / vertical
 
 
-def classify_flow_mode(index, stagnant, rule: FlowModeRule = FlowModeRule()) -> str:
-    """``"mass"`` or ``"funnel"`` by :class:`FlowModeRule`."""
-    if not np.isfinite(index):
-        return "funnel"
-    mass = index >= rule.index_threshold and (
-        not np.isfinite(stagnant) or stagnant <= rule.stagnant_threshold)
-    return "mass" if mass else "funnel"
+def classify_flow_mode(slip_ratio, rule: FlowModeRule = FlowModeRule()) -> str:
+    """``"mass"`` or ``"funnel"`` by :class:`FlowModeRule` from the wall slip ratio (the
+    smallest over the hopper stretches); funnel when it was not measured (NaN)."""
+    return "mass" if np.isfinite(slip_ratio) and slip_ratio >= rule.slip_ratio else "funnel"
 
 
 @dataclass(frozen=True)

@@ -57,19 +57,23 @@ __all__ = [
     "atomic_write_text", "write_json", "write_timeseries", "write_wall_pressure", "read_csv",
     "environment_versions", "code_commit", "grid_points_and_quads", "cell_fields", "marker_file",
     "write_markers", "read_markers", "read_vtu",
-    "TIMESERIES_COLUMNS", "WALL_PRESSURE_COLUMNS",
+    "TIMESERIES_COLUMNS", "WALL_PRESSURE_COLUMNS", "WALL_SLIP_COLUMNS", "write_wall_slip",
 ]
 
 PathLike = Union[str, os.PathLike]
 
 #: Columns of ``timeseries.csv`` (the first four are the public contract).
 TIMESERIES_COLUMNS = ("t_s", "mass_in_hopper_kg", "discharged_kg", "discharge_rate_kg_s",
-                      "mass_flow_index", "stagnant_fraction", "bin_lateral_stress_ratio")
+                      "mass_flow_index", "stagnant_fraction", "bin_lateral_stress_ratio",
+                      "wall_slip_ratio", "wall_slip_fraction")
 #: Columns of ``wall_pressure.csv`` (public contract).
 WALL_PRESSURE_COLUMNS = ("stage", "t_s", "s_m", "r_m", "z_m", "p_n_Pa", "tau_Pa",
                          "p_n_stress_Pa", "tau_stress_Pa", "p_n_raw_Pa", "tau_raw_Pa",
                          "window_s", "hoop_force_N_m",
                          "meridional_force_N_m")
+#: Columns of ``wall_slip.csv``: the loaded contacts of the hopper wall at the last sample of
+#: the flow-mode window (:class:`fipy_hopper.diagnostics.FlowModeRule`).
+WALL_SLIP_COLUMNS = ("s_m", "r_m", "z_m", "slip_ratio", "sliding")
 #: Columns of ``loads.csv`` (public contract): the vertical momentum balance of the grid over
 #: each interval, as mean forces (N, 3D, upward positive; ``weight`` positive).
 LOADS_COLUMNS = ("stage", "t_s", "weight_N", "wall_vertical_N", "outlet_N", "damping_N",
@@ -235,14 +239,17 @@ def write_timeseries(path: PathLike, record, axisymmetric: bool = True) -> None:
     ``t_s`` is the time since the outlet opened (s); masses are for the full 3D hopper (kg);
     ``discharge_rate_kg_s`` is the mass through the outlet over the preceding sample interval;
     ``bin_lateral_stress_ratio`` the bin's ``sigma_rr / sigma_zz``
-    (:func:`fipy_hopper.diagnostics.bin_lateral_stress_ratio`).
+    (:func:`fipy_hopper.diagnostics.bin_lateral_stress_ratio`); ``wall_slip_ratio`` and
+    ``wall_slip_fraction`` the slip along the hopper wall of
+    :class:`fipy_hopper.diagnostics.FlowModeRule`.
     A wedge's masses and rates are per metre of length and named so (``mass_in_hopper_kg_m``,
     ``discharge_rate_kg_s_m``, :func:`result_columns`).
     """
     n = len(record.t)
     rows = ([_num(record.t[i]), _num(record.mass_in_hopper[i]), _num(record.discharged[i]),
              _num(record.rate[i]), _num(record.mass_flow_index[i]),
-             _num(record.stagnant_fraction[i]), _num(record.bin_lateral_stress_ratio[i])]
+             _num(record.stagnant_fraction[i]), _num(record.bin_lateral_stress_ratio[i]),
+             _num(record.wall_slip_ratio[i]), _num(record.wall_slip_fraction[i])]
             for i in range(n))
     _write_csv(path, result_columns(TIMESERIES_COLUMNS, axisymmetric), rows)
 
@@ -288,6 +295,17 @@ def write_wall_pressure(path: PathLike, record) -> None:
     _write_csv(path, WALL_PRESSURE_COLUMNS, rows)
 
 
+def write_wall_slip(path: PathLike, record, slip_ratio: float) -> None:
+    """``wall_slip.csv``: one row per loaded contact of the hopper wall at the last sample of
+    the flow-mode window (``RunRecord.wall_slip_profile``): its wall point (arc length
+    ``s_m`` from the outlet lip, ``r_m``, ``z_m``), its slip speed down the wall over the axis
+    speed at its height (``slip_ratio``) and whether that reaches the rule's ``slip_ratio``
+    (``sliding``, 1 or 0).  No rows when nothing was measured."""
+    rows = ([_num(s), _num(r), _num(z), _num(x), int(x >= slip_ratio)]
+            for s, r, z, x in getattr(record, "wall_slip_profile", []))
+    _write_csv(path, WALL_SLIP_COLUMNS, rows)
+
+
 def write_loads(path: PathLike, record, axisymmetric: bool = True) -> None:
     """``loads.csv``: the vertical momentum balance of the grid over each output interval
     (:meth:`fipy_hopper.diagnostics.WallLoads.balance`), filling and discharge; ``t_s`` the
@@ -323,6 +341,7 @@ class RunDirectory:
     TIMESERIES = "timeseries.csv"
     WALL_PRESSURE = "wall_pressure.csv"
     LOADS = "loads.csv"
+    WALL_SLIP = "wall_slip.csv"
     CHECKPOINT = "checkpoint.npz"
     FIELDS = "fields"
     ERROR_LOG = "error.log"
@@ -491,8 +510,8 @@ class RunDirectory:
         return self.path / self.CHECKPOINT
 
     #: every file a run writes at the top of its directory, besides the pictures
-    OUTPUTS = (CONFIG, MANIFEST, SUMMARY, PROFILE, TIMESERIES, WALL_PRESSURE, LOADS, CHECKPOINT,
-               ERROR_LOG)
+    OUTPUTS = (CONFIG, MANIFEST, SUMMARY, PROFILE, TIMESERIES, WALL_PRESSURE, LOADS, WALL_SLIP,
+               CHECKPOINT, ERROR_LOG)
 
     @classmethod
     def output_names(cls) -> tuple:

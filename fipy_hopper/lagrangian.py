@@ -868,15 +868,18 @@ class LagrangianModel:
         nodes = np.flatnonzero(np.any(wall != 0.0, axis=1))
         if not len(nodes):
             return
-        pr, pz, seg = geometry._nearest_on_polyline(state.x[nodes, 0], state.x[nodes, 1],
-                                                    self.vertices)
+        np.add.at(state.wall_impulse, self._station(state.x[nodes]), wall[nodes])
+
+    def _station(self, x: np.ndarray) -> np.ndarray:
+        """The wall station (row of ``wall_impulse``) of the nearest wall point of each
+        position ``x`` (n, 2)."""
+        pr, pz, seg = geometry._nearest_on_polyline(x[:, 0], x[:, 1], self.vertices)
         s = geometry.arc_length_of_point(pr, pz, self.geom)
         cone = np.clip(np.floor(s / self._ds_cone), 0, self._n_cone - 1) + 1
         n_bin = len(self._wall_stations[0]) - 1 - self._n_cone
         above = np.clip(np.floor((s - self._s_t) / self._ds_bin), 0, n_bin - 1) \
             + 1 + self._n_cone
-        station = np.where(seg == 0, 0, np.where(s < self._s_t, cone, above)).astype(int)
-        np.add.at(state.wall_impulse, station, wall[nodes])
+        return np.where(seg == 0, 0, np.where(s < self._s_t, cone, above)).astype(int)
 
     # ------------------------------------------------------------------ measuring
     def wall_entries(self) -> tuple:
@@ -897,6 +900,26 @@ class LagrangianModel:
         _, _, A, r_el = element_gradients(state.x, conn)
         s = geometry.arc_length_of_point(pr[idx], pz[idx], geom)
         return s, (A * r_el)[idx], state.sigma[idx]
+
+    def contact_slip(self, state: LagrangianState) -> tuple:
+        """``(slip, axis_speed)`` (m/s) per wall station: the mean slip speed down the wall of
+        the mesh nodes on the wall (within a tenth of an element size of it) whose nearest
+        wall point lies in the station's stretch (NaN where none does), and the downward
+        speed at the axis at the station's height (linear between the axis nodes)."""
+        from . import diagnostics
+        s_w, normal, _ = self._wall_stations
+        d = geometry.signed_distance(state.x[:, 0], state.x[:, 1], self.geom)
+        on = np.flatnonzero(np.abs(d) <= 0.1 * self.h)
+        station = self._station(state.x[on])
+        slip = diagnostics.entry_slip(state.v[on], normal[station])
+        n = len(s_w)
+        count = np.bincount(station, minlength=n)
+        total = np.bincount(station, slip, minlength=n)
+        mean = np.where(count > 0, total / np.maximum(count, 1), math.nan)
+        _, z_w, _, _ = geometry.wall_point(s_w, self.geom)
+        axis = self.axis_nodes[np.argsort(state.x[self.axis_nodes, 1])]
+        axis_speed = np.interp(z_w, state.x[axis, 1], -state.v[axis, 1])
+        return mean, axis_speed
 
     def flow_mode_measures(self, state: LagrangianState, rule) -> tuple:
         """The mass-flow index and the stagnant fraction of

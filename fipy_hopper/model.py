@@ -246,9 +246,11 @@ class HopperModel:
         self.hourglass_base = (cfg.numerics.hourglass_coefficient * self.rho
                                * math.sqrt(GRAVITY * g.h)
                                * self.open_volume / g.h)
-        #: grid viscosity ``eta = b rho sqrt(g h) h`` (Pa s; ``numerics.grid_viscosity`` b)
-        self.viscosity = (cfg.numerics.grid_viscosity * self.rho * math.sqrt(GRAVITY * g.h)
-                          * g.h)
+        #: grid viscosity ``eta = b rho sqrt(g l) l`` (Pa s; ``numerics.grid_viscosity`` b, the
+        #: length ``l`` ``numerics.viscosity_length``, the cell size when 0)
+        length = cfg.numerics.viscosity_length or g.h
+        self.viscosity = (cfg.numerics.grid_viscosity * self.rho * math.sqrt(GRAVITY * length)
+                          * length)
         # mass-proportional damping during filling only: critical for the column's lowest mode
         column = max(cfg.hopper.fill_level, g.h)
         self.fill_damping = math.pi * self.c_p / (2.0 * column)
@@ -441,6 +443,14 @@ class HopperModel:
         alpha = state.alpha.ravel()[cells]
         w = np.where(alpha > 0.5, (state.alpha * self.open_volume).ravel()[cells], 0.0)
         return s, w, state.sigma.reshape(-1, 4)[cells]
+
+    def contact_slip(self, state: State) -> tuple:
+        """``(slip, axis_speed)`` (m/s) of every entry of ``contact_list``: the slip speed
+        down the wall of the entry's node (its velocity in ``state.v``, after the step's
+        contact) and the downward speed of the axis node of the same row."""
+        from . import diagnostics
+        j, i, normals, _ = self.contact_list
+        return diagnostics.entry_slip(state.v[:, j, i].T, normals), -state.v[1, j, 0]
 
     def flow_mode_measures(self, state: State, rule) -> tuple:
         from . import diagnostics

@@ -239,8 +239,39 @@ def _label(entry):
     return f"{entry['stage']}, t = {entry['t_s']:.2f} s"
 
 
+def wall_slip_segments(run, cfg: HopperConfig):
+    """The hopper wall's loaded contacts of ``wall_slip.csv`` as wall segments: a list of
+    ``((r, z) points, sliding)``, each contact standing for the wall between the midpoints
+    to its neighbours (arc length ``s``); empty when the run wrote none."""
+    path = Path(run) / RunDirectory.WALL_SLIP
+    if not path.is_file():
+        return []
+    table = read_csv(path)
+    s = np.asarray(table.get("s_m", []), float)
+    if s.size == 0:
+        return []
+    sliding = np.asarray(table["sliding"], float) > 0.5
+    edges = np.concatenate([s[:1], 0.5 * (s[1:] + s[:-1]), s[-1:]])
+    out = []
+    for k in range(len(s)):
+        arc = np.linspace(edges[k], edges[k + 1], 3)
+        r, z, _, _ = geometry.wall_point(arc, cfg.hopper)
+        out.append((np.column_stack([r, z]), bool(sliding[k])))
+    return out
+
+
+def _draw_wall_slip(ax, segments):
+    """The wall slip on the right half of a section: green where the material slides along
+    the hopper wall, red where it does not (:func:`wall_slip_segments`)."""
+    for points, sliding in segments:
+        ax.plot(points[:, 0], points[:, 1], "-", color="limegreen" if sliding else "red",
+                lw=3.0, solid_capstyle="butt", zorder=4)
+
+
 def flow_pattern(run, n: int = 4):
-    """Flow-pattern snapshots: layers (left half) and speed (right half) at ``n`` times."""
+    """Flow-pattern snapshots: layers (left half) and speed (right half) at ``n`` times; on
+    the right half's hopper wall, where the material slides along it (green) and where it
+    does not (red) in the flow-mode window (``wall_slip.csv``, the rule's slip ratio)."""
     run = Path(run)
     cfg = _config(run)
     entries = _pick(snapshots(run), n)
@@ -249,15 +280,23 @@ def flow_pattern(run, n: int = 4):
     snaps = [load_snapshot(run, e) for e in entries]
     n_layers = _n_layers(snaps)
     vmax = _speed_scale(snaps)
+    segments = wall_slip_segments(run, cfg)
     fig = _figure(2.6 * len(snaps) + 1.0, 4.6)
     axes = fig.subplots(1, len(snaps), sharey=True, squeeze=False)[0]
     mesh = None
     for ax, snap in zip(axes, snaps):
         mesh = _draw_section(ax, snap, cfg, n_layers, vmax)
+        _draw_wall_slip(ax, segments)
         ax.set_title(_label(snap), fontsize=9)
     axes[0].set_ylabel("z (m)")
     fig.colorbar(mesh, ax=list(axes), label="speed (m/s)", shrink=0.8)
-    fig.suptitle("Flow pattern: layers (left half) and speed (right half)", fontsize=10)
+    title = "Flow pattern: layers (left half) and speed (right half)"
+    if segments:
+        share = _summary(run).get("wall_slip_fraction")
+        title += ("\nhopper wall: slides (green) / does not (red)"
+                  + (f", sliding over {100 * share:.0f} % of it" if share is not None
+                     and math.isfinite(share) else ""))
+    fig.suptitle(title, fontsize=10)
     return fig
 
 

@@ -73,6 +73,11 @@ class HopperModelProtocol(Protocol):
         """``(s, weight, sigma)`` of the material next to the wall: the arc length of the
         nearest wall point (m), a volume weight and the stress ``(rr, zz, tt, rz)`` (Pa)."""
 
+    def contact_slip(self, state) -> tuple:
+        """``(slip, axis_speed)`` (m/s) for the rows of ``state.wall_impulse``: the material's
+        slip speed down the wall there and the downward speed at the axis at its height
+        (:class:`~fipy_hopper.diagnostics.FlowModeRule`)."""
+
     def flow_mode_measures(self, state, rule) -> tuple:
         """``(mass-flow index, stagnant fraction)`` by
         :class:`~fipy_hopper.diagnostics.FlowModeRule`."""

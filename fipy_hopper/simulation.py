@@ -212,6 +212,11 @@ class RunRecord:
     rate: list = field(default_factory=list)             # kg/s over the last interval
     mass_flow_index: list = field(default_factory=list)
     stagnant_fraction: list = field(default_factory=list)
+    wall_slip_ratio: list = field(default_factory=list)      # -, FlowModeRule, per sample
+    wall_slip_fraction: list = field(default_factory=list)   # -, share of the hopper wall
+    # rows (s, r, z, slip / axis speed) of the loaded hopper-wall contacts at the last sample
+    # of the flow-mode window (wall_slip.csv, the flow-pattern picture)
+    wall_slip_profile: list = field(default_factory=list)
     bin_lateral_stress_ratio: list = field(default_factory=list)   # -, in the bin's full cells
     # stage -> (t since the outlet opened, s, r, z, p_n, tau): the traction recovered from the
     # wall's reaction, its mean per bin (diagnostics.WallLoads.profile)
@@ -520,6 +525,14 @@ class Simulation:
         index, stagnant = m.flow_mode_measures(st, self.flow_rule)
         rec.mass_flow_index.append(index)
         rec.stagnant_fraction.append(stagnant)
+        previous = self._readings.get("sample")     # the wall's impulse at the last sample
+        slip, share, _, profile = diagnostics.wall_slip_measures(
+            m, st, previous["wall"] if previous is not None else None, self.flow_rule)
+        rec.wall_slip_ratio.append(slip)
+        rec.wall_slip_fraction.append(share)
+        if len(rec.t) > 1 and _before_flow_window_end(t, mass, rec.initial_mass) \
+                and len(profile):
+            rec.wall_slip_profile = profile.tolist()
         rec.bin_lateral_stress_ratio.append(m.bin_lateral_stress_ratio(st))
 
     def _load_sample(self, stage: str):
@@ -731,8 +744,9 @@ class Simulation:
         self.state = type(self.state)(**meta["state"], **arrays)
         self.record = RunRecord(**meta["record"], wall=wall, wall_stress=wall_stress,
                                 wall_forces=wall_forces, wall_raw=wall_raw)
-        ratios = self.record.bin_lateral_stress_ratio     # not recorded by older checkpoints
-        ratios[:0] = [math.nan] * (len(self.record.t) - len(ratios))
+        for name in ("bin_lateral_stress_ratio", "wall_slip_ratio", "wall_slip_fraction"):
+            values = getattr(self.record, name)          # not recorded by older checkpoints
+            values[:0] = [math.nan] * (len(self.record.t) - len(values))
         self.t_open = meta["t_open"]
         self.next_sample = meta["next_sample"]
         self.next_load_sample = meta.get("next_load_sample", math.nan)
@@ -842,21 +856,17 @@ class Simulation:
         t = np.asarray(rec.t)
         masses = np.asarray(rec.mass_in_hopper)
         m0 = rec.initial_mass
-        window = (masses <= 0.9 * m0) & (masses >= 0.4 * m0) & (t > 0.1)
-        idx = np.asarray(rec.mass_flow_index)[window] if window.any() else np.asarray(
-            rec.mass_flow_index[1:])
-        stag = np.asarray(rec.stagnant_fraction)[window] if window.any() else np.asarray(
-            rec.stagnant_fraction[1:])
-        index = float(np.nanmedian(idx)) if np.isfinite(idx).any() else math.nan
-        stagnant = float(np.nanmedian(stag)) if np.isfinite(stag).any() else math.nan
+        window = (masses <= 0.9 * m0) & _before_flow_window_end(t, masses, m0)
+        index, stagnant, slip, share = (
+            _window_median(getattr(rec, name), window) for name in (
+                "mass_flow_index", "stagnant_fraction", "wall_slip_ratio", "wall_slip_fraction"))
         remaining = m.mass_in_hopper(st)
         if np.isfinite(m0) and m0 > 0:
             balance = abs(remaining + st.discharged - m0) / m0
             left = remaining / m0
         else:
             balance = left = math.nan
-        mode = diagnostics.classify_flow_mode(index, stagnant, self.flow_rule) if len(t) \
-            else "none"
+        mode = diagnostics.classify_flow_mode(slip, self.flow_rule) if len(t) else "none"
         stopped = self.flow_stopped_time()
         channel, height = math.nan, math.nan
         if math.isfinite(stopped):
@@ -867,6 +877,8 @@ class Simulation:
             "steady_discharge_rate_kg_s": rate,
             "steady_rate_spread": spread,
             "flow_mode": mode,
+            "wall_slip_ratio": slip,
+            "wall_slip_fraction": share,
             "mass_flow_index": index,
             "stagnant_fraction": stagnant,
             "initial_mass_kg": m0 if np.isfinite(m0) else m.mass_in_hopper(st),
@@ -894,3 +906,18 @@ class Simulation:
         out.update(diagnostics.load_summary(self))
         out.update(m.summary_extras(st))
         return out
+
+
+def _window_median(values, window) -> float:
+    """The median of a per-sample measure over the samples of ``window`` (all but the first
+    when the window is empty), NaN samples left out; NaN when none is finite."""
+    values = np.asarray(values, float)
+    chosen = values[window] if window.any() else values[1:]
+    return float(np.nanmedian(chosen)) if np.isfinite(chosen).any() else math.nan
+
+
+def _before_flow_window_end(t, mass, m0):
+    """Whether samples lie at or before the end of the flow-mode window: at least 0.1 s after
+    the opening with at least 40 % of the initial mass ``m0`` left (the window also needs at
+    most 90 % left, :meth:`Simulation.summary`)."""
+    return (np.asarray(t) > 0.1) & (np.asarray(mass) >= 0.4 * m0)

@@ -3,32 +3,38 @@
 Each case is a short discharge of a conical hopper (default: a 0.2 m bin, 0.06 m outlet,
 0.15 m fill above the transition, phi = 30 deg, 5 mm cells, 0.8 s of discharge) classified
 ``mass`` or ``funnel`` by the package's own rule (``summary.json`` ``flow_mode``:
-:class:`fipy_hopper.diagnostics.FlowModeRule`, the near-wall to axis speed ratio in the cone
-and the stagnant fraction, medians over the discharge).  The classification is compared with
-Jenike's boundary for conical hoppers, ``theta_c(delta = phi, phi_w)``
+:class:`fipy_hopper.diagnostics.FlowModeRule`, whether the material slides along the hopper
+wall: the wall slip ratio, the load-weighted slip speed of the hopper wall's contacts over the
+axis speed at their height, against 0.2; medians over the discharge).  The classification is
+compared with Jenike's boundary for conical hoppers, ``theta_c(delta = phi, phi_w)``
 (:func:`fipy_hopper.theory.jenike_critical_half_angle`): mass flow for ``theta < theta_c``, and
 no mass flow at all where ``phi_w >= phi``.
 
+Grid check: the cases within ``grid_check_within`` (6 deg) of Jenike's boundary are run again
+on ``fine_cell_size`` (2.5 mm) cells; the report lists both calls (the call should not hang on
+the grid).  ``fine_cell_size = 0`` leaves it out.
+
 Written to ``--out`` (default ``studies/output/flow_mode_map``):
 
-* ``results.csv``: one row per case (angles, theta_c, both classifications, the index and
-  stagnant fraction, the steady rate, timing) and ``study.json`` (settings, numbers, findings);
+* ``results.csv``: one row per case (angles, theta_c, both classifications, the wall slip
+  ratio and fraction, the index and stagnant fraction, the steady rate, timing; the grid
+  check's runs flagged ``grid_check``) and ``study.json`` (settings, numbers, findings);
 * ``flow_mode_map.png``: the cases on the (phi_w, theta) plane over Jenike's curve;
-* ``mass_flow_index.png``: the mass-flow index against the distance from Jenike's boundary;
+* ``wall_slip.png``: the wall slip ratio and fraction against the distance from Jenike's
+  boundary, at both cell sizes where the grid check ran;
 * ``thumbnails.png``: the layers at the end of the discharge for a few cases;
 * ``cases/<name>/``: the run directory of every case (results and fields; its own pictures
   with ``--case-plots``, or later with ``fipy-hopper plot cases/<name>``, about 3 s each).
 
-Default cost (measured on this machine, 2026-12-02, one core per case): 5-12 s of simulation
-per case at 5 mm, 201 core-seconds for the 30 cases, 109 s on 2 cores without the cases' own
-pictures and 154 s with them (``tests/benchmarks``).
+Default cost: 5-12 s of simulation per case at 5 mm (201 core-seconds for the 30 cases,
+2026-12-02), and about ten times that for each of the grid check's 2.5 mm runs.
 
 Usage::
 
     python studies/flow_mode_map.py [--out DIR] [--quick] [--serial | --scheduler ADDRESS]
                                     [--cell-size 0.005] [--end-time 0.8]
                                     [--half-angles 10 20 ...] [--wall-angles 10 15 ...]
-                                    [--case-plots]
+                                    [--fine-cell-size 0.0025] [--case-plots]
 """
 
 from __future__ import annotations
@@ -47,6 +53,7 @@ if str(HERE) not in sys.path:
 import _sweep  # noqa: E402
 
 from fipy_hopper import geometry, theory  # noqa: E402
+from fipy_hopper.diagnostics import FlowModeRule  # noqa: E402
 
 _r = _sweep.rounded
 NAME = "flow_mode_map"
@@ -66,9 +73,12 @@ DEFAULTS = {
                               # bin width B and the slot width B0 (plane flow, per metre)
     "case_plots": False,      # each run draws its own pictures (30 runs: off, --case-plots)
     "thumbnails": 8,          # layer pictures in thumbnails.png
+    "fine_cell_size": 0.0025,  # m: the grid check's cells (0: no grid check)
+    "grid_check_within": 6.0,  # deg: the cases this near Jenike's boundary are checked
 }
 QUICK = {"pairs": ((15.0, 12.0), (60.0, 25.0)), "cell_size": 0.01, "end_time": 0.6,
-         "case_plots": False}
+         "case_plots": False, "fine_cell_size": 0.0}
+FINE = "_fine"                # suffix of a grid-check case's name
 
 
 def setup(quick: bool = False, **options) -> dict:
@@ -88,14 +98,20 @@ def setup(quick: bool = False, **options) -> dict:
             "run": {"end_time": opts["end_time"], "output_interval": 0.02,
                     "field_interval": 0.2}}
     cases = []
+    shape = geometry_of(opts["shape"])
     for theta, wall in pairs:
         theta, wall = float(theta), float(wall)
-        cases.append(_sweep.make_case(
-            _sweep.case_name(("theta", theta), ("wall", wall)),
-            {"half_angle_deg": theta, "wall_friction_deg": wall},
-            _sweep.merge(base, hopper={"half_angle_deg": theta},
-                         wall={"friction_angle_deg": wall}),
-            plots=opts["case_plots"]))
+        name = _sweep.case_name(("theta", theta), ("wall", wall))
+        config = _sweep.merge(base, hopper={"half_angle_deg": theta},
+                              wall={"friction_angle_deg": wall})
+        params = {"half_angle_deg": theta, "wall_friction_deg": wall}
+        cases.append(_sweep.make_case(name, params, config, plots=opts["case_plots"]))
+        distance = theta - float(critical_angle(opts["friction_angle"], wall, shape))
+        if opts["fine_cell_size"] > 0 and abs(distance) <= opts["grid_check_within"]:
+            cases.append(_sweep.make_case(
+                name + FINE, {**params, "grid_check": True},
+                _sweep.merge(config, numerics={"cell_size": opts["fine_cell_size"]}),
+                plots=False))
     return {"options": opts, "cases": cases, "setting": _sweep.setting_label(quick, options)}
 
 
@@ -119,12 +135,20 @@ def jenike(theta, phi, phi_w, geometry_name="conical"):
     return theta_c, str(theory.jenike_flow_mode(theta, phi, phi_w, geometry=geometry_name))
 
 
+def split_grid_check(rows: list) -> tuple:
+    """``(map rows, grid-check rows)``: the cases of the map and their reruns on fine cells."""
+    return ([r for r in rows if not r.get("grid_check")],
+            [r for r in rows if r.get("grid_check")])
+
+
 def analyse(rows: list, options: dict) -> dict:
     """Adds ``theta_c_deg``, ``jenike_mode``, ``agrees``, ``distance_deg`` to each row and
-    returns the numbers (agreement with Jenike as a fraction of the classified cases)."""
+    returns the numbers (agreement with Jenike as a fraction of the classified cases; cases
+    within 4 deg of the boundary apart; the grid check's calls against the map's)."""
+    rows, fine = split_grid_check(rows)
     phi = options["friction_angle"]
     shape = geometry_of(options.get("shape", "conical"))
-    for r in rows:
+    for r in rows + fine:
         theta_c, mode = jenike(r["half_angle_deg"], phi, r["wall_friction_deg"], shape)
         r["theta_c_deg"] = theta_c
         r["jenike_mode"] = mode
@@ -135,6 +159,14 @@ def analyse(rows: list, options: dict) -> dict:
     agree = [r for r in judged if r["agrees"]]
     clear = [r for r in judged if not (abs(r["distance_deg"]) <= 5.0)]   # NaN counts as clear
     clear_agree = [r for r in clear if r["agrees"]]
+    beyond4 = [r for r in judged if not (abs(r["distance_deg"]) <= 4.0)]
+    coarse = {(r["half_angle_deg"], r["wall_friction_deg"]): r for r in rows}
+    checked = [(coarse[(f["half_angle_deg"], f["wall_friction_deg"])], f) for f in fine
+               if (f["half_angle_deg"], f["wall_friction_deg"]) in coarse]
+    for c, f in checked:
+        f["coarse_flow_mode"] = c.get("flow_mode")
+        f["coarse_slip_ratio"] = c.get("wall_slip_ratio")
+        f["same_call"] = c.get("flow_mode") == f.get("flow_mode")
     return {
         "cases": len(rows),
         "classified": len(judged),
@@ -145,19 +177,56 @@ def analyse(rows: list, options: dict) -> dict:
         "agreement_fraction": len(agree) / len(judged) if judged else math.nan,
         "clear_cases": len(clear),
         "agreement_fraction_clear": (len(clear_agree) / len(clear) if clear else math.nan),
+        "cases_beyond_4deg": len(beyond4),
+        "agreeing_beyond_4deg": sum(1 for r in beyond4 if r["agrees"]),
+        "funnel_at_rough_walls": all(r["flow_mode"] == "funnel" for r in judged
+                                     if r["wall_friction_deg"] >= phi),
         "disagreeing": [r["case"] for r in judged if not r["agrees"]],
-        "failed": [r["case"] for r in rows if r.get("error")],
+        "grid_checked": len(checked),
+        "grid_same_call": sum(1 for _, f in checked if f["same_call"]),
+        "grid_changed": [f["case"] for _, f in checked if not f["same_call"]],
+        "failed": [r["case"] for r in rows + fine if r.get("error")],
     }
 
 
+def explain(r) -> str:
+    """What was measured in a case: its distance from Jenike's boundary, the wall slip ratio
+    and fraction, the mass-flow index and the stagnant fraction."""
+    where = (f"theta - theta_c = {r['distance_deg']:+.1f} deg" if math.isfinite(
+        r["distance_deg"]) else "phi_w >= phi: no theta_c")
+    return (f"{where}; wall slip ratio {_num(r.get('wall_slip_ratio'))} (threshold "
+            f"{FlowModeRule().slip_ratio:g}), the wall slides over "
+            f"{_num(r.get('wall_slip_fraction'), 100, '.0f')} % of its length; stagnant "
+            f"fraction {_num(r.get('stagnant_fraction'))}, mass-flow index "
+            f"{_num(r.get('mass_flow_index'))}")
+
+
+def _num(x, scale=1.0, spec=".2f") -> str:
+    return format(scale * x, spec) if _sweep.finite(x) else "n/a"
+
+
 def disagreements(rows, numbers, noun="cases") -> str:
-    """The finding that lists the cases that disagree with Jenike (simulated mode, index,
-    distance from the boundary)."""
-    return f"Disagreeing {noun}: " + ", ".join(
-        f"{r['case']} (sim {r['flow_mode']}, index {r['mass_flow_index']:.2f}, "
-        + (f"theta - theta_c = {r['distance_deg']:+.1f} deg)"
-           if math.isfinite(r["distance_deg"]) else "phi_w >= phi: no theta_c)")
+    """The finding that lists the cases that disagree with Jenike, each with what was
+    measured (:func:`explain`)."""
+    return f"Disagreeing {noun}: " + "; ".join(
+        f"{r['case']} (simulated {r['flow_mode']}, Jenike {r['jenike_mode']}: {explain(r)})"
         for r in rows if r["case"] in numbers["disagreeing"]) + "."
+
+
+def grid_check_finding(rows, numbers, options) -> str:
+    """The finding of the grid check: each checked case's call at both cell sizes."""
+    _, fine = split_grid_check(rows)
+    fine = [f for f in fine if "same_call" in f]
+    if not fine:
+        return ""
+    h0, h1 = 1000 * options["cell_size"], 1000 * options["fine_cell_size"]
+    return (f"Grid check: {numbers['grid_same_call']} of {numbers['grid_checked']} cases within "
+            f"{options['grid_check_within']:g} deg of the boundary give the same call at "
+            f"{h0:g} and {h1:g} mm: " + "; ".join(
+                f"theta {f['half_angle_deg']:g}, phi_w {f['wall_friction_deg']:g} "
+                f"({f['distance_deg']:+.1f} deg): {f['coarse_flow_mode']} / {f['flow_mode']} "
+                f"(slip ratio {_num(f.get('coarse_slip_ratio'))} / "
+                f"{_num(f.get('wall_slip_ratio'))})" for f in fine) + ".")
 
 
 # ---------------------------------------------------------------- figures
@@ -191,7 +260,7 @@ def plot_map(rows, options, numbers):
                    linewidth=[0.6 if r["agrees"] else 2.2 for r in sel],
                    label=f"simulated: {mode} flow")
     for r in rows:
-        idx = r.get("mass_flow_index")
+        idx = r.get("wall_slip_ratio")
         if _sweep.finite(idx):
             ax.annotate(f"{idx:.2f}", (r["wall_friction_deg"], r["half_angle_deg"]),
                         textcoords="offset points", xytext=(6, -10), fontsize=6, color="0.3")
@@ -205,33 +274,51 @@ def plot_map(rows, options, numbers):
     ax.set_ylabel(f"{'wedge' if plane else 'cone'} half-angle theta from the vertical (deg)")
     frac = numbers["agreement_fraction"]
     ax.set_title(f"Flow mode: {numbers['agreeing']}/{numbers['classified']} cases agree with "
-                 f"Jenike ({100 * frac:.0f} %)\nred edge: disagrees; numbers: mass-flow index",
+                 f"Jenike ({100 * frac:.0f} %)\nred edge: disagrees; numbers: wall slip ratio",
                  fontsize=9)
     ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=7)
     return fig
 
 
-def plot_index(rows, options):
-    from fipy_hopper.diagnostics import FlowModeRule
+def plot_slip(rows, options):
+    """The wall slip ratio (left) and fraction (right) of every case against its distance from
+    Jenike's boundary; the grid check's fine runs open, joined to their map case."""
+    rows, fine = split_grid_check(rows)
+    rule = FlowModeRule()
+    fig = _sweep.figure(10.0, 4.0)
+    axes = fig.subplots(1, 2)
+    finite = [r["distance_deg"] for r in rows + fine if math.isfinite(r["distance_deg"])]
+    x_rough = max(finite + [0.0]) + 8.0
+    coarse = {(r["half_angle_deg"], r["wall_friction_deg"]): r for r in rows}
 
-    fig = _sweep.figure(6.0, 4.0)
-    ax = fig.add_subplot()
-    for mode, marker, colour in (("mass", "o", "C0"), ("funnel", "^", "C1")):
-        sel = [r for r in rows if r.get("flow_mode") == mode and math.isfinite(r["distance_deg"])]
-        ax.scatter([r["distance_deg"] for r in sel], [r["mass_flow_index"] for r in sel],
-                   marker=marker, color=colour, label=f"simulated {mode} flow")
-    nan_rows = [r for r in rows if not math.isfinite(r["distance_deg"]) and
-                _sweep.finite(r.get("mass_flow_index"))]
-    if nan_rows:
-        x = max([r["distance_deg"] for r in rows if math.isfinite(r["distance_deg"])] + [0]) + 8
-        ax.scatter([x] * len(nan_rows), [r["mass_flow_index"] for r in nan_rows], marker="s",
-                   color="0.5", label="phi_w >= phi (no theta_c), drawn at the right")
-    ax.axhline(FlowModeRule().index_threshold, color="k", ls=":", lw=1,
-               label="index threshold of the mass/funnel rule")
-    ax.axvline(0.0, color="k", lw=1, label="Jenike boundary")
-    ax.set_xlabel("theta - theta_c (deg)")
-    ax.set_ylabel("mass-flow index (wall / axis speed)")
-    ax.legend(fontsize=7)
+    def x_of(r):
+        return r["distance_deg"] if math.isfinite(r["distance_deg"]) else x_rough
+
+    for ax, key, label in zip(axes, ("wall_slip_ratio", "wall_slip_fraction"),
+                              ("wall slip ratio (slip / axis speed, load-weighted)",
+                               "wall slip fraction (share of the hopper wall sliding)")):
+        for mode, marker, colour in (("mass", "o", "C0"), ("funnel", "^", "C1")):
+            sel = [r for r in rows if r.get("flow_mode") == mode and _sweep.finite(r.get(key))]
+            ax.scatter([x_of(r) for r in sel], [r[key] for r in sel], marker=marker,
+                       color=colour, label=f"simulated {mode} flow, "
+                                           f"{1000 * options['cell_size']:g} mm")
+        sel = [f for f in fine if _sweep.finite(f.get(key))]
+        if sel:
+            ax.scatter([x_of(f) for f in sel], [f[key] for f in sel], marker="s",
+                       facecolor="none", edgecolor="k",
+                       label=f"grid check, {1000 * options['fine_cell_size']:g} mm")
+            for f in sel:
+                c = coarse.get((f["half_angle_deg"], f["wall_friction_deg"]))
+                if c is not None and _sweep.finite(c.get(key)):
+                    ax.plot([x_of(f)] * 2, [c[key], f[key]], "k-", lw=0.6)
+        if key == "wall_slip_ratio":
+            ax.axhline(rule.slip_ratio, color="k", ls=":", lw=1,
+                       label="threshold of the mass/funnel rule")
+        ax.axvline(0.0, color="k", lw=1, label="Jenike boundary")
+        ax.axvline(x_rough - 4.0, color="0.6", lw=0.6, ls="--")
+        ax.set_xlabel(f"theta - theta_c (deg); phi_w >= phi drawn at {x_rough:.0f}")
+        ax.set_ylabel(label)
+    axes[0].legend(fontsize=6)
     return fig
 
 
@@ -302,22 +389,30 @@ def plot_thumbnails(rows, n):
 
 
 # ---------------------------------------------------------------- outputs
+RESULT_COLUMNS = ("case", "half_angle_deg", "wall_friction_deg", "theta_c_deg", "jenike_mode",
+                  "flow_mode", "agrees", "distance_deg", "wall_slip_ratio",
+                  "wall_slip_fraction", "stagnant_fraction", "mass_flow_index",
+                  "coarse_flow_mode", "same_call", "cell_size_m")
+
+
 def write_outputs(out, rows, numbers, options, setting, argv=None) -> list:
     out = Path(out)
-    _sweep.write_rows_csv(out / "results.csv", rows, first=(
-        "case", "half_angle_deg", "wall_friction_deg", "theta_c_deg", "jenike_mode",
-        "flow_mode", "agrees", "distance_deg", "mass_flow_index", "stagnant_fraction",
-        "steady_discharge_rate_kg_s", "cell_size_m", "discharge_time_s", "wall_time_s",
-        "error"))
+    everything = rows
+    rows, _ = split_grid_check(rows)
+    _sweep.write_rows_csv(out / "results.csv", everything, first=RESULT_COLUMNS + (
+        "steady_discharge_rate_kg_s", "discharge_time_s", "wall_time_s", "error"))
     figures = [{"file": "flow_mode_map.png",
                 "caption": "Simulated flow mode of every case on the (phi_w, theta) plane over "
                            "Jenike's boundary theta_c(delta = phi); a red edge marks a case "
-                           "that disagrees with Jenike; the numbers are the mass-flow index."}]
+                           "that disagrees with Jenike; the numbers are the wall slip ratio."}]
     _sweep.save(plot_map(rows, options, numbers), out / "flow_mode_map.png")
-    _sweep.save(plot_index(rows, options), out / "mass_flow_index.png")
-    figures.append({"file": "mass_flow_index.png",
-                    "caption": "Mass-flow index (near-wall / axis downward speed in the cone) "
-                               "against the distance from Jenike's boundary."})
+    _sweep.save(plot_slip(everything, options), out / "wall_slip.png")
+    figures.append({"file": "wall_slip.png",
+                    "caption": "Wall slip ratio (the hopper wall's load-weighted slip speed "
+                               "over the axis speed; the rule's threshold dotted) and the share "
+                               "of the hopper wall that slides, against the distance from "
+                               "Jenike's boundary; open squares: the grid check on finer "
+                               "cells, joined to the map's case."})
     thumbs = plot_thumbnails(rows, options["thumbnails"])
     if thumbs is not None:
         _sweep.save(thumbs, out / "thumbnails.png")
@@ -336,24 +431,39 @@ def write_outputs(out, rows, numbers, options, setting, argv=None) -> list:
         f"Simulated: {numbers['mass_cases']} mass, {numbers['funnel_cases']} funnel; Jenike: "
         f"{numbers['jenike_mass_cases']} mass.",
     ]
+    findings.append(
+        f"More than 4 deg from the boundary (or phi_w >= phi): {numbers['agreeing_beyond_4deg']} "
+        f"of {numbers['cases_beyond_4deg']} agree; at phi_w >= phi every call is funnel: "
+        f"{numbers['funnel_at_rough_walls']}.")
     if numbers["disagreeing"]:
         findings.append(disagreements(rows, numbers))
+    check = grid_check_finding(everything, numbers, options)
+    if check:
+        findings.append(check)
     if numbers["failed"]:
         findings.append("Failed runs: " + ", ".join(numbers["failed"]) + ".")
-    table = {"title": "Cases", "columns": ["theta (deg)", "phi_w (deg)", "theta_c (deg)",
-                                          "Jenike", "simulated", "index", "stagnant", "agrees"],
-             "rows": [[r["half_angle_deg"], r["wall_friction_deg"], _r(r["theta_c_deg"], 1),
-                       r["jenike_mode"], r.get("flow_mode"), _r(r.get("mass_flow_index"), 2),
-                       _r(r.get("stagnant_fraction"), 2), r["agrees"]] for r in rows]}
+    table = case_table(everything, options)
     settings = {k: (list(v) if isinstance(v, tuple) else v) for k, v in options.items()
                 if k != "pairs" or v}
-    settings["classification"] = ("summary.json flow_mode (FlowModeRule: mass when the "
-                                  "near-wall/axis speed ratio >= 0.2 and the stagnant "
-                                  "fraction <= 0.15)")
+    settings["classification"] = (f"summary.json flow_mode (FlowModeRule: mass when the "
+                                  f"wall slip ratio >= {FlowModeRule().slip_ratio:g})")
     _sweep.write_study_json(out, NAME, TITLE, setting, settings,
                             {k: v for k, v in numbers.items()}, findings, figures, [table],
-                            rows, argv)
+                            everything, argv)
     return figures
+
+
+def case_table(rows, options, title="Cases") -> dict:
+    """The report's table of the cases (the grid check's runs flagged by their cell size)."""
+    return {"title": title,
+            "columns": ["theta (deg)", "phi_w (deg)", "cell (mm)", "theta_c (deg)", "Jenike",
+                        "simulated", "slip ratio", "slip fraction", "stagnant", "index",
+                        "agrees"],
+            "rows": [[r["half_angle_deg"], r["wall_friction_deg"],
+                      _r(1000 * r.get("cell_size_m", math.nan), 2), _r(r["theta_c_deg"], 1),
+                      r["jenike_mode"], r.get("flow_mode"), _r(r.get("wall_slip_ratio"), 2),
+                      _r(r.get("wall_slip_fraction"), 2), _r(r.get("stagnant_fraction"), 2),
+                      _r(r.get("mass_flow_index"), 2), r["agrees"]] for r in rows]}
 
 
 def main(argv=None) -> int:
@@ -363,8 +473,11 @@ def main(argv=None) -> int:
     parser.add_argument("--end-time", type=float, help="s of discharge (default 0.8)")
     parser.add_argument("--half-angles", type=float, nargs="+", help="deg")
     parser.add_argument("--wall-angles", type=float, nargs="+", help="deg")
+    parser.add_argument("--fine-cell-size", type=float,
+                        help="m: the grid check's cells (default 0.0025; 0: none)")
     args = parser.parse_args(argv)
-    options = _sweep.study_options(args, ('cell_size', 'end_time', 'half_angles', 'wall_angles'))
+    options = _sweep.study_options(args, ('cell_size', 'end_time', 'half_angles', 'wall_angles',
+                                          'fine_cell_size'))
     study = setup(quick=args.quick, **options)
     rows = _sweep.run_study(NAME, study, args)
     numbers = analyse(rows, study["options"])

@@ -158,9 +158,22 @@ class Claim:
 
 
 def _agreement(section: Section, table: str) -> tuple:
+    """The map's agreement on its own cell size (the most frequent ``cell (mm)``), and that of
+    its grid check (the rows on other cells), if any."""
     rows = section.table(table)
-    agree = sum(r["agrees"] == "yes" for r in rows)
-    return f"{agree} of {len(rows)} cases agree", {"agree": agree, "cases": len(rows)}
+    cells = [r.get("cell (mm)", "") for r in rows]
+    main = max(set(cells), key=cells.count)
+    own = [r for r, c in zip(rows, cells) if c == main]
+    check = [r for r, c in zip(rows, cells) if c != main]
+    agree = sum(r["agrees"] == "yes" for r in own)
+    text = f"{agree} of {len(own)} cases agree"
+    values = {"agree": agree, "cases": len(own)}
+    if check:
+        held = sum(r["agrees"] == "yes" for r in check)
+        finer = ", ".join(sorted(set(cells) - {main}))
+        text += f" ({held} of {len(check)} again on {finer} mm cells)"
+        values.update(grid_check_agree=held, grid_check_cases=len(check))
+    return text, values
 
 
 def _flow_mode_cones(s):

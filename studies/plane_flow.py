@@ -26,16 +26,19 @@ Two parts, both run as ordinary run directories (``hopper.shape = "wedge"``):
   friction angle, against Jenike's plane-flow boundary.  That boundary is the conical one plus
   10 deg (:func:`fipy_hopper.theory.jenike_critical_half_angle_plane`, a rule of thumb, [M]:
   no closed form of Jenike's plane-flow chart could be read); the conical boundary is drawn
-  beside it, so the picture sets the wedge's map against the cone's.
+  beside it, so the picture sets the wedge's map against the cone's.  The wedges within 6 deg
+  of that boundary are run again on ``fine_cell_size`` (2.5 mm) cells (the grid check of
+  ``flow_mode_map.py``).
 
 Written to ``--out`` (default ``studies/output/plane_flow``): ``slots.csv`` and
 ``results.csv`` (one row per case), ``slot_exponent.png``, ``plane_flow_map.png``,
+``wall_slip.png``,
 ``study.json`` (what ``make_report.py`` reads) and ``cases/<name>/``.
 
 Usage::
 
     python studies/plane_flow.py [--out DIR] [--quick] [--serial | --scheduler ADDRESS]
-                                 [--cell-size 0.005]
+                                 [--cell-size 0.005] [--fine-cell-size 0.0025]
 """
 
 from __future__ import annotations
@@ -76,11 +79,12 @@ DEFAULTS = {
     "wall_angles": (10.0, 15.0, 20.0, 25.0, 30.0),
     "pairs": None,
     "cell_size": 0.005,                          # m
+    "fine_cell_size": 0.0025,                    # m: the map's grid check (0: none)
     "case_plots": False,
 }
 QUICK = {"slot_widths": (0.06, 0.08), "slot_bottoms": ((90.0, 0.3),), "slot_fill": 0.1,
          "slot_end_time": 0.3, "fine_widths": (), "rate_window_start": 0.1,
-         "pairs": ((20.0, 12.0), (60.0, 25.0)), "cell_size": 0.01}
+         "pairs": ((20.0, 12.0), (60.0, 25.0)), "cell_size": 0.01, "fine_cell_size": 0.0}
 #: the map's own settings (flow_mode_map.DEFAULTS but for the shape)
 MAP = {"shape": "wedge", "end_time": 0.8, "friction_angle": 30.0, "bin_diameter": 0.2,
        "outlet_diameter": 0.06, "fill_height": 0.15, "youngs_modulus": 5.0e6}
@@ -91,6 +95,7 @@ def setup(quick: bool = False, **options) -> dict:
     options raise ``TypeError``."""
     opts = _sweep.resolve_options(DEFAULTS, options, QUICK if quick else None)
     map_options = {**MAP, "cell_size": opts["cell_size"], "case_plots": opts["case_plots"],
+                   "fine_cell_size": opts["fine_cell_size"],
                    **({"pairs": opts["pairs"]} if opts["pairs"] else
                       {"half_angles": opts["half_angles"], "wall_angles": opts["wall_angles"]}),
                    **({"end_time": 0.6} if quick else {})}
@@ -243,21 +248,22 @@ def write_outputs(out, rows, options, map_options, setting, argv=None) -> dict:
     out = Path(out)
     slots = [r for r in rows if r.get("part") == "slot"]
     fine = [r for r in rows if r.get("part") == "slot_fine"]
-    cases = [r for r in rows if r.get("part") == "map"]
+    everything = [r for r in rows if r.get("part") == "map"]
+    cases, _ = flow_mode_map.split_grid_check(everything)
     slot_numbers = analyse_slots(slots, options)
     slot_numbers.update(analyse_refinement(fine, slots, options))
-    map_numbers = flow_mode_map.analyse(cases, map_options)
+    map_numbers = flow_mode_map.analyse(everything, map_options)
     _sweep.write_rows_csv(out / "slots.csv", slots + fine, first=(
         "case", "slot_width_m", "half_angle_deg", "cell_size_m", RATE_WINDOW, RATE,
         "beverloo_slot_kg_s_m", "ratio_to_beverloo", "mass_balance_error", "discharge_time_s",
         "wall_time_s", "error"))
-    _sweep.write_rows_csv(out / "results.csv", cases, first=(
-        "case", "half_angle_deg", "wall_friction_deg", "theta_c_deg", "jenike_mode",
-        "flow_mode", "agrees", "distance_deg", "mass_flow_index", "stagnant_fraction", RATE,
-        "mass_balance_error", "wall_time_s", "error"))
+    _sweep.write_rows_csv(out / "results.csv", everything,
+                          first=flow_mode_map.RESULT_COLUMNS + (
+                              RATE, "mass_balance_error", "wall_time_s", "error"))
     _sweep.save(plot_slots(slots + fine, options, slot_numbers), out / "slot_exponent.png")
     _sweep.save(flow_mode_map.plot_map(cases, map_options, map_numbers),
                 out / "plane_flow_map.png")
+    _sweep.save(flow_mode_map.plot_slip(everything, map_options), out / "wall_slip.png")
     figures = [{"file": "slot_exponent.png",
                 "caption": "Steady rate per metre against the slot width, flat bottom and "
                            "wedge, with Beverloo's slot form (n = 3/2)."},
@@ -265,7 +271,12 @@ def write_outputs(out, rows, options, map_options, setting, argv=None) -> dict:
                 "caption": "Simulated flow mode of each wedge on the (phi_w, theta) plane over "
                            "Jenike's plane-flow boundary (the conical one + 10 deg, a rule of "
                            "thumb) with the conical boundary dashed beside it; a red edge "
-                           "marks a case that disagrees; the numbers are the mass-flow index."}]
+                           "marks a case that disagrees; the numbers are the wall slip ratio."},
+               {"file": "wall_slip.png",
+                "caption": "The wedges' wall slip ratio (the rule's threshold dotted) and the "
+                           "share of the hopper wall that slides, against the distance from "
+                           "Jenike's plane-flow boundary; open squares: the grid check on "
+                           "finer cells."}]
     numbers = {**slot_numbers, **{f"map_{k}": v for k, v in map_numbers.items()}}
     findings = []
     for theta, _ in options["slot_bottoms"]:
@@ -296,8 +307,15 @@ def write_outputs(out, rows, options, map_options, setting, argv=None) -> dict:
         f"{map_numbers['agreement_fraction_clear']:.2f} of {map_numbers['clear_cases']}); "
         f"simulated {map_numbers['mass_cases']} mass, {map_numbers['funnel_cases']} funnel; "
         f"Jenike {map_numbers['jenike_mass_cases']} mass.")
+    findings.append(
+        f"Plane-flow map, more than 4 deg from the boundary (or phi_w >= phi): "
+        f"{map_numbers['agreeing_beyond_4deg']} of {map_numbers['cases_beyond_4deg']} agree; at "
+        f"phi_w >= phi every call is funnel: {map_numbers['funnel_at_rough_walls']}.")
     if map_numbers["disagreeing"]:
         findings.append(flow_mode_map.disagreements(cases, map_numbers, noun="wedges"))
+    check = flow_mode_map.grid_check_finding(everything, map_numbers, map_options)
+    if check:
+        findings.append(check)
     failed = [r["case"] for r in rows if r.get("error")]
     if failed:
         findings.append("Failed runs: " + ", ".join(failed) + ".")
@@ -311,12 +329,7 @@ def write_outputs(out, rows, options, map_options, setting, argv=None) -> dict:
                    _r(r.get(RATE), 2),
                    _r(r.get("beverloo_slot_kg_s_m"), 2), _r(r.get("ratio_to_beverloo"), 3),
                    _r(r.get("mass_balance_error"), 15)] for r in slots + fine]},
-        {"title": "Plane-flow map", "columns": ["theta (deg)", "phi_w (deg)",
-                                                "theta_c plane (deg)", "Jenike", "simulated",
-                                                "index", "stagnant", "agrees"],
-         "rows": [[r["half_angle_deg"], r["wall_friction_deg"], _r(r["theta_c_deg"], 1),
-                   r["jenike_mode"], r.get("flow_mode"), _r(r.get("mass_flow_index"), 2),
-                   _r(r.get("stagnant_fraction"), 2), r["agrees"]] for r in cases]}]
+        flow_mode_map.case_table(everything, map_options, title="Plane-flow map")]
     settings = {k: (list(v) if isinstance(v, tuple) else v) for k, v in options.items()
                 if k != "pairs" or v}
     settings["map"] = {k: v for k, v in MAP.items()}
@@ -340,8 +353,10 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     _sweep.add_arguments(parser, NAME)
     parser.add_argument("--cell-size", type=float, help="m (default 0.005)")
+    parser.add_argument("--fine-cell-size", type=float,
+                        help="m: the map's grid check (default 0.0025; 0: none)")
     args = parser.parse_args(argv)
-    options = _sweep.study_options(args, ("cell_size",))
+    options = _sweep.study_options(args, ("cell_size", "fine_cell_size"))
     study = setup(quick=args.quick, **options)
     rows = _sweep.run_study(NAME, study, args)
     numbers = write_outputs(args.out, rows, study["options"], study["map_options"],

@@ -115,6 +115,7 @@ PLAUSIBLE = {
                  "transport_cfl": near(0.05, 0.5),
                  "max_transport_interval": near(1, 200, integer=True),
                  "hourglass_coefficient": near(0.0, 1.0), "grid_viscosity": near(0.0, 1.0),
+                 "viscosity_length": near(0.0, 0.02),
                  "bulk_viscosity": near(0.0, 1.0),
                  "alpha_min": near(1e-4, 0.1),
                  "free_fall_depth": near(0.25, 10.0),

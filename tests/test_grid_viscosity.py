@@ -73,6 +73,16 @@ def test_viscosity_is_b_rho_sqrt_gh_h():
     assert HopperModel(config()).viscosity == 0.0
 
 
+def test_a_viscosity_length_fixes_eta_on_every_grid():
+    """With ``numerics.viscosity_length`` l the viscosity is b rho sqrt(g l) l whatever the
+    cell size: a material's rate dependence, not a grid's."""
+    eta = 0.25 * 1500.0 * math.sqrt(9.81 * 0.005) * 0.005
+    for h in (0.01, 0.0075):
+        cfg = config(grid_viscosity=0.25, viscosity_length=0.005)
+        cfg = cfg.replace(numerics={"cell_size": h})
+        assert HopperModel(cfg).viscosity == pytest.approx(eta, rel=1e-12)
+
+
 def test_kernel_forces_are_those_of_sigma_plus_2_eta_D(discharging):
     model, state = discharging
     eta = model.viscosity

@@ -52,26 +52,33 @@ def test_headline_json_names_its_report_and_each_studys_commit():
 
 
 def test_the_flow_mode_map_count_is_read_from_the_report():
-    """The map's agreement comes from its table's rows: one row flipped, one fewer."""
+    """The map's agreement comes from its table's rows on the map's own cells: one row
+    flipped, one fewer; a flipped grid-check row (on finer cells) counts in the grid check."""
     before = {c["key"]: c for c in headline.build(REPORT_TEXT)["claims"]}["flow_mode_cones"]
-    agree, cases = before["values"]["agree"], before["values"]["cases"]
-    row = "| 40 | 15 | 36.9 | funnel | mass | 0.22 | 0 | no |"
-    assert row in REPORT_TEXT
-    flipped = REPORT_TEXT.replace("| 10 | 10 | 44.8 | mass | mass | 0.87 | 0 | yes |",
-                                  "| 10 | 10 | 44.8 | mass | funnel | 0.87 | 0 | no |", 1)
+    values = before["values"]
+    agree, cases = values["agree"], values["cases"]
+    own = "| 10 | 10 | 5 | 44.8 | mass | mass | 0.81 | 1 | 0 | 0.87 | yes |"
+    check = "| 40 | 10 | 2.5 | 44.8 | mass | mass | 0.24 | 0.95 | 0 | 0.23 | yes |"
+    assert own in REPORT_TEXT and check in REPORT_TEXT
+    flipped = REPORT_TEXT.replace(own, own.replace("| mass | mass |", "| mass | funnel |")
+                                  .replace("| yes |", "| no |"), 1)
     after = {c["key"]: c for c in headline.build(flipped)["claims"]}["flow_mode_cones"]
-    assert after["values"] == {"agree": agree - 1, "cases": cases}
-    assert after["result"] == f"{agree - 1} of {cases} cases agree"
+    assert after["values"] == {**values, "agree": agree - 1}
+    assert after["result"].startswith(f"{agree - 1} of {cases} cases agree")
     table = headline.readme_table({**headline.build(flipped), "claims": [after]})
-    assert f"| {agree - 1} of {cases} cases agree |" in table
+    assert f"| {agree - 1} of {cases} cases agree" in table
+    flipped = REPORT_TEXT.replace(check, check.replace("| yes |", "| no |"), 1)
+    after = {c["key"]: c for c in headline.build(flipped)["claims"]}["flow_mode_cones"]
+    assert after["values"] == {**values,
+                               "grid_check_agree": values["grid_check_agree"] - 1}
 
 
 def test_a_hand_edit_of_the_readme_table_is_found(tmp_path):
     files = headline.outputs(REPORT_TEXT)
     readme = files[headline.README]
     body = headline._docs.region(readme, "headline")
-    first = re.search(r"\| (\d+) of (\d+) cases agree \|", body)
-    edited = readme.replace(first[0], f"| {int(first[1]) + 1} of {first[2]} cases agree |", 1)
+    first = re.search(r"\| (\d+) of (\d+) cases agree", body)
+    edited = readme.replace(first[0], f"| {int(first[1]) + 1} of {first[2]} cases agree", 1)
     (tmp_path / "README.md").write_text(edited, encoding="utf-8")
     (tmp_path / "docs").mkdir()
     (tmp_path / "docs" / "validation.md").write_text(files[headline.VALIDATION],

@@ -96,3 +96,26 @@ def test_forces_picture_is_skipped_for_a_table_without_forces(tmp_path):
         fig = wall_forces(tmp_path)
         assert (fig is None) == (columns is old)
     assert len(fig.axes) == 2
+
+
+def test_flow_pattern_marks_where_the_hopper_wall_slides(tmp_path):
+    """wall_slip.csv from a record: each loaded contact stands for the wall between the
+    midpoints to its neighbours, green where its slip ratio reaches the rule's 0.2."""
+    from types import SimpleNamespace
+
+    from fipy_hopper import geometry
+    from fipy_hopper.io import RunDirectory, write_wall_slip
+    from fipy_hopper.plotting import wall_slip_segments
+
+    cfg = cone()
+    s = np.array([0.0, 0.02, 0.05])
+    r, z, _, _ = geometry.wall_point(s, cfg.hopper)
+    record = SimpleNamespace(wall_slip_profile=np.column_stack([s, r, z, [0.5, 0.1, 0.2]]))
+    write_wall_slip(tmp_path / RunDirectory.WALL_SLIP, record, 0.2)
+    segments = wall_slip_segments(tmp_path, cfg)
+    assert [sliding for _, sliding in segments] == [True, False, True]
+    ends = [(points[0], points[-1]) for points, _ in segments]
+    middle = geometry.wall_point(np.array([0.01, 0.035]), cfg.hopper)
+    np.testing.assert_allclose(ends[1][0], [middle[0][0], middle[1][0]], atol=1e-12)
+    np.testing.assert_allclose(ends[1][1], [middle[0][1], middle[1][1]], atol=1e-12)
+    assert wall_slip_segments(tmp_path / "none", cfg) == []

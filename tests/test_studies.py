@@ -14,6 +14,7 @@ import os
 import pathlib
 import shutil
 
+import numpy as np
 import pytest
 
 STUDIES = pathlib.Path(__file__).resolve().parents[1] / "studies"
@@ -116,11 +117,32 @@ def test_flow_mode_map_classifies_the_two_clear_cases(flow_map):
     assert data["setting"] == "quick"
     assert data["numbers"]["agreement_fraction"] == 1.0
     assert data["numbers"]["classified"] == 2
-    for name in ("flow_mode_map.png", "mass_flow_index.png", "thumbnails.png"):
+    for name in ("flow_mode_map.png", "wall_slip.png", "thumbnails.png"):
         assert_png(flow_map / name)
     for case in ("theta15_wall12", "theta60_wall25"):     # ordinary run directories
         assert (flow_map / "cases" / case / "summary.json").is_file()
         assert (flow_map / "cases" / case / "config.toml").is_file()
+
+
+def test_flow_mode_map_grid_check_reruns_the_cases_near_the_boundary():
+    """The cases within 6 deg of Jenike's boundary (and no others) get a rerun on 2.5 mm
+    cells; the analysis sets each against its map case and counts the cases beyond 4 deg."""
+    study = load("flow_mode_map")
+    setup = study.setup(pairs=((40.0, 10.0), (20.0, 10.0), (30.0, 30.0)))
+    names = [c["name"] for c in setup["cases"]]
+    assert names == ["theta40_wall10", "theta40_wall10_fine", "theta20_wall10",
+                     "theta30_wall30"]
+    fine = setup["cases"][1]
+    assert fine["config"]["numerics"]["cell_size"] == 0.0025 and fine["params"]["grid_check"]
+    rows = [{"case": c["name"], **c["params"], "flow_mode": mode, "wall_slip_ratio": x}
+            for c, mode, x in zip(setup["cases"], ("mass", "funnel", "mass", "funnel"),
+                                  (0.25, 0.15, 0.6, 0.05))]
+    numbers = study.analyse(rows, setup["options"])
+    assert numbers["classified"] == 3 and numbers["agreeing"] == 3
+    assert numbers["cases_beyond_4deg"] == 3 and numbers["funnel_at_rough_walls"]
+    assert numbers["grid_checked"] == 1 and numbers["grid_same_call"] == 0
+    assert numbers["grid_changed"] == ["theta40_wall10_fine"]
+    assert "mass / funnel" in study.grid_check_finding(rows, numbers, setup["options"])
 
 
 def test_case_pictures_are_the_study_setting_unless_asked_for():
@@ -135,7 +157,8 @@ def test_case_pictures_are_the_study_setting_unless_asked_for():
 
 @pytest.mark.parametrize("name", ["flow_mode_map", "plane_flow", "discharge_rate",
                                   "wall_pressure", "stiffness_spread", "convergence",
-                                  "robustness", "lagrangian_vs_eulerian", "arching"])
+                                  "robustness", "funnel_channel", "lagrangian_vs_eulerian",
+                                  "arching"])
 def test_a_study_refuses_an_option_it_does_not_have(name):
     with pytest.raises(TypeError, match=r"unknown options \['bogus'\]; known: "):
         load(name).setup(bogus=1)
@@ -283,6 +306,37 @@ def test_convergence_three_cell_sizes_and_three_moduli(convergence):
     diffs = rows_of(convergence / "profiles.csv")
     assert {r["series"] for r in diffs} == {"cell size", "stiffness"}
     assert_png(convergence / "convergence.png")
+
+
+# ---------------------------------------------------------------- funnel channel
+def test_funnel_channel_edge_on_a_constructed_speed_profile():
+    """Speed falling linearly from the axis, 1 - r/R: half the axis cell's speed is reached
+    at r = (R + r_0)/2 exactly (linear between cell centres); loose cells (alpha <= 1/2) count
+    as at rest, and a row whose axis cell is empty has no edge."""
+    study = load("funnel_channel")
+    R = 0.1
+    r = (np.arange(20) + 0.5) * 0.005
+    speed = np.tile(1.0 - r / R, (3, 1))
+    alpha = np.ones_like(speed)
+    alpha[1, 6:] = 0.3
+    alpha[2, 0] = 0.3
+    half = study.edge_radius(r, speed, alpha, 0.5)
+    assert half[0] == pytest.approx(0.5 * (R + r[0]), rel=1e-12)
+    assert half[1] == pytest.approx(r[5] + (0.5 * speed[1, 0] - speed[1, 5]) / (0 - speed[1, 5])
+                                    * (r[6] - r[5]), rel=1e-12)
+    assert np.isnan(half[2])
+    t = np.array([0.0, 1.0, 2.0, 3.0])
+    assert study.mean_rate(t, 2.0 * t, 0.5, 2.5) == pytest.approx(2.0)
+
+
+def test_funnel_channel_study_writes_its_outputs(root):
+    out = run_quick(root, "funnel_channel")
+    numbers = study_json(out)["numbers"]["funnel_plain"]
+    assert numbers["cell_sizes_mm"] == [10.0, 7.5]
+    assert all(math.isfinite(x) for x in numbers["early_rate_kg_s"])
+    assert all(x is not None for x in numbers["edge_angle_deg"])
+    assert_png(out / "funnel_channel.png")
+    assert len(rows_of(out / "channel.csv")) > 10
 
 
 # ---------------------------------------------------------------- robustness
@@ -454,6 +508,6 @@ def test_report_is_generated_from_the_outputs(root, flow_map, discharge, wall, c
     assert set(result["missing"]) == {"plane_flow", "discharge_rate", "wall_pressure",
                                       "convergence",
                                       "discharge_dynamics", "stiffness_spread",
-                                      "robustness", "element_tests", "lagrangian_vs_eulerian",
-                                      "arching"}
+                                      "robustness", "funnel_channel", "element_tests",
+                                      "lagrangian_vs_eulerian", "arching"}
     assert "python studies/robustness.py" in (tmp_path / "partial.md").read_text()
