@@ -177,7 +177,6 @@ def run(config_or_path, out, force: bool = False, resume: bool = False, quiet: b
     if lagrangian:
         checkpoint_interval = 0
     # every refusal before anything is built or written
-    _check_runnable(cfg)
     if threads is not None:
         resources.check_threads(threads)
     resources.check_memory(cfg)
@@ -331,24 +330,11 @@ def make_model(cfg: HopperConfig, threads: Optional[int] = None):
     """The model of ``cfg.numerics.formulation``: the Eulerian
     :class:`~fipy_hopper.model.HopperModel` (``threads``: numba threads of its compiled steps)
     or the updated-Lagrangian :class:`~fipy_hopper.lagrangian.LagrangianModel`."""
-    _check_runnable(cfg)
     if cfg.numerics.formulation == "lagrangian":
         from .lagrangian import LagrangianModel
         return LagrangianModel(cfg)
     from .model import HopperModel
     return HopperModel(cfg, threads=threads)
-
-
-def _check_runnable(cfg: HopperConfig) -> None:
-    """Refuse what the models cannot run yet: a wall profile or inserts are checked, described
-    and drawn (``fipy-hopper validate``), but the models still take the shorthands' cone or
-    wedge (issue 34 wires the boundary into them)."""
-    if cfg.hopper.shape == "profile" or cfg.hopper.inserts:
-        what = "hopper.shape = \"profile\"" if cfg.hopper.shape == "profile" \
-            else "hopper.inserts"
-        raise ConfigError(f"{what} is checked and drawn (fipy-hopper validate) but cannot "
-                          f"run yet: the models take the conical and wedge shorthands without "
-                          f"inserts")
 
 
 def _write_tables(rundir, record, axisymmetric: bool = True) -> None:

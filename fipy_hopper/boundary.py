@@ -551,6 +551,35 @@ class Boundary:
         length = np.hypot(*(tab.b - tab.a).T)
         return px, pz, tab.chain[row], tab.segment[row], tab.s0[row] + t * length[row]
 
+    @cached_property
+    def _offsets(self) -> tuple:
+        """Each chain's start along all the chains (m): the walls' and inserts' lengths one
+        after the other, a metre apart (tubes: 0)."""
+        out, at = [], 0.0
+        for c in self.chains:
+            out.append(0.0 if c.kind == "tube" else at)
+            if c.kind != "tube":
+                at += c.length + 1.0
+        return tuple(out)
+
+    def chain_offset(self, chain) -> float:
+        """Where a chain starts along all the chains (m): :meth:`position` of its ``s = 0``."""
+        return self._offsets[self.chain_index(chain) if isinstance(chain, str) else chain]
+
+    def position(self, chain, s):
+        """One coordinate along every wall and insert (m): a chain's offset
+        (:meth:`chain_offset`) plus the arc length ``s`` along it, clipped to the chain."""
+        chain = np.asarray(chain)
+        offsets = np.asarray(self._offsets)[chain]
+        lengths = np.array([c.length for c in self.chains])[chain]
+        return offsets + np.clip(np.asarray(s, float), 0.0, lengths)
+
+    def load_row(self, x, z) -> np.ndarray:
+        """The table row whose load a contact at ``(x, z)`` is: the nearest segment's, or for
+        a tube's the first segment of the wall above it (a lip's load is the wall's)."""
+        _, _, row, _ = self._nearest_rows(x, z)
+        return np.where(self.table.tube[row], row + 1, row)
+
     def signed_distance(self, x, z):
         """Signed distance to the boundary (m): positive in the open region, negative in the
         solid."""

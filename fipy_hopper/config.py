@@ -1287,11 +1287,21 @@ def grid_rows(geom: HopperGeometry, num: NumericsConfig, h: float) -> tuple:
     """``(nr, n_below, n_above)``: the columns of the grid (across
     :attr:`HopperGeometry.x_extent`), its rows below the outlet plane and above it, by the
     rules of :func:`fipy_hopper.mesh.build_grid` for cell size ``h``."""
-    x_min, x_max = geom.x_extent
-    nr = int(math.ceil((x_max - x_min) / h - 1e-9)) + 2
+    x0, nr = grid_columns(geom, h)
     n_below = max(int(math.ceil(num.free_fall_depth * geom.outlet_diameter / h - 1e-9)), 3)
     n_above = int(math.ceil(geom.top / h - 1e-9)) + 1
     return nr, n_below, n_above
+
+
+def grid_columns(geom: HopperGeometry, h: float) -> tuple:
+    """``(x0, nr)``: the grid's first node column ``x0`` (m) and its number of columns.  A
+    half-section starts on the axis (``x0 = 0``) and ends two cells beyond its widest point;
+    a full section starts two cells beyond its left wall's extreme on a multiple of ``h``
+    (so ``x = 0``, the middle of a centred slot, is a node column) and ends two cells beyond
+    its right wall's."""
+    x_min, x_max = geom.x_extent
+    x0 = 0.0 if not geom.full_section else -h * (math.ceil(-x_min / h - 1e-9) + 2)
+    return x0, int(math.ceil((x_max - x0) / h - 1e-9)) + 2
 
 
 def grid_memory(n_cells: int, kept: bool = False) -> float:

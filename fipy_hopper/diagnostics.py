@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import geometry
+from .wall_traction import WallStretch
 
 
 # ---------------------------------------------------------------- discharge rate
@@ -302,29 +303,60 @@ def classify_outcome(mode: str, stopped: bool, left_fraction: float, channel_dia
 #: share the wall's reaction among the nodes (docs/physics_and_numerics.md, section 8)
 KNOT_CELLS = 4.0
 
+def wall_stretches(cfg) -> list:
+    """The straight stretches of wall the material can load
+    (:class:`~fipy_hopper.wall_traction.WallStretch`, one per segment of the boundary's walls
+    and inserts; the free-fall tubes left out): a wall's segments up to the fill level (the
+    one through it cut there), every segment of every insert.  Their arc length ``s_start`` is
+    the boundary's position along all the chains (:meth:`Boundary.position`), their
+    ``segment`` the chain's segment index and ``name`` the chain's name."""
+    bnd = cfg.boundary
+    out = []
+    for ci, chain in enumerate(bnd.chains):
+        if chain.kind == "tube":
+            continue
+        offset = bnd.chain_offset(ci)
+        for k, seg in enumerate(chain.segments):
+            a, b = np.asarray(seg.a, float), np.asarray(seg.b, float)
+            if chain.kind == "wall":
+                if a[1] >= bnd.fill_level and k > 0:
+                    break
+                if b[1] > bnd.fill_level > a[1]:
+                    b = a + (b - a) * (bnd.fill_level - a[1]) / (b[1] - a[1])
+            out.append(WallStretch(tuple(a), tuple(b), offset + seg.s_start,
+                                   bnd.section.axisymmetric, chain.name, k, chain.side))
+    return out
+
+
 @dataclass(frozen=True)
 class WallBins:
-    """The bins along the wall that every wall-load profile is reported on: each straight
-    stretch of wall (:func:`fipy_hopper.geometry.wall_stretches`) divided into equal bins of
-    about the configuration's ``wall_bin_width_m``, stretch after stretch from the outlet lip
-    up, so no bin straddles a corner.  Per bin: ``s`` the arc length of its centre from the
-    lip (m), ``(r, z)`` its centre, ``normal`` (nb, 2) the wall's normal into the wall,
-    ``tangent`` (nb, 2) the tangent up the wall, ``area`` its wall area per radian (per metre
-    of a plane wall), ``stretch`` the index of its stretch; ``edges`` (nb + 1,) the bins'
-    bounds in arc length (contiguous)."""
+    """The bins along the walls that every wall-load profile is reported on: each straight
+    stretch of wall (:func:`wall_stretches`) divided into equal bins of about the
+    configuration's ``wall_bin_width_m``, chain after chain and along each from its lowest
+    point, so no bin straddles a corner.  Per bin: ``wall`` the name of its chain, ``s`` the
+    arc length of its centre along the chain (m), ``position`` that along all the chains
+    (:meth:`Boundary.position`), ``(r, z)`` its centre, ``normal`` (nb, 2) the wall's normal
+    into the wall, ``tangent`` (nb, 2) the tangent along ``s`` (up a wall), ``area`` its wall
+    area per radian (per metre of a plane wall), ``stretch`` the index of its stretch,
+    ``lo``/``hi`` its bounds in ``position``."""
 
+    wall: np.ndarray
     s: np.ndarray
+    position: np.ndarray
     r: np.ndarray
     z: np.ndarray
     normal: np.ndarray
     tangent: np.ndarray
     area: np.ndarray
     stretch: np.ndarray
-    edges: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
     stretches: tuple
 
     @classmethod
-    def of(cls, stretches, width: float) -> "WallBins":
+    def of(cls, stretches, width: float, offsets: dict) -> "WallBins":
+        """Bins of about ``width`` m on ``stretches``; ``offsets``: each chain's position
+        (m) along all the chains, by name."""
         from .wall_traction import bin_edges
         parts = []
         for k, st in enumerate(stretches):
@@ -332,25 +364,32 @@ class WallBins:
             centres = 0.5 * (edges[1:] + edges[:-1])
             r, z = st.point(centres)
             n = len(centres)
-            parts.append((centres, r, z, np.tile(st.normal, (n, 1)), np.tile(st.tangent, (n, 1)),
-                          st.area(edges[:-1], edges[1:]), np.full(n, k), edges[:-1]))
+            parts.append((np.full(n, st.name, dtype=object), centres - offsets[st.name],
+                          centres, r, z, np.tile(st.normal, (n, 1)),
+                          np.tile(st.tangent, (n, 1)), st.area(edges[:-1], edges[1:]),
+                          np.full(n, k), edges[:-1], edges[1:]))
         cols = [np.concatenate(c) for c in zip(*parts)]
-        edges = np.append(cols[7], stretches[-1].s_end)
-        return cls(*cols[:7], edges=edges, stretches=tuple(stretches))
+        return cls(*cols, stretches=tuple(stretches))
 
-    def index(self, s) -> np.ndarray:
-        """The bin of each arc length ``s`` (m; clipped onto the wall)."""
-        return np.clip(np.searchsorted(self.edges, s, side="right") - 1, 0, len(self.s) - 1)
+    def index(self, position) -> np.ndarray:
+        """The bin of each ``position`` along the chains (m): the bin that holds it, or the
+        nearest bin of its chain (a point above a wall's fill level: its top bin)."""
+        position = np.asarray(position, float)
+        return np.clip(np.searchsorted(self.lo, position, side="right") - 1, 0,
+                       len(self.lo) - 1)
 
     @property
     def width(self) -> np.ndarray:
-        return np.diff(self.edges)
+        return self.hi - self.lo
 
 
-def wall_bins(model) -> WallBins:
-    """The :class:`WallBins` of a model's wall (its configuration's stretches and width)."""
-    cfg = model.cfg
-    return WallBins.of(geometry.wall_stretches(cfg.hopper), cfg.wall_bin_width_m)
+def wall_bins(cfg, cell_size: float | None = None) -> WallBins:
+    """The :class:`WallBins` of a configuration (on a grid of ``cell_size``, default its
+    own)."""
+    bnd = cfg.boundary
+    width = cfg.wall_bin_width_at(cfg.numerics.cell_size if cell_size is None else cell_size)
+    offsets = {c.name: bnd.chain_offset(i) for i, c in enumerate(bnd.chains)}
+    return WallBins.of(wall_stretches(cfg), width, offsets)
 
 
 # ---------------------------------------------------------------- wall pressure
@@ -369,7 +408,7 @@ class WallSampler:
 
     def __init__(self, model, bins: "WallBins | None" = None):
         self.model = model
-        self.bins = bins if bins is not None else wall_bins(model)
+        self.bins = bins if bins is not None else wall_bins(model.cfg)
         self.centres, self.r, self.z = self.bins.s, self.bins.r, self.bins.z
         self.nr, self.nz = self.bins.normal[:, 0], self.bins.normal[:, 1]
 
@@ -436,16 +475,26 @@ class WallLoads:
         self.model = model
         self.sampler = sampler if sampler is not None else WallSampler(model)
         self.bins = self.sampler.bins
-        s, normals, seg = model.wall_entries()
-        first = self.bins.stretches[0].segment
+        bnd = model.cfg.boundary
+        s, _, _ = model.wall_entries()
+        rows = model.wall_load_rows()
+        tab = bnd.table
+        chain, segment = tab.chain[rows], tab.segment[rows]
+        position = bnd.position(chain, s)
+        stretches = self.bins.stretches
         width = model.cfg.wall_bin_width_m
         self.recoveries = []
-        for st in self.bins.stretches:
-            members = np.flatnonzero((seg == st.segment) | ((seg == -1) & (st.segment == first)))
-            self.recoveries.append(StretchRecovery.build(st, members, s[members], width,
-                                                         KNOT_CELLS * model.cell_size))
+        for k, st in enumerate(stretches):
+            ci = bnd.chain_index(st.name)
+            last = k + 1 == len(stretches) or stretches[k + 1].name != st.name
+            # a wall's segments above the fill level load its top stretch
+            on = (segment >= st.segment) if last else (segment == st.segment)
+            members = np.flatnonzero((chain == ci) & on & ~tab.tube[rows])
+            self.recoveries.append(StretchRecovery.build(st, members, position[members],
+                                                         width, KNOT_CELLS * model.cell_size))
         self.entries = np.concatenate([rec.entries for rec in self.recoveries])
-        self.centres, self.r_w, self.z_w = self.bins.s, self.bins.r, self.bins.z
+        self.wall, self.centres = self.bins.wall, self.bins.s
+        self.r_w, self.z_w = self.bins.r, self.bins.z
         self.bin_area = self.bins.area
 
     @staticmethod
@@ -498,12 +547,13 @@ class WallLoads:
 
     def hoop_force(self, p_n):
         """Hoop force ``N_theta = p_n r / n_r`` (N/m, tension positive) of the bins' normal
-        pressures ``p_n`` (Pa); NaN on a flat floor and for a wedge (:meth:`membrane_forces`)."""
+        pressures ``p_n`` (Pa) on the walls; NaN on a flat floor, on an insert and for a plane
+        section (:meth:`membrane_forces`)."""
         p_n = np.asarray(p_n, dtype=float)
         n_r = self.bins.normal[:, 0]
         if not self.model.cfg.hopper.axisymmetric:
             return np.full_like(p_n, np.nan)
-        curved = n_r > 0.0
+        curved = (n_r > 0.0) & (self.bins.wall == "wall")
         return np.where(curved, p_n * self.r_w / np.where(curved, n_r, 1.0), np.nan)
 
     def membrane_forces(self, start: dict, end: dict, p_n, tau=None):
@@ -514,16 +564,18 @@ class WallLoads:
         * hoop ``N_theta = p_n r / n_r`` per bin (the normal pressure over the wall's second
           radius of curvature, ``r / cos(theta)`` in the cone, ``R`` in the bin; NaN on a flat
           floor and for a wedge, whose plates carry ``p_n`` in bending);
-        * meridional ``N_m``: the cone (the hopper) hangs from the transition, so at a bin
-          centre on it ``N_m = V / (c cos(theta))``, ``V`` the downward load (per radian) of
-          the material on the cone below that point, ``c = r`` (1 for a wedge); the bin's
-          wall stands on the transition, so above it ``N_m = -U / c``, ``U`` the downward
-          friction (per radian) on the wall above that point, a compression (NaN on a flat
-          floor, which is not hung);
+        * meridional ``N_m`` along each wall (``wall``, ``left_wall``; NaN on inserts): the
+          hopper (the wall below the transition, ``z < cone_height``) hangs from the
+          transition, so at a bin centre on it ``N_m = V / (c cos(theta))``, ``V`` the
+          downward load (per radian) of the material on the hopper below that point,
+          ``c = r`` (1 for a wedge), ``theta`` the local slope from the vertical
+          (``cos(theta) = |n_r|``); the bin's wall stands on the transition, so above it
+          ``N_m = -U / c``, ``U`` the downward load (per radian) on the wall above that point,
+          a compression (NaN on a flat floor or ledge, which is not hung);
         * at the transition ``(N_m of the hopper there, the bin wall's axial compression
-          there)`` (N/m), from the hopper's and the bin wall's shares of the wall's vertical
-          reaction, so that ``section factor * c_t * (cos(theta) N_hopper + N_bin) = wall
-          vertical force``.
+          there)`` (N/m) of the (right) wall, from the hopper's and the bin wall's shares of
+          its vertical reaction, so that ``section factor * c_t * (cos(theta) N_hopper +
+          N_bin) = the wall's vertical force``.
 
         A bin's vertical load is its traction's: ``A_b (-p_n n_z + tau t_z)`` (upward on the
         material), with ``p_n``, ``tau`` the window's recovered bin means (:meth:`profile`,
@@ -536,21 +588,30 @@ class WallLoads:
             p_n, tau = self.profile(start, end)[3:]
         bins = self.bins
         down = bins.area * (-p_n * bins.normal[:, 1] + tau * bins.tangent[:, 1])   # N/rad
-        cone = bins.stretch == 0
-        cone_load = np.where(cone, down, 0.0)
-        wall_load = np.where(cone, 0.0, down)
-        r, n_r = self.r_w, bins.normal[:, 0]
-        c = r if geom.axisymmetric else np.ones_like(r)
-        hung = geom.cone_height > 0
-        cos_t = math.cos(geom.half_angle) if hung else math.nan
-        below = np.cumsum(cone_load) - 0.5 * cone_load
-        above = np.cumsum(wall_load[::-1])[::-1] - 0.5 * wall_load
-        meridional = np.where(cone, below / (c * cos_t), -above / c)
-        meridional[n_r <= 0.0] = np.nan
+        c = np.abs(bins.r) if geom.axisymmetric else np.ones_like(bins.r)
+        n_r = np.abs(bins.normal[:, 0])
+        meridional = np.full(len(down), np.nan)
+        at_transition = (math.nan, math.nan)
+        z_t = geom.cone_height
+        for name in ("wall", "left_wall"):
+            on = bins.wall == name
+            if not on.any():
+                continue
+            curved = n_r > 1e-12
+            hung = on & (bins.z < z_t)
+            stands = on & ~hung & curved
+            load_h, load_s = np.where(hung, down, 0.0), np.where(stands, down, 0.0)
+            below = np.cumsum(load_h) - 0.5 * load_h
+            above = np.cumsum(load_s[::-1])[::-1] - 0.5 * load_s
+            meridional[hung & curved] = (below / (c * n_r))[hung & curved]
+            meridional[stands] = (-above / c)[stands]
+            if name == "wall":
+                top = np.flatnonzero(hung)
+                c_t = geom.bin_radius if geom.axisymmetric else 1.0
+                at_transition = (float(np.sum(load_h)) / (c_t * n_r[top[-1]])
+                                 if len(top) and n_r[top[-1]] > 1e-12 else math.nan,
+                                 float(np.sum(load_s)) / c_t)
         hoop = self.hoop_force(p_n)
-        c_t = geom.bin_radius if geom.axisymmetric else 1.0
-        at_transition = (float(np.sum(cone_load)) / (c_t * cos_t) if hung else math.nan,
-                         float(np.sum(wall_load)) / c_t)
         return hoop, meridional, at_transition
 
     def balance(self, start: dict, end: dict) -> dict:

@@ -13,7 +13,6 @@ from __future__ import annotations
 import numpy as np
 
 from .config import HopperGeometry
-from .wall_traction import WallStretch
 
 
 def wall_polyline(geom: HopperGeometry, r_far: float, z_far: float) -> np.ndarray:
@@ -138,18 +137,6 @@ def wall_point(s, geom: HopperGeometry):
     nr = np.where(in_cone, np.cos(th) if hc > 0 else 0.0, 1.0)
     nz = np.where(in_cone, -np.sin(th), 0.0)
     return r, z, nr, nz
-
-
-def wall_stretches(geom: HopperGeometry) -> list:
-    """The straight stretches of the wall that the material loads, from the outlet lip up:
-    the cone (the floor of a flat bin) and the bin wall up to the fill level, as
-    :class:`~fipy_hopper.wall_traction.WallStretch` es with the index of their segment of
-    :func:`wall_polyline` (``segment``: 1 and 2)."""
-    R, R0, hc = geom.bin_radius, geom.outlet_radius, geom.cone_height
-    s_t = float(transition_arc_length(geom))
-    top = max(geom.fill_level, hc)
-    return [WallStretch((R0, 0.0), (R, hc), 0.0, geom.axisymmetric, "wall", segment=1),
-            WallStretch((R, hc), (R, top), s_t, geom.axisymmetric, "wall", segment=2)]
 
 
 def transition_arc_length(geom: HopperGeometry) -> float:

@@ -886,6 +886,11 @@ class LagrangianModel:
         """``(s, normal, segment)`` of the wall stations (rows of ``wall_impulse``)."""
         return self._wall_stations
 
+    def wall_load_rows(self) -> np.ndarray:
+        """The boundary's table row of each wall station: its segment (0 the tube, 1 the cone
+        or floor, 2 the bin wall: the rows of a conical hopper's boundary)."""
+        return self._wall_stations[2]
+
     def wall_stress_points(self, state: LagrangianState) -> tuple:
         """``(s, weight, sigma)`` of the active elements whose centroids lie within 2.5
         element sizes of the cone or bin wall, below the fill level (the outer column's

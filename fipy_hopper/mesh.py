@@ -22,7 +22,7 @@ import numpy as np
 from fipy import CylindricalGrid2D
 
 from .fipy_adapter import UniformGrid2D
-from .config import HopperConfig
+from .config import HopperConfig, grid_columns, grid_rows
 
 
 @dataclass
@@ -107,17 +107,16 @@ def build_grid(cfg: HopperConfig, n_sub: int = 16) -> HopperGrid:
     """Build the FiPy grid covering the hopper, its wall's cut cells and the free-fall zone."""
     geom, num = cfg.hopper, cfg.numerics
     h = num.cell_size
-    nr = int(math.ceil(geom.bin_radius / h - 1e-9)) + 2
-    n_below = max(int(math.ceil(num.free_fall_depth * geom.outlet_diameter / h - 1e-9)), 3)
-    n_above = int(math.ceil(geom.top / h - 1e-9)) + 1
+    x0, _ = grid_columns(geom, h)
+    nr, n_below, n_above = grid_rows(geom, num, h)
     nz = n_below + n_above
     z_bottom = -n_below * h
     if geom.axisymmetric:
         mesh = CylindricalGrid2D(dx=np.full(nr, h), dy=np.full(nz, h),
                                  origin=((0.0,), (z_bottom,)))
-    else:                       # plane: the half-section, per metre of length
-        mesh = UniformGrid2D(dx=h, dy=h, nx=nr, ny=nz, origin=((0.0,), (z_bottom,)))
-    r_nodes = h * np.arange(nr + 1)
+    else:                       # plane: a half-section or the full one, per metre of length
+        mesh = UniformGrid2D(dx=h, dy=h, nx=nr, ny=nz, origin=((x0,), (z_bottom,)))
+    r_nodes = x0 + h * np.arange(nr + 1)
     z_nodes = z_bottom + h * np.arange(nz + 1)
     z_nodes[n_below] = 0.0
 

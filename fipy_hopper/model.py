@@ -188,7 +188,10 @@ class HopperModel:
         self.dt = (self.material.stable_time_step(g.h, cfg.numerics.dt_safety)
                    * damped_step_factor(cfg.bulk_viscosity))
         self.mu_wall = cfg.wall.friction_coefficient
-        # the symmetry as data: an axisymmetric cone, or a wedge in plane strain (per metre)
+        #: the boundary (fipy_hopper.boundary): the walls, inserts and the section as data
+        self.boundary = cfg.boundary
+        section = self.boundary.section
+        # the symmetry as data: an axisymmetric section, or a plane one (per metre)
         axisymmetric = cfg.hopper.axisymmetric
         #: radius of the hoop terms (infinite in plane strain: they vanish)
         self.r_c = g.r_cells if axisymmetric else np.full(g.nr, np.inf)
@@ -196,9 +199,9 @@ class HopperModel:
         self.flux_radius = g.r_nodes if axisymmetric else np.ones(g.nr + 1)
         #: normal strains that share the open-divergence correction
         self.strain_dims = 3.0 if axisymmetric else 2.0
-        #: the computed half-section to the whole hopper: 2 pi rad (m^3/rad -> m^3), or both
-        #: halves of a wedge (per metre of length)
-        self.section_factor = 2.0 * math.pi if axisymmetric else 2.0
+        #: the computed section to the whole hopper: 2 pi rad (m^3/rad -> m^3), both halves of
+        #: a plane half-section, or 1 for a full plane section (per metre of length)
+        self.section_factor = section.factor
         self.open_volume = g.kappa * g.cell_volume          # (nz, nr) m^3/rad (m^2 for a wedge)
         # "axisymmetric": FiPy's van Leer update with the reconstruction distances of the
         # cylindrical cells corrected; FiPy's own geometry over/undershoots on cylindrical
@@ -216,27 +219,39 @@ class HopperModel:
         self.face_sign = np.concatenate([normals[1, :nzf], normals[0, nzf:]])
         self.face_area = np.asarray(fipy_adapter.face_areas(g.mesh)) * g.face_aperture
         # wall contact: every node within half a cell in front of a wall segment (or behind
-        # it) is constrained by that segment's normal; nodes round the convex lip by the
-        # normal towards the nearest wall point.  The free-fall tube (segment 0) is frictionless.
+        # it) is constrained by that segment's normal, with its friction; nodes round a convex
+        # corner (a lip) by the normal towards the nearest wall point, with the friction of
+        # the nearest segment that is not a tube.  The free-fall tubes are frictionless.
         RN, ZN = np.meshgrid(g.r_nodes, g.z_nodes)
         reach = 0.5 * g.h
+        table = self.boundary.table
+        #: friction coefficient of each segment of the boundary's table (tubes: 0)
+        self.segment_mu = np.array([0.0 if tube else math.tan(math.radians(f))
+                                    for tube, f in zip(table.tube, table.friction_deg)])
         self.contact_passes = []
-        segments = []                 # the wall segment of each pass (-1: the lip)
+        segments, owners = [], []     # per pass: its table row (-1: convex corners), owners
         covered = np.zeros_like(RN, dtype=bool)
-        for k, mask, n_r, n_z in geometry.segment_contacts(RN, ZN, cfg.hopper, reach):
+        for k, mask, n_r, n_z in self.boundary.segment_contacts(RN, ZN, reach):
             normal = np.array([n_r, n_z])[:, None, None] * np.ones((2,) + RN.shape)
-            self.contact_passes.append((mask, normal, 0.0 if k == 0 else self.mu_wall))
-            segments.append(k)
+            self.contact_passes.append((mask, normal, self.segment_mu[k]))
+            segments.append(np.full(np.count_nonzero(mask), k))
+            owners.append(segments[-1])
             covered |= mask
-        lip = (g.node_distance < reach) & ~covered
-        self.contact_passes.append((lip, g.node_normal, self.mu_wall))
-        segments.append(-1)
-        #: wall segment of each entry of ``contact_list`` (0 tube, 1 cone or floor, 2 bin
-        #: wall, -1 the outlet lip)
-        self.contact_segment = np.concatenate([np.full(np.count_nonzero(mask), k) for
-                                               (mask, _, _), k in zip(self.contact_passes,
-                                                                      segments)])
-        self.plate_nodes = (np.abs(ZN) < 1e-12) & (RN <= cfg.hopper.outlet_radius + 1e-12)
+        corner = (g.node_distance < reach) & ~covered
+        owner = self.boundary.load_row(RN, ZN)
+        self.contact_passes.append((corner, g.node_normal, self.segment_mu[owner]))
+        segments.append(np.full(np.count_nonzero(corner), -1))
+        owners.append(owner[corner])
+        #: row of ``boundary.table`` of each entry of ``contact_list`` (for the conical and
+        #: wedge shorthands 0 the tube, 1 the cone or floor, 2 the bin wall), -1 at a convex
+        #: corner (the outlet lip)
+        self.contact_segment = np.concatenate(segments)
+        #: the table row whose load each entry is: its segment's, or at a convex corner the
+        #: nearest segment's that is not a tube (:meth:`Boundary.load_row`)
+        self.contact_owner = np.concatenate(owners)
+        x_left, x_right = self.boundary.outlet
+        self.plate_nodes = ((np.abs(ZN) < 1e-12) & (RN >= x_left - 1e-12)
+                            & (RN <= x_right + 1e-12))
         self.plate_normal = np.array([0.0, -1.0])[:, None, None] * np.ones((2,) + RN.shape)
         self.contact_list = _contact_list(self.contact_passes)
         self.plate_list = _contact_list([(self.plate_nodes, self.plate_normal, self.mu_wall)])
@@ -403,42 +418,51 @@ class HopperModel:
 
     def wall_entries(self) -> tuple:
         """``(s, normal, segment)`` of every entry of ``contact_list`` (the rows of
-        ``State.wall_impulse``): the arc length from the outlet lip of the node's wall point
-        (m; the lip's entries at ``s = 0``, cone entries within ``[0, s_t]``, bin entries at or
-        above the transition ``s_t``), the contact normal and ``contact_segment``."""
-        geom, g = self.cfg.hopper, self.grid
-        j, i, normals, _ = self.contact_list
-        seg = self.contact_segment
-        r, z = g.r_nodes[i], g.z_nodes[j]
-        theta = geom.half_angle
-        s_t = float(geometry.transition_arc_length(geom))
-        on_cone = (seg == 1) | (seg == -1)
-        s = np.where(seg == 2, s_t + (z - geom.cone_height),
-                     np.where(seg == -1, 0.0,
-                              (r - geom.outlet_radius) * np.sin(theta)
-                              + (z * np.cos(theta) if geom.cone_height > 0 else 0.0)))
-        s = np.where(on_cone, np.clip(s, 0.0, s_t), np.maximum(s, s_t))
-        return s, normals, seg
+        ``State.wall_impulse``): the arc length along its chain of the node's wall point on
+        the segment whose load it is (m; :meth:`wall_load_rows`, clipped to the segment: the
+        lip's entries at ``s = 0``), the contact normal and ``contact_segment`` (the
+        boundary's table row, -1 at a convex corner)."""
+        return self._entry_arc_length, self.contact_list[2], self.contact_segment
+
+    def wall_load_rows(self) -> np.ndarray:
+        """The row of ``boundary.table`` whose load each contact entry is
+        (:attr:`contact_owner`)."""
+        return self.contact_owner
+
+    @property
+    def _entry_arc_length(self) -> np.ndarray:
+        if not hasattr(self, "_entry_s"):
+            g, tab = self.grid, self.boundary.table
+            j, i, _, _ = self.contact_list
+            row = self.contact_owner
+            a, b = tab.a[row], tab.b[row]
+            ab = b - a
+            length = np.hypot(ab[:, 0], ab[:, 1])
+            t = ((g.r_nodes[i] - a[:, 0]) * ab[:, 0] + (g.z_nodes[j] - a[:, 1]) * ab[:, 1])
+            self._entry_s = tab.s0[row] + np.clip(t / length ** 2, 0.0, 1.0) * length
+        return self._entry_s
 
     def _wall_band(self):
-        """The cells whose centres lie 0.5 to 2.5 cells from the cone or bin wall, below the
-        fill level, and the arc length of their nearest wall point (cached)."""
+        """The cells whose centres lie 0.5 to 2.5 cells from a wall or an insert (not a
+        tube), with their nearest wall point at or above the outlet plane and below the fill
+        level, and that point's position along the chains (:meth:`Boundary.position`;
+        cached)."""
         if not hasattr(self, "_band"):
-            g, geom = self.grid, self.cfg.hopper
+            g, bnd = self.grid, self.boundary
             R, Z = np.meshgrid(g.r_cells, g.z_cells)
-            d = geometry.signed_distance(R, Z, geom)
-            vertices = geometry.wall_polyline(geom, 1e3, 1e3)
-            pr, pz, seg = geometry._nearest_on_polyline(R, Z, vertices)
-            band = (d >= 0.5 * g.h) & (d <= 2.5 * g.h) & (seg >= 1) & (pz >= 0) & (
-                pz < geom.fill_level)
-            s = geometry.arc_length_of_point(pr, pz, geom)
+            d = bnd.signed_distance(R, Z)
+            _, pz, chain, _, s = bnd.nearest(R, Z)
+            tube = np.array([c.kind == "tube" for c in bnd.chains])[chain]
+            band = (d >= 0.5 * g.h) & (d <= 2.5 * g.h) & ~tube & (pz >= 0) & (
+                pz < bnd.fill_level)
             cells = np.flatnonzero(band.ravel())
-            self._band = (cells, s.ravel()[cells])
+            self._band = (cells, bnd.position(chain.ravel()[cells], s.ravel()[cells]))
         return self._band
 
     def wall_stress_points(self, state: State) -> tuple:
-        """``(s, weight, sigma)`` of the cells 0.5 to 2.5 cells off the wall: the weight is
-        ``alpha kappa V`` where ``alpha > 1/2`` (else 0: fronts and free surfaces)."""
+        """``(position, weight, sigma)`` of the cells 0.5 to 2.5 cells off the walls: the
+        position of the nearest wall point along the chains (m), the weight ``alpha kappa V``
+        where ``alpha > 1/2`` (else 0: fronts and free surfaces) and the stress."""
         cells, s = self._wall_band()
         alpha = state.alpha.ravel()[cells]
         w = np.where(alpha > 0.5, (state.alpha * self.open_volume).ravel()[cells], 0.0)
@@ -762,13 +786,14 @@ class HopperModel:
 
 
 def _contact_list(passes):
-    """Flatten contact passes into ordered arrays ``(j, i, normals (K, 2), mu (K,))``."""
+    """Flatten contact passes ``(mask, normal, mu)`` (``mu`` one coefficient or one per
+    node) into ordered arrays ``(j, i, normals (K, 2), mu (K,))``."""
     js, is_, normals, mus = [], [], [], []
     for mask, normal, mu in passes:
         j, i = np.nonzero(mask)
         js.append(j)
         is_.append(i)
         normals.append(np.stack([normal[0][j, i], normal[1][j, i]], axis=1))
-        mus.append(np.full(len(j), mu))
+        mus.append(mu[j, i] if np.ndim(mu) == 2 else np.full(len(j), mu))
     return (np.concatenate(js).astype(np.int64), np.concatenate(is_).astype(np.int64),
             np.ascontiguousarray(np.concatenate(normals)), np.concatenate(mus))

@@ -66,17 +66,18 @@ class HopperModelProtocol(Protocol):
 
     def wall_entries(self) -> tuple:
         """``(s, normal, segment)`` of the rows of ``state.wall_impulse``: the arc length
-        from the outlet lip (m), the unit normal into the wall ``(n, 2)`` and the wall
-        segment (0 the free-fall tube, 1 cone or floor, 2 bin wall, -1 the outlet lip)."""
+        along its chain of the entry's wall point (m), the unit normal into the wall ``(n, 2)``
+        and the row of ``cfg.boundary.table`` of its wall segment (for the shorthands 0 the
+        free-fall tube, 1 cone or floor, 2 bin wall; -1 a convex corner, the outlet lip)."""
+
+    def wall_load_rows(self):
+        """The row of ``cfg.boundary.table`` whose load each entry of ``state.wall_impulse``
+        is (a convex corner's: its nearest segment that is not a tube)."""
 
     def wall_stress_points(self, state) -> tuple:
-        """``(s, weight, sigma)`` of the material next to the wall: the arc length of the
-        nearest wall point (m), a volume weight and the stress ``(rr, zz, tt, rz)`` (Pa)."""
-
-    def contact_slip(self, state) -> tuple:
-        """``(slip, axis_speed)`` (m/s) for the rows of ``state.wall_impulse``: the material's
-        slip speed down the wall there and the downward speed at the axis at its height
-        (:class:`~fipy_hopper.diagnostics.FlowModeRule`)."""
+        """``(position, weight, sigma)`` of the material next to the walls: the position of
+        the nearest wall point along the chains (m, :meth:`Boundary.position`), a volume
+        weight and the stress ``(rr, zz, tt, rz)`` (Pa)."""
 
     def flow_mode_measures(self, state, rule) -> tuple:
         """``(mass-flow index, stagnant fraction)`` by

@@ -39,12 +39,10 @@ BUSY_CORE = 0.25
 # ---------------------------------------------------------------- memory
 def wall_bins(cfg, cell_size: float) -> int:
     """The bins of the wall-load profiles on a grid of ``cell_size`` (those of
-    :class:`~fipy_hopper.diagnostics.WallBins`, from the configuration alone)."""
-    from . import geometry
-    from .diagnostics import WallBins
+    :func:`fipy_hopper.diagnostics.wall_bins`, from the configuration alone)."""
+    from .diagnostics import wall_bins as bins
 
-    return len(WallBins.of(geometry.wall_stretches(cfg.hopper),
-                           cfg.wall_bin_width_at(cell_size)).s)
+    return len(bins(cfg, cell_size).s)
 
 
 def wall_entry_bound(cfg, cell_size: float) -> int:

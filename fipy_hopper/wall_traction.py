@@ -55,8 +55,10 @@ class WallStretch:
     """A straight stretch of wall from ``start`` to ``end`` (``(r, z)`` in m), arc length
     ``s_start`` (m) at ``start`` along its wall (its chain), ``name`` of that wall, whether
     its area is per radian of an axisymmetric wall (``c = r``) or per metre of a plane one
-    (``c = 1``), and ``segment``, the index of the wall segment whose contact entries it
-    collects."""
+    (``c = 1``), ``segment``, the index of the wall segment whose contact entries it
+    collects, and ``side``: +1 when the solid lies to the right of the direction from
+    ``start`` to ``end`` (a wall followed up from its lip), -1 to the left (a left wall, an
+    insert followed counter-clockwise)."""
 
     start: tuple
     end: tuple
@@ -64,6 +66,7 @@ class WallStretch:
     axisymmetric: bool
     name: str = "wall"
     segment: int = 0
+    side: int = 1
 
     @property
     def length(self) -> float:
@@ -81,10 +84,10 @@ class WallStretch:
 
     @property
     def normal(self) -> np.ndarray:
-        """Unit normal into the wall: the tangent turned clockwise (the material lies to the
-        left of a wall followed from its lowest point: inside the hopper)."""
+        """Unit normal into the wall: the tangent turned clockwise, or anticlockwise for
+        ``side = -1``."""
         t = self.tangent
-        return np.array([t[1], -t[0]])
+        return self.side * np.array([t[1], -t[0]])
 
     def point(self, s):
         """``(r, z)`` of the wall point at arc length ``s`` (m)."""
