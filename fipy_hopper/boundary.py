@@ -653,6 +653,19 @@ class Boundary:
         z = a[k, 1] + f * (b[k, 1] - a[k, 1])
         return x, z, c.normals[k, 0], c.normals[k, 1]
 
+    def arc_at_height(self, chain, z: float) -> float:
+        """The arc length (m) along a wall chain where it first reaches height ``z`` (its top,
+        carried on straight up, beyond its last point)."""
+        c = self.chain(chain)
+        a, b = c.ends()
+        sv = c.s_vertices
+        for k in range(c.n_segments):
+            if b[k, 1] >= z:
+                if b[k, 1] == a[k, 1] or z <= a[k, 1]:
+                    return float(sv[k]) if z <= a[k, 1] else float(sv[k + 1])
+                return float(sv[k] + (sv[k + 1] - sv[k]) * (z - a[k, 1]) / (b[k, 1] - a[k, 1]))
+        return float(sv[-1] + z - b[-1, 1])
+
     def wall_area(self, chain, s1, s2):
         """Wall area between arc lengths ``s1 < s2`` of a chain, ``int w ds`` with the
         section's weight ``w`` (:meth:`Section.weight`): m^2 per radian (``int r ds``) or m^2

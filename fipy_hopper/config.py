@@ -334,6 +334,17 @@ class HopperGeometry:
         return len(self.wall_points) - 1
 
     @property
+    def classic(self) -> bool:
+        """The silo the classic theories cover: a half-section without inserts whose wall is a
+        cone, a wedge's plate or a flat floor under one vertical bin wall (the shorthands,
+        and a profile drawn as one).  Janssen, Walker and EN 1991-4's hopper loads apply to
+        it as a whole; other silos get them where a stretch allows (Janssen on a top vertical
+        stretch)."""
+        wall = self.wall_points
+        return (not self.full_section and not self.inserts and len(wall) == 3
+                and wall[1][0] == wall[2][0] and wall[1][0] != wall[0][0])
+
+    @property
     def x_extent(self) -> tuple:
         """``(x_min, x_max)`` (m) of the section: the axis to the widest point, or the two
         walls' extremes in a full section (the width the grid must span)."""

@@ -16,7 +16,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import geometry
 from .wall_traction import WallStretch
 
 
@@ -89,17 +88,25 @@ class FlowModeRule:
     stagnant_speed: float = 0.05
 
 
-def hopper_stretches(segment, s, gap: float):
-    """Labels ``0, 1, ...`` of the stretches of hopper wall (``segment == 1``) that the
-    contact entries belong to, ``-1`` for the other entries: the hopper entries sorted by
-    their arc length ``s`` (m) split where two neighbours lie more than ``gap`` (m) apart."""
-    segment, s = np.asarray(segment), np.asarray(s, float)
-    label = np.full(len(s), -1)
-    hopper = np.flatnonzero(segment == 1)
-    if hopper.size:
-        order = hopper[np.argsort(s[hopper], kind="stable")]
-        label[order] = np.concatenate([[0], np.cumsum(np.diff(s[order]) > gap)])
-    return label
+def hopper_rows(boundary) -> np.ndarray:
+    """The rows of ``boundary.table`` that are hopper wall: the segments of the walls
+    (``wall``, ``left_wall``) that are not vertical (a hopper's slopes, a floor or ledge),
+    below the top of the wall."""
+    tab = boundary.table
+    kind = np.array([boundary.chains[c].kind for c in tab.chain])
+    vertical = np.abs(tab.normal[:, 1]) < 1e-9
+    return np.flatnonzero((kind == "wall") & ~vertical)
+
+
+def hopper_stretches(segment, rows) -> np.ndarray:
+    """Labels ``0, 1, ...`` of the stretches of hopper wall that the contact entries belong
+    to (their ``segment``, a table row, is the ``k``-th of the hopper ``rows``: label ``k``),
+    ``-1`` for the other entries (other walls, convex corners)."""
+    segment = np.asarray(segment)
+    lookup = np.full(max(int(np.max(rows, initial=-1)), int(np.max(segment, initial=-1))) + 2,
+                     -1)
+    lookup[np.asarray(rows, dtype=int)] = np.arange(len(rows))
+    return np.where(segment >= 0, lookup[segment], -1)
 
 
 def wall_slip(load, slip, axis_speed, s, stretch, rule: FlowModeRule = FlowModeRule()):
@@ -132,12 +139,13 @@ def wall_slip(load, slip, axis_speed, s, stretch, rule: FlowModeRule = FlowModeR
     return ratio, fraction
 
 
-def entry_slip(v, normals):
+def entry_slip(v, normals, side=1.0):
     """Slip speed down the wall (m/s) of contact entries with velocities ``v`` (n, 2) and
-    normals into the wall ``normals`` (n, 2): ``-v . t`` with ``t = (-n_z, n_r)`` the
-    tangent pointing up the wall."""
+    normals into the wall ``normals`` (n, 2): ``-v . t`` with ``t = side (-n_z, n_r)`` the
+    tangent pointing up the wall (``side`` +1 on a wall with the solid to its right, -1 on a
+    left wall: one value or one per entry)."""
     v, normals = np.asarray(v, float), np.asarray(normals, float)
-    return -(-v[:, 0] * normals[:, 1] + v[:, 1] * normals[:, 0])
+    return -side * (-v[:, 0] * normals[:, 1] + v[:, 1] * normals[:, 0])
 
 
 def normal_load(impulse, normals):
@@ -159,12 +167,16 @@ def wall_slip_measures(model, state, previous_impulse=None,
     impulse = state.wall_impulse if previous_impulse is None else (
         state.wall_impulse - previous_impulse)
     slip, axis_speed = model.contact_slip(state)
-    stretch = hopper_stretches(segment, s, 2.0 * model.cell_size)
+    bnd = model.cfg.boundary
+    stretch = hopper_stretches(segment, hopper_rows(bnd))
     load = normal_load(impulse, normals)
     ratios, fractions = wall_slip(load, slip, axis_speed, s, stretch, rule)
     on = np.flatnonzero((stretch >= 0) & (load > 0.0) & (axis_speed > 0.0) & np.isfinite(slip))
     on = on[np.argsort(s[on], kind="stable")]
-    r_w, z_w, _, _ = geometry.wall_point(s[on], model.cfg.hopper)
+    chain = bnd.table.chain[np.maximum(segment[on], 0)]
+    r_w, z_w = np.zeros(len(on)), np.zeros(len(on))
+    for c in np.unique(chain):
+        r_w[chain == c], z_w[chain == c] = bnd.wall_point(int(c), s[on][chain == c])[:2]
     profile = np.column_stack([s[on], r_w, z_w, slip[on] / axis_speed[on]])
     if not np.isfinite(ratios).any():
         return math.nan, math.nan, ratios, profile
@@ -180,14 +192,15 @@ def flow_mode_measures(model, state, rule: FlowModeRule = FlowModeRule()):
                       + state.v[1, 1:, 1:])
     down = -vz_cell
     R, Z = np.meshgrid(g.r_cells, g.z_cells)
-    d = geometry.signed_distance(R, Z, geom)
+    d = model.cfg.boundary.signed_distance(R, Z)
+    centre = abs(g.r_cells - model.cfg.boundary.section.centreline) < 2.0 * g.h
     full = state.alpha > 0.5
     ratios = []
     for frac in rule.heights:
         zc = frac * geom.cone_height
         row = int(np.argmin(np.abs(g.z_cells - zc)))
         near_wall = (d[row] >= 1.0 * g.h) & (d[row] <= 2.5 * g.h) & full[row]
-        axis = (np.arange(g.nr) < 2) & full[row]
+        axis = centre & full[row]
         if near_wall.any() and axis.any():
             v_axis = float(np.mean(down[row, axis]))
             if v_axis > 1e-9:
@@ -227,6 +240,44 @@ def bin_lateral_stress_ratio(model, state) -> float:
     return float(np.sum(weights * state.sigma[..., 0][band])) / vertical
 
 
+def stretch_calls(cfg, samples, rule: FlowModeRule = FlowModeRule()) -> list:
+    """The call per stretch of hopper wall (:func:`hopper_rows`): a dict of its ``wall``,
+    ``segment``, ``z_m`` (its bottom and top), ``half_angle_deg`` (its slope from the
+    vertical), ``wall_friction_deg``, ``slip_ratio`` (the median of the samples' ratios of
+    that stretch), the ``call`` (``"mass"`` where it slides: ``slip_ratio >= rule.slip_ratio``,
+    else ``"funnel"``: a stagnant zone on it), and Jenike's critical half-angle for its wall
+    friction with the call it gives for that slope (``jenike_critical_half_angle_deg``,
+    ``jenike_call``; conical or plane by the section)."""
+    from . import theory
+
+    bnd, mat = cfg.boundary, cfg.material
+    tab = bnd.table
+    ratios = np.asarray(samples, float) if len(samples) else np.zeros((0, 0))
+    out = []
+    for k, row in enumerate(hopper_rows(bnd)):
+        a, b = tab.a[row], tab.b[row]
+        angle = float(np.degrees(np.arctan2(abs(b[0] - a[0]), b[1] - a[1])))
+        values = ratios[:, k] if ratios.ndim == 2 and ratios.shape[1] > k else np.zeros(0)
+        values = values[np.isfinite(values)]
+        slip = float(np.median(values)) if values.size else math.nan
+        phi_w = float(tab.friction_deg[row])
+        geometry = "conical" if bnd.section.axisymmetric else "plane"
+        critical = (theory.jenike_critical_half_angle if geometry == "conical"
+                    else theory.jenike_critical_half_angle_plane)
+        try:
+            theta_c = float(critical(mat.friction_angle_deg, phi_w))
+            jenike = str(theory.jenike_flow_mode(angle, mat.friction_angle_deg, phi_w,
+                                                 geometry=geometry))
+        except ValueError:
+            theta_c, jenike = math.nan, "funnel"
+        out.append({"wall": bnd.chains[tab.chain[row]].name, "segment": int(tab.segment[row]),
+                    "z_m": [float(a[1]), float(b[1])], "half_angle_deg": angle,
+                    "wall_friction_deg": phi_w, "slip_ratio": slip,
+                    "call": classify_flow_mode(slip, rule),
+                    "jenike_critical_half_angle_deg": theta_c, "jenike_call": jenike})
+    return out
+
+
 def classify_flow_mode(slip_ratio, rule: FlowModeRule = FlowModeRule()) -> str:
     """``"mass"`` or ``"funnel"`` by :class:`FlowModeRule` from the wall slip ratio (the
     smallest over the hopper stretches); funnel when it was not measured (NaN)."""
@@ -263,10 +314,13 @@ class OutcomeRule:
 
 def empty_channel(model, state, rule: OutcomeRule = OutcomeRule()):
     """``(diameter, height)`` (m) of the empty channel of :class:`OutcomeRule` from the outlet
-    through the material to its top; ``(nan, nan)`` where the material closes the axis (or
-    there is none)."""
+    through the material to its top, measured from the section's centreline outwards (in a
+    full section on its right side); ``(nan, nan)`` where the material closes the centreline
+    (or there is none)."""
     g = model.grid
-    full = state.alpha > rule.full
+    centre = model.cfg.boundary.section.centreline
+    c0 = int(np.searchsorted(g.r_cells, centre))   # the first cell column past the centreline
+    full = state.alpha[:, c0:] > rule.full
     above = g.z_cells > 0.0
     rows = np.flatnonzero(above & full.any(axis=1))
     if len(rows) == 0:
@@ -276,11 +330,11 @@ def empty_channel(model, state, rule: OutcomeRule = OutcomeRule()):
     if band[:, 0].any():
         return math.nan, math.nan
     held = band.any(axis=1)
-    k = np.argmax(band, axis=1)[held]                      # first full cell from the axis
-    a = state.alpha[j0:top + 1][held]
+    k = np.argmax(band, axis=1)[held]                  # first full cell from the centreline
+    a = state.alpha[j0:top + 1, c0:][held]
     rows_ = np.arange(len(k))
     a0, a1 = a[rows_, k - 1], a[rows_, k]
-    r0, r1 = g.r_cells[k - 1], g.r_cells[k]
+    r0, r1 = g.r_cells[c0 + k - 1] - centre, g.r_cells[c0 + k] - centre
     radius = r0 + (rule.full - a0) / (a1 - a0) * (r1 - r0)
     return 2.0 * float(np.median(radius)), float(g.z_nodes[top + 1])
 
@@ -614,13 +668,75 @@ class WallLoads:
         hoop = self.hoop_force(p_n)
         return hoop, meridional, at_transition
 
+    def chain_forces(self, start: dict, end: dict) -> dict:
+        """The mean force of each wall and insert on the material over a window,
+        ``{name: (F_x, F_z)}`` (N, for the whole silo: times the section factor; per metre of
+        a plane section), from its contact entries' impulses (the tubes' left out)."""
+        duration = end["t"] - start["t"]
+        if not duration > 0:
+            raise ValueError("a load window needs a positive duration")
+        bnd = self.model.cfg.boundary
+        rows = self.model.wall_load_rows()
+        chain = bnd.table.chain[rows]
+        force = (end["wall"] - start["wall"]) * (self.model.section_factor / duration)
+        return {c.name: tuple(float(v) for v in force[chain == k].sum(axis=0))
+                for k, c in enumerate(bnd.chains) if c.kind != "tube"}
+
+    def corner_forces(self, p_n, tau) -> list:
+        """The forces at every corner of the walls (``wall``, ``left_wall``) for the bins'
+        recovered ``p_n`` and ``tau`` of a window, as the membrane statics of
+        :meth:`membrane_forces` give them (the hopper, below ``cone_height``, hung from the
+        transition; the bin wall standing on it): per corner a dict of its ``wall``, ``s_m``,
+        ``r_m``, ``z_m``, the meridional forces on the segments below and above it
+        (``meridional_below_N_m``, ``meridional_above_N_m``, N/m, tension positive), the
+        horizontal pull the corner takes, ``horizontal_pull_N_m = N_b sin(b_b) - N_a
+        sin(b_a)`` (``b`` a segment's slope from the vertical; inward positive), and for a
+        section of revolution the ring there, ``ring_compression_N = r`` times that pull.
+        NaN next to a horizontal floor or ledge (not hung)."""
+        bins, geom = self.bins, self.model.cfg.hopper
+        bnd = self.model.cfg.boundary
+        down = bins.area * (-p_n * bins.normal[:, 1] + tau * bins.tangent[:, 1])
+        out = []
+        for name in ("wall", "left_wall"):
+            if name not in [c.name for c in bnd.chains]:
+                continue
+            chain = bnd.chain(name)
+            on = bins.wall == name
+            normals = chain.normals
+            for corner in chain.corners:
+                k = corner.segment                       # the segment above the corner
+                x, z = corner.point
+                if z >= bnd.fill_level:
+                    continue
+                c = abs(x) if geom.axisymmetric else 1.0
+                below, above = normals[k - 1], normals[k]
+                n_b, n_a = abs(below[0]), abs(above[0])
+                hung = on & (bins.z < geom.cone_height)
+                load_below = float(np.sum(down[hung & (bins.s < corner.s)]))
+                load_above = float(np.sum(down[on & ~hung & (bins.s > corner.s)]))
+                m_b = load_below / (c * n_b) if n_b > 1e-12 and z <= geom.cone_height \
+                    else math.nan
+                if z < geom.cone_height:
+                    m_a = load_below / (c * n_a) if n_a > 1e-12 else math.nan
+                else:
+                    m_a = -load_above / c if n_a > 1e-12 else math.nan
+                pull = m_b * abs(below[1]) - (m_a * abs(above[1]) if math.isfinite(m_a)
+                                              and abs(above[1]) > 0 else 0.0)
+                out.append({"wall": name, "s_m": float(corner.s), "r_m": float(x),
+                            "z_m": float(z), "meridional_below_N_m": m_b,
+                            "meridional_above_N_m": m_a, "horizontal_pull_N_m": pull,
+                            "ring_compression_N": (pull * abs(x) if geom.axisymmetric
+                                                   else math.nan)})
+        return out
+
     def balance(self, start: dict, end: dict) -> dict:
         """The vertical momentum balance of the whole grid over a window, as mean forces in N
         (3D, upward positive): ``weight`` (positive), ``wall`` and ``outlet`` (the plate's
         reaction), ``damping``, ``stopped`` (light nodes), ``outflow`` (momentum leaving
         through the bottom, as a force), ``momentum_rate`` (``dP/dt``) and the ``residual``
         of ``dP/dt = wall + outlet + damping + stopped + outflow - weight``, also relative to
-        the weight (``relative_residual``)."""
+        the weight (``relative_residual``); with inserts, each insert's share of ``wall``
+        under its name (``insert_1``, ...)."""
         duration = end["t"] - start["t"]
         if not duration > 0:
             raise ValueError("a load window needs a positive duration")
@@ -633,6 +749,10 @@ class WallLoads:
                "momentum_rate": (end["momentum"] - start["momentum"]) * to_n}
         out["residual"] = (out["wall"] + out["outlet"] + out["damping"] + out["stopped"]
                            + out["outflow"] - out["weight"] - out["momentum_rate"])
+        inserts = self.model.cfg.boundary.inserts
+        if inserts:                      # each insert's share of ``wall`` (upward on the fill)
+            forces = self.chain_forces(start, end)
+            out.update({c.name: forces[c.name][1] for c in inserts})
         out["relative_residual"] = (abs(out["residual"]) / out["weight"]
                                     if out["weight"] > 0 else math.nan)
         return out
@@ -640,17 +760,19 @@ class WallLoads:
 
 def wall_k(wall_loads: WallLoads, p_n, state, geom, margin_bins: int = 2) -> float:
     """The lateral pressure ratio measured at the bin wall: the median over the bin wall's
-    bins of ``p_n / (-sigma_zz)``, ``p_n`` from the reaction and ``sigma_zz`` the mean
-    vertical stress of the cells next to the wall (:meth:`WallSampler.mean_stress`), leaving
-    out ``margin_bins`` bins next to the transition and next to the free surface."""
+    bins (the wall's top vertical stretch, above ``cone_height``) of ``p_n / (-sigma_zz)``,
+    ``p_n`` from the reaction and ``sigma_zz`` the mean vertical stress of the cells next to
+    the wall (:meth:`WallSampler.mean_stress`), leaving out ``margin_bins`` bins next to the
+    transition and next to the free surface."""
     bins = wall_loads.bins
     s = bins.s
-    s_t = float(geometry.transition_arc_length(geom))
-    s_top = float(geometry.arc_length(geom.fill_level, geom))
+    bnd = wall_loads.model.cfg.boundary
+    s_t = bnd.arc_at_height("wall", geom.cone_height)
+    s_top = bnd.arc_at_height("wall", geom.fill_level)
     margin = margin_bins * bins.width
     szz = wall_loads.sampler.mean_stress(state)[:, 1]
-    keep = ((s > s_t + margin) & (s < s_top - margin)
-            & np.isfinite(szz) & (szz < 0.0))
+    keep = ((bins.wall == "wall") & (np.abs(bins.normal[:, 1]) < 1e-9)
+            & (s > s_t + margin) & (s < s_top - margin) & np.isfinite(szz) & (szz < 0.0))
     if not keep.any():
         return math.nan
     return float(np.median(p_n[keep] / -szz[keep]))
@@ -736,10 +858,12 @@ def load_summary(sim) -> dict:
         theory.k_jaky(mat.friction_angle_deg))
     mu = m.mu_wall
     if "filling" in rec.wall and "discharge_envelope" in rec.wall:
-        s, p_fill = rec.wall["filling"][1], rec.wall["filling"][4]
-        envelope = rec.wall["discharge_envelope"][4]
-        s_t = float(geometry.transition_arc_length(geom))
-        s_top = float(geometry.arc_length(geom.fill_level, geom))
+        on_wall = np.asarray(rec.wall_names) == "wall" if rec.wall_names else slice(None)
+        s, p_fill = rec.wall["filling"][1][on_wall], rec.wall["filling"][4][on_wall]
+        envelope = rec.wall["discharge_envelope"][4][on_wall]
+        bnd = m.cfg.boundary
+        s_t = bnd.arc_at_height("wall", geom.cone_height)
+        s_top = bnd.arc_at_height("wall", geom.fill_level)
         loaded = p_fill > 0.05 * np.nanmax(p_fill)
         ratio = np.where(loaded, envelope / np.where(loaded, p_fill, 1.0), np.nan)
         near = geom.bin_diameter
@@ -753,7 +877,7 @@ def load_summary(sim) -> dict:
         if zone.any():
             k = np.flatnonzero(zone)[np.argmax(envelope[zone])]
             out["switch_peak_Pa"], out["switch_peak_s_m"] = float(envelope[k]), float(s[k])
-        if geom.cone_height > 0:
+        if geom.cone_height > 0 and geom.classic:
             if mu > 0:
                 janssen = (theory.janssen_vertical_stress if geom.axisymmetric
                            else theory.janssen_plane_vertical_stress)
@@ -762,11 +886,41 @@ def load_summary(sim) -> dict:
                 out["walker_switch_pressure_Pa"] = float(theory.walker_switch_pressure(
                     sigma_vt, K, mat.friction_angle_deg, m.cfg.wall.friction_angle_deg,
                     geom.half_angle_deg).hopper)
-    if mu > 0:
+    if mu > 0 and geom.classic:
         axial = (theory.janssen_wall_axial_force if geom.axisymmetric
                  else theory.janssen_plane_wall_axial_force)
         out["janssen_wall_axial_compression_N_m"] = float(axial(
             geom.fill_height, mat.density, geom.bin_diameter, K, mu))
+    out.update(_insert_and_corner_loads(rec, m.cfg))
+    return out
+
+
+def _insert_and_corner_loads(rec, cfg) -> dict:
+    """The inserts' and the corners' numbers of :func:`load_summary`: per insert the
+    material's downward load on it at rest, ``<insert>_vertical_force_N``, and the largest
+    over the discharge's load windows, ``<insert>_vertical_force_discharge_max_N`` (N, 3D);
+    and ``corners``, the forces at every corner of the walls at rest and, as
+    ``..._discharge``, the larger in size of the 90 % and 50 % stages
+    (:meth:`WallLoads.corner_forces`)."""
+    out = {}
+    rest = getattr(rec, "chain_forces", {}).get("filling", {})
+    for insert in cfg.boundary.inserts:
+        out[f"{insert.name}_vertical_force_N"] = (rest[insert.name][1] if insert.name in rest
+                                                  else math.nan)
+        out[f"{insert.name}_vertical_force_discharge_max_N"] = float(
+            getattr(rec, "insert_force_max", {}).get(insert.name, math.nan))
+    corners = getattr(rec, "corner_forces", {})
+    if "filling" in corners:
+        rows = [dict(c) for c in corners["filling"]]
+        stages = [corners[s] for s in ("early_discharge", "mid_discharge") if s in corners]
+        for k, row in enumerate(rows):
+            for key in ("meridional_below_N_m", "meridional_above_N_m", "horizontal_pull_N_m",
+                        "ring_compression_N"):
+                values = [st[k][key] for st in stages if len(st) > k
+                          and math.isfinite(st[k][key])]
+                row[key.replace("_N", "_discharge_N", 1)] = (
+                    max(values, key=abs) if values else math.nan)
+        out["corners"] = rows
     return out
 
 

@@ -67,7 +67,7 @@ TIMESERIES_COLUMNS = ("t_s", "mass_in_hopper_kg", "discharged_kg", "discharge_ra
                       "mass_flow_index", "stagnant_fraction", "bin_lateral_stress_ratio",
                       "wall_slip_ratio", "wall_slip_fraction")
 #: Columns of ``wall_pressure.csv`` (public contract).
-WALL_PRESSURE_COLUMNS = ("stage", "t_s", "s_m", "r_m", "z_m", "p_n_Pa", "tau_Pa",
+WALL_PRESSURE_COLUMNS = ("stage", "wall", "t_s", "s_m", "r_m", "z_m", "p_n_Pa", "tau_Pa",
                          "p_n_stress_Pa", "tau_stress_Pa", "p_n_raw_Pa", "tau_raw_Pa",
                          "window_s", "hoop_force_N_m",
                          "meridional_force_N_m")
@@ -259,8 +259,9 @@ def write_wall_pressure(path: PathLike, record) -> None:
 
     ``stage`` is ``filling`` (at rest), ``early_discharge`` / ``mid_discharge`` (90 % / 50 %
     of the mass left) or ``discharge_envelope`` (the largest windowed pressure per bin over
-    the discharge); ``s_m`` is the arc length along the wall from the outlet lip to the bin's
-    centre, ``(r_m, z_m)`` the wall point there; the bins divide each straight stretch of
+    the discharge); ``wall`` the wall the bin is on (``wall``, ``left_wall`` of a full
+    section, ``insert_1``, ...); ``s_m`` the arc length along that wall from its lowest point
+    (a wall's outlet lip) to the bin's centre, ``(r_m, z_m)`` the wall point there; the bins divide each straight stretch of
     wall into equal parts of about ``run.wall_bin_width``.  ``p_n_Pa`` is the normal
     pressure (compression positive) and ``tau_Pa`` the shear the wall exerts on the material
     (up the wall positive): the bin's mean of the traction recovered from the wall's reaction
@@ -282,14 +283,16 @@ def write_wall_pressure(path: PathLike, record) -> None:
     raw = getattr(record, "wall_raw", {})
     window = getattr(record, "wall_window", {})
     forces = getattr(record, "wall_forces", {})
+    names = list(getattr(record, "wall_names", [])) or ["wall"] * max(
+        (len(v[1]) for v in record.wall.values()), default=0)
     for stage, (t, s, r, z, p, tau) in record.wall.items():
         empty = np.full(len(s), np.nan)
         p_s, tau_s = stress.get(stage, (empty, empty))
         p_r, tau_r = raw.get(stage, (empty, empty))
         hoop, meridional = forces.get(stage, (empty, empty))[:2]
         for k in range(len(s)):
-            rows.append([stage, _num(t), _num(s[k]), _num(r[k]), _num(z[k]), _num(p[k]),
-                         _num(tau[k]), _num(p_s[k]), _num(tau_s[k]), _num(p_r[k]),
+            rows.append([stage, names[k], _num(t), _num(s[k]), _num(r[k]), _num(z[k]),
+                         _num(p[k]), _num(tau[k]), _num(p_s[k]), _num(tau_s[k]), _num(p_r[k]),
                          _num(tau_r[k]), _num(window.get(stage, math.nan)), _num(hoop[k]),
                          _num(meridional[k])])
     _write_csv(path, WALL_PRESSURE_COLUMNS, rows)
@@ -309,13 +312,18 @@ def write_wall_slip(path: PathLike, record, slip_ratio: float) -> None:
 def write_loads(path: PathLike, record, axisymmetric: bool = True) -> None:
     """``loads.csv``: the vertical momentum balance of the grid over each output interval
     (:meth:`fipy_hopper.diagnostics.WallLoads.balance`), filling and discharge; ``t_s`` the
-    time since filling began at the end of the interval (s).  A wedge's forces are per metre
-    of length (``weight_N_m``, ...)."""
+    time since filling began at the end of the interval (s).  With inserts, each insert's
+    vertical force on the material (``insert_1_vertical_N``, ...: its part of
+    ``wall_vertical_N``).  A plane section's forces are per metre of length (``weight_N_m``,
+    ...)."""
     keys = ("weight", "wall", "outlet", "damping", "stopped", "outflow", "momentum_rate",
             "residual", "relative_residual")
+    loads = getattr(record, "loads", [])
+    inserts = sorted(k for k in (loads[0] if loads else {}) if k.startswith("insert_"))
     rows = [[row["stage"], _num(row["t_s"])] + [_num(row[k]) for k in keys]
-            for row in getattr(record, "loads", [])]
-    _write_csv(path, result_columns(LOADS_COLUMNS, axisymmetric), rows)
+            + [_num(row.get(k, math.nan)) for k in inserts] for row in loads]
+    columns = LOADS_COLUMNS + tuple(f"{k}_vertical_N" for k in inserts)
+    _write_csv(path, result_columns(columns, axisymmetric), rows)
 
 
 # ---------------------------------------------------------------- run directory
@@ -957,8 +965,9 @@ def check_run_files(path: PathLike) -> None:
         _check_table(folder / RunDirectory.TIMESERIES,
                      result_columns(TIMESERIES_COLUMNS[:4], axisymmetric), ())
         if (folder / RunDirectory.WALL_PRESSURE).is_file():
-            _check_table(folder / RunDirectory.WALL_PRESSURE, WALL_PRESSURE_COLUMNS[:7],
-                         ("stage",))         # the public columns (older runs have no more)
+            _check_table(folder / RunDirectory.WALL_PRESSURE,     # the public columns (older
+                         ("stage", "t_s", "s_m", "r_m", "z_m", "p_n_Pa", "tau_Pa"),  # runs have
+                         ("stage",))                                 # no more, no wall)
         if (folder / RunDirectory.SUMMARY).is_file():
             try:
                 with open(folder / RunDirectory.SUMMARY, encoding="utf-8") as fh:

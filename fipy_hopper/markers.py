@@ -26,13 +26,12 @@ did, the markers drained faster than the material near a cone wall).
 
 from __future__ import annotations
 
-import functools
 import math
 
 import numpy as np
 from numba import njit, prange
 
-from . import geometry
+from .boundary import in_solid_point, nearest_point
 
 #: Markers pushed out of the wall end this far (fraction of the cell size) in the open region.
 WALL_GAP = 1e-6
@@ -47,7 +46,7 @@ def seed(grid, geom, alpha, layer, per_side: int = 2) -> np.ndarray:
     Every cell with ``alpha > 1/2`` and its centre at ``z >= 0`` (the hopper, above the outlet
     plane) gets the ``per_side x per_side`` points ``r = r_i + (k + 1/2) h_r / per_side``,
     ``z = z_j + (l + 1/2) h_z / per_side`` (m), ``k, l = 0 .. per_side - 1``; points inside the
-    wall (:func:`fipy_hopper.geometry.in_solid`) are left out.  The layer id is the cell's layer
+    wall (:meth:`fipy_hopper.boundary.Boundary.in_solid`) are left out.  The layer id is the cell's layer
     tracer rounded to the nearest integer.  Deterministic: cells in row-major order ``(j, i)``,
     then ``l``, then ``k``.
     """
@@ -64,7 +63,7 @@ def seed(grid, geom, alpha, layer, per_side: int = 2) -> np.ndarray:
     z = z_nodes[j, None, None] + h_z[j, None, None] * t[None, :, None]       # (m, s, 1)
     ids = np.round(np.asarray(layer, dtype=float)[j, i])[:, None, None]
     r, z, ids = np.broadcast_arrays(r, z, ids)
-    keep = ~geometry.in_solid(r, z, geom)
+    keep = ~geom.boundary.in_solid(r, z)
     return np.column_stack([r[keep], z[keep], ids[keep]])
 
 
@@ -90,12 +89,14 @@ def interpolate(field, r_nodes, z_nodes, r, z) -> np.ndarray:
             + (1 - s) * t * field[:, j + 1, i] + s * t * field[:, j + 1, i + 1])
 
 
-def _displacement_at(displacement, grid, r, z) -> np.ndarray:
+def _displacement_at(displacement, grid, r, z, mirror: bool = True) -> np.ndarray:
     """The nodal displacement ``(d_r, d_z)`` at points that may lie at ``r < 0``.
 
-    The axisymmetric field continues across the axis as ``d_r(-r, z) = -d_r(r, z)``,
-    ``d_z(-r, z) = d_z(r, z)``.
+    In a half-section (``mirror``) the field continues across the axis as
+    ``d_r(-r, z) = -d_r(r, z)``, ``d_z(-r, z) = d_z(r, z)``.
     """
+    if not mirror:
+        return interpolate(displacement, grid.r_nodes, grid.z_nodes, r, z)
     d = interpolate(displacement, grid.r_nodes, grid.z_nodes, np.abs(r), z)
     d[0] *= np.where(r < 0.0, -1.0, 1.0)
     return d
@@ -105,18 +106,19 @@ def _push_out_of_wall(r, z, geom, gap):
     """Move points inside the wall to the nearest wall point, plus ``gap`` (m) into the open.
 
     With the signed distance ``d < 0`` and the unit normal ``n`` into the wall
-    (:func:`fipy_hopper.geometry.signed_distance`, :func:`~fipy_hopper.geometry.wall_normal`),
+    (:meth:`Boundary.signed_distance`, :meth:`~Boundary.wall_normal`),
     ``x <- x + (d - gap) n``.  Repeated ``WALL_PASSES`` times for points that a corner of the
     wall leaves within ``gap`` of the other segment.
     """
     r, z = r.copy(), z.copy()
+    bnd = geom.boundary
     for _ in range(WALL_PASSES):
-        inside = np.nonzero(geometry.in_solid(r, z, geom))[0]
+        inside = np.nonzero(bnd.in_solid(r, z))[0]
         if inside.size == 0:
             break
         ri, zi = r[inside], z[inside]
-        d = geometry.signed_distance(ri, zi, geom)
-        n_r, n_z = geometry.wall_normal(ri, zi, geom)
+        d = bnd.signed_distance(ri, zi)
+        n_r, n_z = bnd.wall_normal(ri, zi)
         r[inside] = ri + (d - gap) * n_r
         z[inside] = zi + (d - gap) * n_z
     return r, z
@@ -138,12 +140,12 @@ def advance(markers, displacement, grid, geom) -> np.ndarray:
     markers = np.ascontiguousarray(markers, dtype=float).reshape(-1, 3)
     r_new = np.empty(len(markers))
     z_new = np.empty(len(markers))
-    vertices, normals = _wall_segments(geom)
-    tan_cone = float(np.tan(geom.half_angle)) if geom.cone_height > 0.0 else 0.0
+    bnd = geom.boundary
     _midpoint_kernel(markers, np.ascontiguousarray(displacement, dtype=float),
                      np.asarray(grid.r_nodes, float), np.asarray(grid.z_nodes, float),
-                     geom.outlet_radius, geom.bin_radius, geom.cone_height, tan_cone, vertices,
-                     normals, WALL_GAP * grid.h, WALL_PASSES, r_new, z_new)
+                     bnd.section.mirror, bnd.kernel_arrays(),
+                     np.ascontiguousarray(bnd.table.normal), WALL_GAP * grid.h, WALL_PASSES,
+                     r_new, z_new)
     return _kept_markers(markers, r_new, z_new, float(grid.z_nodes[0]))
 
 
@@ -165,31 +167,16 @@ def _kept_markers(markers, r_new, z_new, z_min):
     return out
 
 
-@functools.lru_cache(maxsize=16)
-def _wall_segments(geom):
-    """Vertices (4, 2) of the wall polyline and the unit normal (3, 2) of each segment into
-    the wall, as :func:`fipy_hopper.geometry.wall_normal` computes them (once per geometry:
-    read-only arrays, shared by every call)."""
-    vertices = geometry.wall_polyline(geom, 1e3, 1e3)
-    seg_dir = vertices[1:] - vertices[:-1]
-    seg_dir = seg_dir / np.linalg.norm(seg_dir, axis=1)[:, None]
-    normals = np.stack([seg_dir[:, 1], -seg_dir[:, 0]], axis=1)
-    mid = 0.5 * (vertices[1:] + vertices[:-1])
-    probe = mid + 1e-9 * normals
-    normals[~geometry.in_solid(probe[:, 0], probe[:, 1], geom)] *= -1.0
-    vertices, normals = np.ascontiguousarray(vertices), np.ascontiguousarray(normals)
-    vertices.flags.writeable = False
-    normals.flags.writeable = False
-    return vertices, normals
-
-
 def advance_reference(markers, displacement, grid, geom) -> np.ndarray:
     """:func:`advance` in plain numpy (the reference of the compiled midpoint rule)."""
     markers = np.asarray(markers, dtype=float).reshape(-1, 3)
     r, z = markers[:, 0], markers[:, 1]
-    d0 = _displacement_at(displacement, grid, r, z)
-    d_mid = _displacement_at(displacement, grid, r + 0.5 * d0[0], z + 0.5 * d0[1])
-    r_new, z_new = np.abs(r + d_mid[0]), z + d_mid[1]
+    mirror = geom.boundary.section.mirror
+    d0 = _displacement_at(displacement, grid, r, z, mirror)
+    d_mid = _displacement_at(displacement, grid, r + 0.5 * d0[0], z + 0.5 * d0[1], mirror)
+    r_new, z_new = r + d_mid[0], z + d_mid[1]
+    if mirror:
+        r_new = np.abs(r_new)
     r_new, z_new = _push_out_of_wall(r_new, z_new, geom, WALL_GAP * grid.h)
     keep = z_new >= grid.z_nodes[0]
     return np.column_stack([r_new[keep], z_new[keep], markers[keep, 2]])
@@ -226,43 +213,22 @@ def _interpolate_point(field, r_nodes, z_nodes, r, z):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _in_solid(r, z, r_outlet, r_bin, cone_height, tan_cone):
-    """:func:`fipy_hopper.geometry.in_solid` of one point."""
-    if cone_height == 0.0:
-        wall = r_bin if z > 0.0 else r_outlet
-    else:
-        wall = r_outlet + max(z, 0.0) * tan_cone
-    return r >= min(wall, r_bin)
-
-
-@njit(cache=True, error_model="numpy", inline="always")
 def _isclose(a, b):
     return abs(a - b) <= 1e-8 + 1e-5 * abs(b)
 
 
 @njit(cache=True, error_model="numpy")
-def _push_point(r, z, vertices, normals, gap, inside):
+def _push_point(r, z, a, b, normals, gap, inside):
     """One pass of :func:`_push_out_of_wall` for one point inside the wall: the nearest wall
-    point (first nearest segment), the signed distance and the normal as in
-    :mod:`fipy_hopper.geometry`, then ``x + (d - gap) n``."""
-    best = np.inf
-    pr = pz = 0.0
-    seg = 0
-    for k in range(vertices.shape[0] - 1):
-        a0, a1 = vertices[k, 0], vertices[k, 1]
-        ab0, ab1 = vertices[k + 1, 0] - a0, vertices[k + 1, 1] - a1
-        t = ((r - a0) * ab0 + (z - a1) * ab1) / (ab0 * ab0 + ab1 * ab1)
-        t = min(max(t, 0.0), 1.0)
-        qr, qz = a0 + t * ab0, a1 + t * ab1
-        d2 = (r - qr) ** 2 + (z - qz) ** 2
-        if d2 < best:
-            best, pr, pz, seg = d2, qr, qz, k
+    point (first nearest segment of the boundary's table ``a -> b``), the signed distance and
+    the normal as :meth:`Boundary.wall_normal` computes them, then ``x + (d - gap) n``."""
+    pr, pz, seg = nearest_point(r, z, a, b)
     dr, dz = pr - r, pz - z
     dist = math.hypot(dr, dz)
     d = -dist if inside else dist
     n_r, n_z = normals[seg, 0], normals[seg, 1]
-    at_vertex = ((_isclose(pr, vertices[seg, 0]) and _isclose(pz, vertices[seg, 1]))
-                 or (_isclose(pr, vertices[seg + 1, 0]) and _isclose(pz, vertices[seg + 1, 1])))
+    at_vertex = ((_isclose(pr, a[seg, 0]) and _isclose(pz, a[seg, 1]))
+                 or (_isclose(pr, b[seg, 0]) and _isclose(pz, b[seg, 1])))
     if at_vertex and dist > 1e-12:
         sign = -1.0 if inside else 1.0
         safe = dist if dist > 0 else 1.0
@@ -271,27 +237,31 @@ def _push_point(r, z, vertices, normals, gap, inside):
 
 
 @njit(cache=True, error_model="numpy", parallel=True)
-def _midpoint_kernel(markers, displacement, r_nodes, z_nodes, r_outlet, r_bin, cone_height,
-                     tan_cone, vertices, normals, gap, passes, r_new, z_new):
-    """:func:`advance` of every marker into ``r_new, z_new``: the midpoint rule with the axis
-    reflection, then up to ``passes`` pushes out of the wall (:func:`_push_point`); the
-    markers are shared out among numba's threads."""
+def _midpoint_kernel(markers, displacement, r_nodes, z_nodes, mirror, solid, normals, gap,
+                     passes, r_new, z_new):
+    """:func:`advance` of every marker into ``r_new, z_new``: the midpoint rule (with the
+    axis reflection in a half-section, ``mirror``), then up to ``passes`` pushes out of the
+    wall (:func:`_push_point`; ``solid`` the boundary's :meth:`~Boundary.kernel_arrays`);
+    the markers are shared out among numba's threads."""
+    a, b = solid[0], solid[1]
     for k in prange(markers.shape[0]):
         r = markers[k, 0]
         z = markers[k, 1]
-        d0r, d0z = _interpolate_point(displacement, r_nodes, z_nodes, abs(r), z)
-        if r < 0.0:
+        d0r, d0z = _interpolate_point(displacement, r_nodes, z_nodes,
+                                      abs(r) if mirror else r, z)
+        if mirror and r < 0.0:
             d0r = -d0r
         rm = r + 0.5 * d0r
         zm = z + 0.5 * d0z
-        dmr, dmz = _interpolate_point(displacement, r_nodes, z_nodes, abs(rm), zm)
-        if rm < 0.0:
+        dmr, dmz = _interpolate_point(displacement, r_nodes, z_nodes,
+                                      abs(rm) if mirror else rm, zm)
+        if mirror and rm < 0.0:
             dmr = -dmr
-        rn = abs(r + dmr)
+        rn = abs(r + dmr) if mirror else r + dmr
         zn = z + dmz
         for _ in range(passes):
-            if not _in_solid(rn, zn, r_outlet, r_bin, cone_height, tan_cone):
+            if not in_solid_point(rn, zn, *solid):
                 break
-            rn, zn = _push_point(rn, zn, vertices, normals, gap, True)
+            rn, zn = _push_point(rn, zn, a, b, normals, gap, True)
         r_new[k] = rn
         z_new[k] = zn

@@ -15,7 +15,6 @@ computed by sub-sampling each cell and face with ``n_sub`` points per direction 
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np

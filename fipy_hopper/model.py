@@ -46,14 +46,14 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from functools import partial
 
 import numpy as np
 
 import numba
 
-from . import (dense_loose, fipy_adapter, geometry, markers, material, momentum, profiling,
+from . import (dense_loose, fipy_adapter, markers, material, momentum, profiling,
                resources, stepping)
 from .config import HopperConfig, damped_step_factor
 from .mesh import HopperGrid, build_grid
@@ -252,6 +252,14 @@ class HopperModel:
         x_left, x_right = self.boundary.outlet
         self.plate_nodes = ((np.abs(ZN) < 1e-12) & (RN >= x_left - 1e-12)
                             & (RN <= x_right + 1e-12))
+        #: the outlet's half-width (its radius in a half-section, m) and each node column's
+        #: distance from the section's centreline (m): the iris of ``run.opening_time`` opens
+        #: from the centreline outwards over these
+        self.outlet_half_width = x_right if section.half else 0.5 * (x_right - x_left)
+        self.node_offset = np.abs(g.r_nodes - section.centreline)
+        #: the node column at the centreline (the axis, or the middle of a full section's
+        #: outlet): the axis speed of the flow-mode rule
+        self.centre_column = int(np.argmin(self.node_offset))
         self.plate_normal = np.array([0.0, -1.0])[:, None, None] * np.ones((2,) + RN.shape)
         self.contact_list = _contact_list(self.contact_passes)
         self.plate_list = _contact_list([(self.plate_nodes, self.plate_normal, self.mu_wall)])
@@ -371,7 +379,7 @@ class HopperModel:
         unless the outlet is opening)."""
         opening = state.plate_closed and state.opened_at >= 0.0
         return np.array([state.opened_at if opening else -1.0, self.cfg.run.opening_time,
-                         self.cfg.hopper.outlet_radius])
+                         self.outlet_half_width])
 
     def _end_opening(self, state: State) -> None:
         """The plate is gone once the opening time has passed."""
@@ -471,10 +479,13 @@ class HopperModel:
     def contact_slip(self, state: State) -> tuple:
         """``(slip, axis_speed)`` (m/s) of every entry of ``contact_list``: the slip speed
         down the wall of the entry's node (its velocity in ``state.v``, after the step's
-        contact) and the downward speed of the axis node of the same row."""
+        contact) and the downward speed of the node of the same row on the centreline (the
+        axis)."""
         from . import diagnostics
         j, i, normals, _ = self.contact_list
-        return diagnostics.entry_slip(state.v[:, j, i].T, normals), -state.v[1, j, 0]
+        side = self.boundary.table.side[self.contact_owner]
+        return (diagnostics.entry_slip(state.v[:, j, i].T, normals, side),
+                -state.v[1, j, self.centre_column])
 
     def flow_mode_measures(self, state: State, rule) -> tuple:
         from . import diagnostics
@@ -542,7 +553,7 @@ class HopperModel:
             self._zface_aperture, self._rface_aperture, self._face_sign, self._open_face,
             self._prm, self.dt, GRAVITY, ramp, damping, self.light_mass, num.alpha_min,
             num.transport_cfl, num.max_transport_interval, row_nodes, node_i, node_ptr,
-            normal, mu, kind, entry, state.plate_closed, self._opening(state), g.r_nodes,
+            normal, mu, kind, entry, state.plate_closed, self._opening(state), self.node_offset,
             state.wall_impulse, state.plate_impulse, state.momentum_budget, self._work,
             self.viscosity, self.bulk_viscosity, self._rate_trace, self.threads,
             self._no_cycles if profile is None else profile.cycles)
@@ -632,7 +643,7 @@ class HopperModel:
         budget[2] -= np.sum(np.where(heavy, 0.0, m * state.v[1]))
         r_open = self.plate_opening_radius(state)
         node_i = self.contact_groups[2]
-        plate_on = state.plate_closed & (g.r_nodes[node_i] >= r_open)
+        plate_on = state.plate_closed & (self.node_offset[node_i] >= r_open)
         momentum.contact_nodes(v, m, self.contact_groups, plate_on,
                                state.wall_impulse, state.plate_impulse)
         if damping > 0.0:              # after the contact: a wall, not the damping, holds

@@ -164,6 +164,24 @@ def draw_layers(ax, snap, n_layers=None, side: float = -1.0):
     return discs
 
 
+def wall_lines(cfg: HopperConfig, bottom: float, top: float) -> list:
+    """The boundary's walls and inserts as polylines ``(k, 2)`` (m) to draw: each wall from
+    ``bottom`` (its free-fall tube) up to ``top``, each insert's outline."""
+    bnd = cfg.boundary
+    lines = []
+    for c in bnd.chains:
+        points = np.asarray(c.points, float)
+        if c.kind == "wall":
+            lip = points[0]
+            last = points[-1]
+            lines.append(np.vstack([[lip[0], bottom], points,
+                                    [[last[0], max(top, last[1])]]]))
+        elif c.kind == "insert":
+            outline = np.asarray(c.polygon if c.polygon else c.points, float)
+            lines.append(np.vstack([outline, outline[:1]]))
+    return lines
+
+
 def _draw_section(ax, snap, cfg, n_layers, speed_max):
     """Layers on the left (r < 0), speed on the right, the wall in grey; returns the mesh.
 
@@ -186,19 +204,30 @@ def _draw_section_parts(ax, snap, cfg, n_layers, speed_max):
     alpha = snap["alpha"]
     solid = np.ma.masked_where(snap["open_fraction"] > 0, np.ones_like(alpha))
     grey = ListedColormap(["0.78"])
-    layers = draw_layers(ax, snap, n_layers, side=-1.0)
+    mirror = cfg.boundary.section.mirror
+    layers = draw_layers(ax, snap, n_layers, side=-1.0) if mirror else None
     mesh = ax.pcolormesh(r, z, _masked_speed(snap), cmap="viridis", vmin=0.0, vmax=speed_max,
                          shading="flat")
-    wall = geometry.wall_polyline(cfg.hopper, r[-1], z[-1])
-    for sign in (-1.0, 1.0):
+    for sign in (-1.0, 1.0) if mirror else (1.0,):
         ax.pcolormesh(sign * r, z, solid, cmap=grey, vmin=0, vmax=1, shading="flat")
-        ax.plot(sign * wall[:, 0], wall[:, 1], color="k", lw=1.0)
-    ax.axvline(0.0, color="w", lw=0.5)
-    ax.set_xlim(-r[-1], r[-1])
+        for line in wall_lines(cfg, z[0], z[-1]):
+            ax.plot(sign * line[:, 0], line[:, 1], color="k", lw=1.0)
+    if mirror:
+        ax.axvline(0.0, color="w", lw=0.5)
+        ax.set_xlim(-r[-1], r[-1])
+    else:
+        ax.set_xlim(r[0], r[-1])
     ax.set_ylim(z[0], z[-1])
     ax.set_aspect("equal")
     ax.set_xlabel("r (m)")
     return mesh, layers
+
+
+def _section_limits(cfg: HopperConfig) -> tuple:
+    """The ``x`` range (m) of one side of a half-section or of a full section, with 5 %."""
+    x_min, x_max = cfg.hopper.x_extent
+    pad = 0.05 * (x_max - x_min)
+    return (x_min - pad if cfg.hopper.full_section else 0.0), x_max + pad
 
 
 def _update_section(ax, mesh, layers, snap, n_layers):
@@ -206,6 +235,8 @@ def _update_section(ax, mesh, layers, snap, n_layers):
     speed and the layers change, the grid, the wall and the axes stay.  Returns the new
     layers artist (drawn first, beneath the rest, as in a fresh section)."""
     mesh.set_array(_masked_speed(snap))
+    if layers is None:                   # a full section: the speed only
+        return None
     layers.remove()
     layers = draw_layers(ax, snap, n_layers, side=-1.0)
     layers.set_zorder(0.5)
@@ -251,12 +282,17 @@ def wall_slip_segments(run, cfg: HopperConfig):
     if s.size == 0:
         return []
     sliding = np.asarray(table["sliding"], float) > 0.5
-    edges = np.concatenate([s[:1], 0.5 * (s[1:] + s[:-1]), s[-1:]])
+    bnd = cfg.boundary
+    _, _, chain, _, _ = bnd.nearest(np.asarray(table["r_m"], float),
+                                    np.asarray(table["z_m"], float))
     out = []
-    for k in range(len(s)):
-        arc = np.linspace(edges[k], edges[k + 1], 3)
-        r, z, _, _ = geometry.wall_point(arc, cfg.hopper)
-        out.append((np.column_stack([r, z]), bool(sliding[k])))
+    for c in np.unique(chain):
+        on = np.flatnonzero(chain == c)
+        arc = s[on]
+        edges = np.concatenate([arc[:1], 0.5 * (arc[1:] + arc[:-1]), arc[-1:]])
+        for k, q in enumerate(on):
+            r, z, _, _ = bnd.wall_point(int(c), np.linspace(edges[k], edges[k + 1], 3))
+            out.append((np.column_stack([r, z]), bool(sliding[q])))
     return out
 
 
@@ -281,16 +317,29 @@ def flow_pattern(run, n: int = 4):
     n_layers = _n_layers(snaps)
     vmax = _speed_scale(snaps)
     segments = wall_slip_segments(run, cfg)
-    fig = _figure(2.6 * len(snaps) + 1.0, 4.6)
-    axes = fig.subplots(1, len(snaps), sharey=True, squeeze=False)[0]
+    mirror = cfg.boundary.section.mirror
+    rows = 1 if mirror else 2               # a full section: the layers in a row of their own
+    fig = _figure(2.6 * len(snaps) + 1.0, 4.6 * rows)
+    grid = fig.subplots(rows, len(snaps), sharey=True, squeeze=False)
+    axes = grid[0]
     mesh = None
-    for ax, snap in zip(axes, snaps):
+    for k, (ax, snap) in enumerate(zip(axes, snaps)):
         mesh = _draw_section(ax, snap, cfg, n_layers, vmax)
         _draw_wall_slip(ax, segments)
         ax.set_title(_label(snap), fontsize=9)
-    axes[0].set_ylabel("z (m)")
+        if not mirror:
+            below = grid[1][k]
+            draw_layers(below, snap, n_layers, side=1.0)
+            for line in wall_lines(cfg, snap["z_nodes"][0], snap["z_nodes"][-1]):
+                below.plot(line[:, 0], line[:, 1], color="k", lw=1.0)
+            below.set_xlim(*ax.get_xlim())
+            below.set_aspect("equal")
+            below.set_xlabel("x (m)")
+    for row in grid:
+        row[0].set_ylabel("z (m)")
     fig.colorbar(mesh, ax=list(axes), label="speed (m/s)", shrink=0.8)
-    title = "Flow pattern: layers (left half) and speed (right half)"
+    title = ("Flow pattern: layers (left half) and speed (right half)" if mirror else
+             "Flow pattern: speed (above) and layers (below)")
     if segments:
         share = _summary(run).get("wall_slip_fraction")
         title += ("\nhopper wall: slides (green) / does not (red)"
@@ -671,9 +720,9 @@ def stress_pattern(run):
                   headwidth=0, headlength=0, headaxislength=0,
                   color="deepskyblue", width=0.012, edgecolor="k", linewidth=0.3,
                   scale=1.0 / (0.9 * step * (rc[1] - rc[0])), scale_units="xy")
-        wall = geometry.wall_polyline(cfg.hopper, r_nodes[-1], z_nodes[-1])
-        ax.plot(wall[:, 0], wall[:, 1], color="k", lw=1.0)
-        ax.set_xlim(0.0, cfg.hopper.bin_radius * 1.05)
+        for line in wall_lines(cfg, z_nodes[0], z_nodes[-1]):
+            ax.plot(line[:, 0], line[:, 1], color="k", lw=1.0)
+        ax.set_xlim(*_section_limits(cfg))
         ax.set_ylim(z_nodes[0], min(z_nodes[-1], cfg.hopper.fill_level * 1.08))
         ax.set_aspect("equal")
         ax.set_title(title, fontsize=10)
@@ -701,7 +750,7 @@ def lagrangian_mesh(run):
     chosen = ([filled[-1]] if filled else []) + ([entries[-1]] if entries else [])
     fig = _figure(4.2 * max(len(chosen), 1), 5.2)
     axes = np.atleast_1d(fig.subplots(1, max(len(chosen), 1)))
-    wall = geometry.wall_polyline(cfg.hopper, 0.0, cfg.hopper.top)
+    walls = wall_lines(cfg, -cfg.hopper.outlet_diameter, cfg.hopper.top)
     meshes = [read_vtu(run / RunDirectory.FIELDS / entry["file"]) for entry in chosen]
     cells = [{"alpha": np.asarray(mesh.cell_data["alpha"][0]),
               "layer": np.asarray(mesh.cell_data["layer"][0])} for mesh in meshes]
@@ -711,7 +760,8 @@ def lagrangian_mesh(run):
         polys = mesh.points[mesh.cells_dict["quad"]][active][:, :, :2]
         ax.add_collection(PolyCollection(polys, array=layer[active], cmap=cmap, norm=norm,
                                          edgecolors="k", linewidths=0.3))
-        ax.plot(wall[:, 0], wall[:, 1], "k-", lw=1.5)
+        for line in walls:
+            ax.plot(line[:, 0], line[:, 1], "k-", lw=1.5)
         ax.set_aspect("equal")
         ax.set_xlim(0.0, 1.05 * cfg.hopper.bin_radius)
         ax.set_ylim(-cfg.hopper.outlet_diameter, cfg.hopper.fill_level * 1.05)

@@ -23,7 +23,6 @@ import math
 import os
 import time
 from pathlib import Path
-from types import SimpleNamespace
 from typing import Callable, Optional
 
 from .config import ConfigError, _ceil_digits, grid_memory, grid_rows

@@ -214,6 +214,8 @@ class RunRecord:
     stagnant_fraction: list = field(default_factory=list)
     wall_slip_ratio: list = field(default_factory=list)      # -, FlowModeRule, per sample
     wall_slip_fraction: list = field(default_factory=list)   # -, share of the hopper wall
+    # per sample, the wall slip ratio of each stretch of hopper wall (diagnostics.hopper_rows)
+    wall_slip_stretches: list = field(default_factory=list)
     # rows (s, r, z, slip / axis speed) of the loaded hopper-wall contacts at the last sample
     # of the flow-mode window (wall_slip.csv, the flow-pattern picture)
     wall_slip_profile: list = field(default_factory=list)
@@ -223,6 +225,15 @@ class RunRecord:
     wall: dict = field(default_factory=dict)
     # stage -> (p_n, tau) of the plain binning of the reaction (WallLoads.raw_profile)
     wall_raw: dict = field(default_factory=dict)
+    # the wall (chain) of each bin: "wall", "left_wall", "insert_1", ...
+    wall_names: list = field(default_factory=list)
+    # stage -> {wall or insert: [F_x, F_z]} (N, 3D) over the stage's window
+    chain_forces: dict = field(default_factory=dict)
+    # insert -> the largest downward load of the material on it over the discharge's windows
+    # (N, 3D)
+    insert_force_max: dict = field(default_factory=dict)
+    # stage -> the forces at the walls' corners (diagnostics.WallLoads.corner_forces)
+    corner_forces: dict = field(default_factory=dict)
     # stage -> (p_n, tau) stress-sampled on the same bins (NaN where a bin held no material)
     wall_stress: dict = field(default_factory=dict)
     wall_window: dict = field(default_factory=dict)      # stage -> window duration (s)
@@ -267,6 +278,8 @@ class Simulation:
         self.stage_marks: list[StageMark] = default_stage_marks()
         self.wall_sampler = diagnostics.WallSampler(model)
         self.wall_loads = diagnostics.WallLoads(model, self.wall_sampler)
+        self.record.wall_names = [str(name) for name in self.wall_sampler.bins.wall]
+        self._insert_names = [c.name for c in model.cfg.boundary.inserts]
         self.load_window = run.load_window_s
         self._started = None
         self._last_progress = 0.0
@@ -526,9 +539,10 @@ class Simulation:
         rec.mass_flow_index.append(index)
         rec.stagnant_fraction.append(stagnant)
         previous = self._readings.get("sample")     # the wall's impulse at the last sample
-        slip, share, _, profile = diagnostics.wall_slip_measures(
+        slip, share, ratios, profile = diagnostics.wall_slip_measures(
             m, st, previous["wall"] if previous is not None else None, self.flow_rule)
         rec.wall_slip_ratio.append(slip)
+        rec.wall_slip_stretches.append([float(r) for r in ratios])
         rec.wall_slip_fraction.append(share)
         if len(rec.t) > 1 and _before_flow_window_end(t, mass, rec.initial_mass) \
                 and len(profile):
@@ -569,6 +583,11 @@ class Simulation:
             current = loads.reading(m, st)
             p_n = loads.profile(self._readings["envelope"], current)[3]
             raw = loads.raw_profile(self._readings["envelope"], current)[3]
+            forces = loads.chain_forces(self._readings["envelope"], current)
+            for name in self._insert_names:
+                load = forces[name][1]     # its push up on the material: the load on it
+                self.record.insert_force_max[name] = max(
+                    self.record.insert_force_max.get(name, -math.inf), load)
             self.envelope = p_n if self.envelope is None else np.maximum(self.envelope, p_n)
             self.envelope_raw = (raw if self.envelope_raw is None
                                  else np.maximum(self.envelope_raw, raw))
@@ -604,6 +623,9 @@ class Simulation:
         self.record.wall[stage] = (end["t"] - t_open, s, r, z, p_n, tau)
         hoop, meridional, at_transition = self.wall_loads.membrane_forces(start, end, p_n,
                                                                           tau)
+        self.record.chain_forces[stage] = {k: list(v) for k, v in
+                                           self.wall_loads.chain_forces(start, end).items()}
+        self.record.corner_forces[stage] = self.wall_loads.corner_forces(p_n, tau)
         self.record.wall_forces[stage] = (hoop, meridional, np.asarray(at_transition))
         self.record.wall_stress[stage] = (p_s, tau_s)
         self.record.wall_window[stage] = end["t"] - start["t"]
@@ -792,10 +814,21 @@ class Simulation:
                 fail(f"its record holds an unknown field {str(key)[:40]!r}")
             if isinstance(like, list) and key in series:
                 ok = isinstance(value, list) and all(is_number(v) for v in value)
-            elif key == "loads":
+            elif key in ("loads", "wall_names"):
                 ok = isinstance(value, list) and all(
-                    isinstance(row, dict) and all(isinstance(v, str) or is_number(v)
-                                                  for v in row.values()) for row in value)
+                    isinstance(row, str) if key == "wall_names" else isinstance(row, dict)
+                    and all(isinstance(v, str) or is_number(v) for v in row.values())
+                    for row in value)
+            elif key == "chain_forces":
+                ok = isinstance(value, dict) and all(
+                    isinstance(f, dict) and all(isinstance(v, list) and len(v) == 2
+                                                and all(is_number(x) for x in v)
+                                                for v in f.values()) for f in value.values())
+            elif key == "corner_forces":
+                ok = isinstance(value, dict) and all(
+                    isinstance(c, list) and all(isinstance(row, dict) and all(
+                        isinstance(v, str) or is_number(v) for v in row.values())
+                        for row in c) for c in value.values())
             elif isinstance(like, dict):
                 ok = isinstance(value, dict) and all(is_number(v) for v in value.values())
             else:
@@ -903,6 +936,9 @@ class Simulation:
             "grid_viscosity": m.cfg.numerics.grid_viscosity,
             "bulk_viscosity": m.cfg.bulk_viscosity,
         }
+        out["hopper_stretches"] = diagnostics.stretch_calls(
+            m.cfg, [np.asarray(r, float) for r, w in zip(rec.wall_slip_stretches, window)
+                    if w], self.flow_rule)
         out.update(diagnostics.load_summary(self))
         out.update(m.summary_extras(st))
         return out

@@ -512,12 +512,3 @@ def test_a_bad_boundary_stops_validate_in_one_line(tmp_path, capsys):
 def test_the_lagrangian_mode_refuses_a_profile():
     with pytest.raises(ConfigError, match="numerics.formulation = \"lagrangian\""):
         HopperConfig.from_dict({"hopper": H, "numerics": {"formulation": "lagrangian"}})
-
-
-def test_a_profile_is_refused_by_the_run_until_the_models_take_it(tmp_path, capsys):
-    path = tmp_path / "silo.toml"
-    path.write_text(profile().to_toml())
-    assert main(["run", str(path), "--out", str(tmp_path / "run"), "--quiet"]) == 2
-    err = capsys.readouterr().err
-    assert "hopper.shape = \"profile\"" in err and "cannot run yet" in err
-    assert not (tmp_path / "run").exists()

@@ -51,7 +51,7 @@ SUMMARY_KEYS = ("steady_discharge_rate_kg_s", "flow_mode", "mass_flow_index", "i
                 "remaining_mass_kg", "mass_balance_error", "discharge_time_s", "stop_reason",
                 "cells", "steps", "wall_time_s", "youngs_modulus_used")
 TIMESERIES = ["t_s", "mass_in_hopper_kg", "discharged_kg", "discharge_rate_kg_s"]
-WALL = ["stage", "t_s", "s_m", "r_m", "z_m", "p_n_Pa", "tau_Pa", "p_n_stress_Pa", "tau_stress_Pa",
+WALL = ["stage", "wall", "t_s", "s_m", "r_m", "z_m", "p_n_Pa", "tau_Pa", "p_n_stress_Pa", "tau_stress_Pa",
         "p_n_raw_Pa", "tau_raw_Pa", "window_s", "hoop_force_N_m", "meridional_force_N_m"]
 CELL_FIELDS = ("alpha", "layer", "velocity", "stress_rr", "stress_zz", "stress_tt", "stress_rz",
                "pressure", "plastic_strain")

@@ -50,11 +50,18 @@ def test_wall_slip_weighs_each_contact_by_its_load_and_its_length():
     assert ratio[1] == 0.0 and fraction[1] == 0.0
 
 
-def test_hopper_stretches_split_at_gaps_and_leave_other_walls_out():
-    segment = np.array([1, 1, 2, 1, -1, 1])
-    s = np.array([0.00, 0.01, 0.30, 0.02, 0.0, 0.10])
-    labels = diagnostics.hopper_stretches(segment, s, gap=0.02)
-    assert labels.tolist() == [0, 0, -1, 0, -1, 1]
+def test_hopper_stretches_are_the_sloping_wall_segments():
+    """A stretch of hopper wall is a wall segment that is not vertical (a slope or a floor),
+    one label each in the table's order; the bin wall, the tubes, inserts and convex corners
+    (-1) belong to none."""
+    cfg = HopperConfig.from_dict({"hopper": {
+        "shape": "profile", "wall": [[0.03, 0.0], [0.06, 0.1], [0.15, 0.2], [0.15, 0.5]],
+        "fill_level": 0.4, "inserts": [{"outline": [[0.0, 0.3], [0.05, 0.25], [0.0, 0.2]]}]},
+        "numerics": {"cell_size": 0.01}})
+    rows = diagnostics.hopper_rows(cfg.boundary)
+    assert rows.tolist() == [1, 2]                     # tube 0, two slopes, then the bin wall
+    segment = np.array([1, 1, 3, 2, -1, 0, 4])
+    assert diagnostics.hopper_stretches(segment, rows).tolist() == [0, 0, -1, 1, -1, -1, -1]
 
 
 def _loaded_eulerian(half_angle=20.0):
