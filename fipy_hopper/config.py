@@ -335,13 +335,16 @@ class HopperGeometry:
 
     @property
     def classic(self) -> bool:
-        """The silo the classic theories cover: a half-section without inserts whose wall is a
-        cone, a wedge's plate or a flat floor under one vertical bin wall (the shorthands,
-        and a profile drawn as one).  Janssen, Walker and EN 1991-4's hopper loads apply to
+        """The silo the classic theories cover: a half-section without inserts in the material
+        (an insert wholly above the fill level does not count) whose wall is a cone, a
+        wedge's plate or a flat floor under one vertical bin wall (the shorthands, and a
+        profile drawn as one).  Janssen, Walker and EN 1991-4's hopper loads apply to
         it as a whole; other silos get them where a stretch allows (Janssen on a top vertical
         stretch)."""
         wall = self.wall_points
-        return (not self.full_section and not self.inserts and len(wall) == 3
+        buried = [i for i in self.inserts
+                  if min(z for _, z in i.outline) < (self.fill_level or self.top)]
+        return (not self.full_section and not buried and len(wall) == 3
                 and wall[1][0] == wall[2][0] and wall[1][0] != wall[0][0])
 
     @property

@@ -547,6 +547,9 @@ class WallLoads:
             self.recoveries.append(StretchRecovery.build(st, members, position[members],
                                                          width, KNOT_CELLS * model.cell_size))
         self.entries = np.concatenate([rec.entries for rec in self.recoveries])
+        kind = np.array([c.kind for c in bnd.chains])
+        #: the contact entries of the inserts (the rest are the walls' and the tubes')
+        self._on_insert = kind[chain] == "insert"
         self.wall, self.centres = self.bins.wall, self.bins.s
         self.r_w, self.z_w = self.bins.r, self.bins.z
         self.bin_area = self.bins.area
@@ -742,8 +745,11 @@ class WallLoads:
             raise ValueError("a load window needs a positive duration")
         to_n = self.model.section_factor / duration
         budget = (end["budget"] - start["budget"]) * to_n
+        rise = end["wall"][:, 1] - start["wall"][:, 1]
+        # the walls' entries, then the inserts': the walls' sum as it is without inserts
+        wall = (float(np.sum(rise[~self._on_insert])) + float(np.sum(rise[self._on_insert])))
         out = {"weight": -budget[0],
-               "wall": float(np.sum(end["wall"][:, 1] - start["wall"][:, 1])) * to_n,
+               "wall": wall * to_n,
                "outlet": float(np.sum(end["plate"][:, 1] - start["plate"][:, 1])) * to_n,
                "damping": budget[1], "stopped": budget[2], "outflow": budget[3],
                "momentum_rate": (end["momentum"] - start["momentum"]) * to_n}

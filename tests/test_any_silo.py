@@ -154,7 +154,8 @@ def test_new_shapes_keep_the_mass_and_the_vertical_balance(shape_run):
     if name == "insert":
         load = summary["insert_1_vertical_force_N"]
         assert 0.0 < load < summary[weight]
-        loads = fh.read_results(folder).loads
+        from fipy_hopper.io import read_csv
+        loads = read_csv(folder / "loads.csv")
         assert "insert_1_vertical_N" in loads
         rest = loads["stage"] == "filling"
         assert np.all(np.abs(loads["insert_1_vertical_N"][rest])
