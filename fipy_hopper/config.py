@@ -976,11 +976,17 @@ class HopperConfig:
         if self.numerics.formulation == "lagrangian" and not self.hopper.axisymmetric:
             raise ConfigError('numerics.formulation = "lagrangian" models conical hoppers only; '
                               'a wedge (hopper.shape = "wedge") runs with "eulerian"')
-        if self.numerics.formulation == "lagrangian" and (self.hopper.shape == "profile"
-                                                          or self.hopper.inserts):
-            raise ConfigError('numerics.formulation = "lagrangian" models the conical '
-                              'shorthand without inserts only (hopper.shape = "conical"); a '
-                              'profile or an insert runs with "eulerian"')
+        if self.numerics.formulation == "lagrangian" and not self.hopper.classic:
+            raise ConfigError('numerics.formulation = "lagrangian" meshes a cone or a flat '
+                              'floor under one vertical bin wall, without inserts in the '
+                              f'material; this {self.hopper.n_wall_segments}-segment wall'
+                              f'{" with inserts" if self.hopper.inserts else ""} runs with '
+                              '"eulerian"')
+        if self.numerics.formulation == "lagrangian" and self.wall.segment_friction_deg \
+                and len(set(self.wall.segment_friction_deg)) > 1:
+            raise ConfigError('numerics.formulation = "lagrangian" takes one wall friction '
+                              '(wall.friction_angle_deg); wall.segment_friction_deg with '
+                              'different angles runs with "eulerian"')
         angles = self.wall.segment_friction_deg
         if angles is not None and len(angles) != self.hopper.n_wall_segments:
             what = ("hopper.wall has" if self.hopper.shape == "profile" else

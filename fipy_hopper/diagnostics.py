@@ -312,13 +312,20 @@ class OutcomeRule:
     rathole_left: float = 0.1
 
 
+def centreline(model) -> float:
+    """The ``x`` (m) of a model's centreline: the axis, or the middle of a full section's
+    outlet (0 for a model that names no configuration)."""
+    cfg = getattr(model, "cfg", None)
+    return cfg.boundary.section.centreline if cfg is not None else 0.0
+
+
 def empty_channel(model, state, rule: OutcomeRule = OutcomeRule()):
     """``(diameter, height)`` (m) of the empty channel of :class:`OutcomeRule` from the outlet
     through the material to its top, measured from the section's centreline outwards (in a
     full section on its right side); ``(nan, nan)`` where the material closes the centreline
     (or there is none)."""
     g = model.grid
-    centre = model.cfg.boundary.section.centreline
+    centre = centreline(model)
     c0 = int(np.searchsorted(g.r_cells, centre))   # the first cell column past the centreline
     full = state.alpha[:, c0:] > rule.full
     above = g.z_cells > 0.0

@@ -33,7 +33,7 @@ from typing import Callable
 
 import numpy as np
 
-from . import geometry, theory
+from . import theory
 from .config import HopperConfig
 from .io import (FieldWriter, RunDirectory, atomic_path, marker_file, read_csv, read_markers,
                  read_snapshot_index, read_vtu, result_key)
@@ -187,7 +187,7 @@ def _draw_section(ax, snap, cfg, n_layers, speed_max):
 
     The layers are drawn by :func:`draw_layers` (markers when the snapshot has them).  The grey
     cells are the grid cells closed by the wall (open fraction 0); the black line is the exact
-    wall of :func:`fipy_hopper.geometry.wall_polyline`.
+    walls and inserts of the boundary (:func:`wall_lines`).
     """
     return _draw_section_parts(ax, snap, cfg, n_layers, speed_max)[0]
 
@@ -219,7 +219,7 @@ def _draw_section_parts(ax, snap, cfg, n_layers, speed_max):
         ax.set_xlim(r[0], r[-1])
     ax.set_ylim(z[0], z[-1])
     ax.set_aspect("equal")
-    ax.set_xlabel("r (m)")
+    ax.set_xlabel("r (m)" if cfg.hopper.axisymmetric else "x (m)")
     return mesh, layers
 
 
@@ -283,8 +283,8 @@ def wall_slip_segments(run, cfg: HopperConfig):
         return []
     sliding = np.asarray(table["sliding"], float) > 0.5
     bnd = cfg.boundary
-    _, _, chain, _, _ = bnd.nearest(np.asarray(table["r_m"], float),
-                                    np.asarray(table["z_m"], float))
+    chain = bnd.table.chain[bnd.load_row(np.asarray(table["r_m"], float),
+                                         np.asarray(table["z_m"], float))]
     out = []
     for c in np.unique(chain):
         on = np.flatnonzero(chain == c)
@@ -440,7 +440,9 @@ def theory_wall_pressure(cfg: HopperConfig, n: int = 120) -> dict:
     ``phi_i = phi`` and the code's ``K_m = 1.1 (1 - sin phi)`` for the lower characteristic K
     (no a_K is known), on ``p_vft`` = EN's vertical-wall filling stress at the transition
     (the slender-silo form, Janssen with K_m; ``C_b = 1``).  A wedge gets the plane forms:
-    Janssen for a long bin of width B and the slices with ``S = 1``.  Returns
+    Janssen for a long bin of width B and the slices with ``S = 1``.  A silo the classic
+    theories do not cover (:attr:`HopperGeometry.classic`: several slopes, inserts, a full
+    section) gets Janssen on its wall's top vertical stretch only.  Returns
     ``{name: (s, p_n)}``; a curve the theory refuses (a frictionless wall; for EN, a bottom
     flatter than 85 deg) is left out.
     """
@@ -450,8 +452,9 @@ def theory_wall_pressure(cfg: HopperConfig, n: int = 120) -> dict:
     K = float(theory.k_jaky(phi))
     K_m = float(theory.k_en1991(phi))
     mu = math.tan(math.radians(phi_w))
-    s_t = float(geometry.transition_arc_length(geom))
-    s_fill = float(geometry.arc_length(geom.fill_level, geom))
+    bnd = cfg.boundary
+    s_t = bnd.arc_at_height("wall", geom.cone_height)
+    s_fill = bnd.arc_at_height("wall", geom.fill_level)
     curves = {}
     # a wedge: the plane forms (Janssen for a long bin of width B, Walker's plane slice, S = 1)
     plane = not geom.axisymmetric
@@ -465,6 +468,8 @@ def theory_wall_pressure(cfg: HopperConfig, n: int = 120) -> dict:
         sigma_vt = float(vertical(geom.fill_height, rho, D, K, mu))
     except ValueError:
         sigma_vt = rho * theory.G * geom.fill_height
+    if not geom.classic:           # Walker and EN 1991-4's hoppers: a cone under a bin only
+        return curves
     s_cone = np.linspace(0.0, s_t, n)
     theta = geom.half_angle
     x = s_cone * math.cos(theta) + geom.outlet_radius / math.tan(theta)
@@ -508,6 +513,12 @@ def wall_pressure(run):
     stages = np.asarray(table.get("stage", np.array([])), dtype=str)
     s_all = np.asarray(table.get("s_m", []), dtype=float)
     p_all = np.asarray(table.get("p_n_Pa", []), dtype=float)
+    walls = np.asarray(table.get("wall", np.full(len(stages), "wall")), dtype=str)
+    others = [w for w in dict.fromkeys(walls.tolist()) if w != "wall"]
+    main = walls == "wall"           # the (right) wall; the others drawn dashed
+    table = {k: (np.asarray(v)[main] if np.ndim(v) else v) for k, v in table.items()}
+    other = (stages, s_all, p_all, walls)
+    stages, s_all, p_all = stages[main], s_all[main], p_all[main]
     filled, envelope = stages == "filling", stages == "discharge_envelope"
     overpressure = filled.any() and envelope.any() and filled.sum() == envelope.sum()
     if overpressure:
@@ -537,6 +548,14 @@ def wall_pressure(run):
               "Walker, wedge, discharge": ("C3", "--"), "EN 1991-4, cone, filling": ("C9", "-."),
               "EN 1991-4, cone, discharge": ("C6", "-."), "EN 1991-4, wedge, filling": ("C9", "-."),
               "EN 1991-4, wedge, discharge": ("C6", "-.")}
+    o_stages, o_s, o_p, o_walls = other
+    for k, name in enumerate(others):
+        for stage, style in (("filling", "--"), ("discharge_envelope", ":")):
+            sel = (o_walls == name) & (o_stages == stage)
+            if sel.any():
+                ax.plot(o_s[sel], o_p[sel] / 1e3, style, color=f"C{5 + k % 4}", lw=1.2,
+                        label=f"{name}, {'at rest' if stage == 'filling' else 'envelope'} "
+                              f"(s along it)")
     curves = theory_wall_pressure(cfg)
     for name, (s, p) in curves.items():
         colour, ls = next((v for k, v in styles.items() if name.startswith(k)), ("0.4", "-"))
@@ -546,7 +565,7 @@ def wall_pressure(run):
         if name.startswith("Janssen"):
             ax.plot(s, c_h * p / 1e3, ":", color="k", lw=1.2,
                     label=f"EN 1991-4 discharge, bin (C_h = {c_h:g} x Janssen)")
-    s_t = float(geometry.transition_arc_length(cfg.hopper))
+    s_t = cfg.boundary.arc_at_height("wall", cfg.hopper.cone_height)
     for a in (ax, ax_f) if overpressure else (ax,):
         a.axvline(s_t, color="0.5", lw=0.8, ls=":")
     ax.text(s_t, 0.0, " transition", va="bottom", fontsize=8, color="0.4")
@@ -599,10 +618,11 @@ def wall_forces(run):
         return None
     cfg, summary = _config(run), _summary(run)
     geom, mat = cfg.hopper, cfg.material
-    stages = np.asarray(table["stage"], dtype=str)
-    s_all = np.asarray(table["s_m"], dtype=float)
-    hoop = np.asarray(table["hoop_force_N_m"], dtype=float)
-    meridional = np.asarray(table["meridional_force_N_m"], dtype=float)
+    main = np.asarray(table.get("wall", np.full(len(table["stage"]), "wall")), str) == "wall"
+    stages = np.asarray(table["stage"], dtype=str)[main]
+    s_all = np.asarray(table["s_m"], dtype=float)[main]
+    hoop = np.asarray(table["hoop_force_N_m"], dtype=float)[main]
+    meridional = np.asarray(table["meridional_force_N_m"], dtype=float)[main]
     largest = np.nanmax(np.abs(np.concatenate([hoop, meridional, [0.0]])))
     scale, unit = (1e3, "kN/m") if largest >= 1e3 else (1.0, "N/m")
     hoop, meridional = hoop / scale, meridional / scale
@@ -618,11 +638,11 @@ def wall_forces(run):
         ax_h.plot(s_all[sel], hoop[sel], marker + "-", color=colour, ms=4, lw=0.8, label=label)
         ax_m.plot(s_all[sel], meridional[sel], marker + "-", color=colour, ms=4, lw=0.8,
                   label=label)
-    s_t = float(geometry.transition_arc_length(geom))
-    s_fill = float(geometry.arc_length(geom.fill_level, geom))
+    s_t = cfg.boundary.arc_at_height("wall", geom.cone_height)
+    s_fill = cfg.boundary.arc_at_height("wall", geom.fill_level)
     mu = math.tan(math.radians(cfg.wall.friction_angle_deg))
     plane = not geom.axisymmetric
-    if mu > 0 and s_fill > s_t:
+    if mu > 0 and s_fill > s_t and geom.classic:
         s_bin = np.linspace(s_t, s_fill, 120)
         depth = s_fill - s_bin
         if not plane:

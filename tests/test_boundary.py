@@ -509,6 +509,15 @@ def test_a_bad_boundary_stops_validate_in_one_line(tmp_path, capsys):
     assert not (tmp_path / "geometry.png").exists()
 
 
-def test_the_lagrangian_mode_refuses_a_profile():
-    with pytest.raises(ConfigError, match="numerics.formulation = \"lagrangian\""):
-        HopperConfig.from_dict({"hopper": H, "numerics": {"formulation": "lagrangian"}})
+def test_the_lagrangian_mode_meshes_a_cone_as_a_profile_and_refuses_the_rest():
+    """A cone under a bin drawn as a profile meshes; a two-slope wall, an insert in the
+    material and a plane section are refused in one line naming the formulation."""
+    cone = {"shape": "profile", "wall": [[0.03, 0.0], [0.15, 0.33], [0.15, 0.68]],
+            "fill_level": 0.6}
+    cfg = HopperConfig.from_dict({"hopper": cone, "numerics": {"formulation": "lagrangian"}})
+    assert cfg.hopper.classic
+    insert = {**cone, "inserts": [{"outline": [[0.0, 0.4], [0.05, 0.35], [0.0, 0.3]]}]}
+    for hopper in (H, insert, {**cone, "symmetry": "plane"}):
+        with pytest.raises(ConfigError, match="numerics.formulation = \"lagrangian\"") as err:
+            HopperConfig.from_dict({"hopper": hopper, "numerics": {"formulation": "lagrangian"}})
+        assert "\n" not in str(err.value) and "eulerian" in str(err.value)

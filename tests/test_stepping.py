@@ -163,10 +163,9 @@ def test_compiled_marker_advance_equals_reference(small_cfg, discharging):
     # the case includes markers that the midpoint rule put inside the wall
     geom, g = small_cfg.hopper, model.grid
     r_mid, z_mid = np.empty(len(pts)), np.empty(len(pts))
-    vertices, normals = markers._wall_segments(geom)
-    markers._midpoint_kernel(pts, disp, g.r_nodes, g.z_nodes, geom.outlet_radius,
-                             geom.bin_radius, geom.cone_height, np.tan(geom.half_angle),
-                             vertices, normals, 0.0, 0, r_mid, z_mid)
+    bnd = geom.boundary
+    markers._midpoint_kernel(pts, disp, g.r_nodes, g.z_nodes, bnd.section.mirror,
+                             bnd.kernel_arrays(), bnd.table.normal, 0.0, 0, r_mid, z_mid)
     assert np.count_nonzero(geometry.in_solid(r_mid, z_mid, geom)) >= 5
     # markers that leave through the bottom are dropped, the others keep their order
     down = np.zeros_like(disp)
