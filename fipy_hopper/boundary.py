@@ -289,6 +289,32 @@ def wall_x(z, rows: np.ndarray, x_below: float):
     return x
 
 
+def nearest_on_segments(x, z, a, b) -> tuple:
+    """The nearest point ``(px, pz)`` of points ``(x, z)`` on the segments ``a[k] -> b[k]``
+    (``(n, 2)`` each), the index of that segment (the first nearest) and ``t`` in ``[0, 1]``
+    along it; vectorised over the points."""
+    x = np.asarray(x, dtype=float)
+    z = np.asarray(z, dtype=float)
+    best_d2 = np.full(np.broadcast(x, z).shape, np.inf)
+    best_x = np.zeros_like(best_d2)
+    best_z = np.zeros_like(best_d2)
+    best_t = np.zeros_like(best_d2)
+    best_row = np.zeros(best_d2.shape, dtype=int)
+    for k in range(len(a)):
+        ab = b[k] - a[k]
+        t = ((x - a[k][0]) * ab[0] + (z - a[k][1]) * ab[1]) / (ab @ ab)
+        t = np.clip(t, 0.0, 1.0)
+        px, pz = a[k][0] + t * ab[0], a[k][1] + t * ab[1]
+        d2 = (x - px) ** 2 + (z - pz) ** 2
+        closer = d2 < best_d2
+        best_d2 = np.where(closer, d2, best_d2)
+        best_x = np.where(closer, px, best_x)
+        best_z = np.where(closer, pz, best_z)
+        best_t = np.where(closer, t, best_t)
+        best_row = np.where(closer, k, best_row)
+    return best_x, best_z, best_row, best_t
+
+
 def inside_polygon(x, z, polygon: np.ndarray):
     """Crossing-number test: True inside the polygon ``(k, 2)`` (points on it either way)."""
     x = np.asarray(x, dtype=float)
@@ -519,29 +545,8 @@ class Boundary:
 
     def _nearest_rows(self, x, z):
         """Nearest point ``(px, pz)``, its table row and ``t`` in ``[0, 1]`` along the row
-        (the first nearest row; the arithmetic of ``geometry._nearest_on_polyline``)."""
-        x = np.asarray(x, dtype=float)
-        z = np.asarray(z, dtype=float)
-        best_d2 = np.full(np.broadcast(x, z).shape, np.inf)
-        best_x = np.zeros_like(best_d2)
-        best_z = np.zeros_like(best_d2)
-        best_t = np.zeros_like(best_d2)
-        best_row = np.zeros(best_d2.shape, dtype=int)
-        tab = self.table
-        for k in range(len(tab)):
-            a, b = tab.a[k], tab.b[k]
-            ab = b - a
-            t = ((x - a[0]) * ab[0] + (z - a[1]) * ab[1]) / (ab @ ab)
-            t = np.clip(t, 0.0, 1.0)
-            px, pz = a[0] + t * ab[0], a[1] + t * ab[1]
-            d2 = (x - px) ** 2 + (z - pz) ** 2
-            closer = d2 < best_d2
-            best_d2 = np.where(closer, d2, best_d2)
-            best_x = np.where(closer, px, best_x)
-            best_z = np.where(closer, pz, best_z)
-            best_t = np.where(closer, t, best_t)
-            best_row = np.where(closer, k, best_row)
-        return best_x, best_z, best_row, best_t
+        (the first nearest row: :func:`nearest_on_segments`)."""
+        return nearest_on_segments(x, z, self.table.a, self.table.b)
 
     def nearest(self, x, z) -> tuple:
         """The nearest wall point of ``(x, z)``: ``(px, pz, chain, segment, s)`` (m, chain

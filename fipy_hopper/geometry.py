@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .boundary import nearest_on_segments
 from .config import HopperGeometry
 
 
@@ -25,26 +26,11 @@ def wall_polyline(geom: HopperGeometry, r_far: float, z_far: float) -> np.ndarra
 
 
 def _nearest_on_polyline(r, z, vertices):
-    """Nearest point (pr, pz) on the polyline and the index of its segment, vectorised."""
-    r = np.asarray(r, dtype=float)
-    z = np.asarray(z, dtype=float)
-    best_d2 = np.full(np.broadcast(r, z).shape, np.inf)
-    best_r = np.zeros_like(best_d2)
-    best_z = np.zeros_like(best_d2)
-    best_seg = np.zeros(best_d2.shape, dtype=int)
-    for k in range(len(vertices) - 1):
-        a, b = vertices[k], vertices[k + 1]
-        ab = b - a
-        t = ((r - a[0]) * ab[0] + (z - a[1]) * ab[1]) / (ab @ ab)
-        t = np.clip(t, 0.0, 1.0)
-        pr, pz = a[0] + t * ab[0], a[1] + t * ab[1]
-        d2 = (r - pr) ** 2 + (z - pz) ** 2
-        closer = d2 < best_d2
-        best_d2 = np.where(closer, d2, best_d2)
-        best_r = np.where(closer, pr, best_r)
-        best_z = np.where(closer, pz, best_z)
-        best_seg = np.where(closer, k, best_seg)
-    return best_r, best_z, best_seg
+    """Nearest point (pr, pz) on the polyline and the index of its segment, vectorised
+    (:func:`fipy_hopper.boundary.nearest_on_segments`)."""
+    vertices = np.asarray(vertices, dtype=float)
+    pr, pz, seg, _ = nearest_on_segments(r, z, vertices[:-1], vertices[1:])
+    return pr, pz, seg
 
 
 def wall_radius(z, geom: HopperGeometry):
