@@ -621,6 +621,29 @@ def relative_l2(a, b) -> float:
     return float(np.linalg.norm(a[ok] - b[ok]) / np.linalg.norm(b[ok]))
 
 
+def smooth_fit_rms(s, p, lo: float, hi: float) -> float:
+    """RMS of the relative deviation of a profile ``p`` (bins at arc lengths ``s``) from a
+    cubic fitted over its finite bins with ``lo < s < hi`` (NaN with fewer than five)."""
+    s, p = np.asarray(s, float), np.asarray(p, float)
+    sel = (s > lo) & (s < hi) & np.isfinite(p)
+    if sel.sum() < 5:
+        return math.nan
+    fit = np.polyval(np.polyfit(s[sel], p[sel], 3), s[sel])
+    return float(np.sqrt(np.mean(((p[sel] - fit) / fit) ** 2)))
+
+
+def bin_scatter(p) -> float:
+    """Mean over a profile's inner bins of ``|p_i - (p_(i-1) + p_(i+1)) / 2| / p_i``, over
+    the bins whose three values are finite (a real peak barely raises it; NaN if none)."""
+    p = np.asarray(p, float)
+    if len(p) < 3:
+        return math.nan
+    with np.errstate(invalid="ignore", divide="ignore"):
+        terms = np.abs(p[1:-1] - 0.5 * (p[:-2] + p[2:])) / p[1:-1]
+    terms = terms[np.isfinite(terms)]
+    return float(np.mean(terms)) if terms.size else math.nan
+
+
 def load_summary(sim) -> dict:
     """The wall-load numbers of ``summary.json`` from a :class:`~fipy_hopper.simulation.
     Simulation`'s record.

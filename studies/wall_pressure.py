@@ -85,50 +85,85 @@ DEFAULTS = {
     "youngs_moduli": (2.0e6, 5.0e6, 20.0e6),           # Pa, the stiffness series
     "end_time": None,                # s; None: emptying_fraction of the Beverloo emptying time
     "emptying_fraction": 0.65,
+    "wall_bin_width": 0.015,         # m, every case's bins (auto at <= 5 mm; 22.5 mm at 7.5)
+    "rest_angles": (10.0, 20.0, 35.0, 60.0),           # deg, cones at rest at cell_size
+    "rest_wedges": (20.0,),          # deg, wedges at rest at cell_size
     "case_plots": True,
 }
 QUICK = {"half_angles": (30.0,), "bin_diameter": 0.2, "fill_height": 0.1, "bin_height": 0.12,
          "cell_size": 0.01, "cell_sizes": (0.01, 0.0075), "youngs_moduli": (2.0e6, 20.0e6),
-         "end_time": 0.5, "case_plots": False}
+         "end_time": 0.5, "wall_bin_width": 0.03, "rest_angles": (30.0, 45.0),
+         "rest_wedges": (30.0,), "case_plots": False}
 STAGES = ("filling", "early_discharge", "mid_discharge")
 #: the stages compared between cell sizes and moduli: the windowed stages and the envelope
 SERIES_STAGES = STAGES + ("discharge_envelope",)
 COMMON_BIN = 0.045                   # m of wall: 6, 9, 12, 18 bins of 3 cells at 7.5-2.5 mm
 
 
-def base_config(opts, theta, cell_size=None, youngs_modulus=None) -> dict:
-    return {"hopper": {"bin_diameter": opts["bin_diameter"], "half_angle_deg": float(theta),
-                       "outlet_diameter": opts["outlet_diameter"],
-                       "fill_height": opts["fill_height"], "bin_height": opts["bin_height"]},
+def base_config(opts, theta, cell_size=None, youngs_modulus=None, shape="conical") -> dict:
+    if shape == "wedge":
+        hopper = {"shape": "wedge", "bin_width": opts["bin_diameter"],
+                  "outlet_width": opts["outlet_diameter"]}
+    else:
+        hopper = {"bin_diameter": opts["bin_diameter"], "outlet_diameter": opts["outlet_diameter"]}
+    hopper.update(half_angle_deg=float(theta), fill_height=opts["fill_height"],
+                  bin_height=opts["bin_height"])
+    return {"hopper": hopper,
             "material": {"friction_angle_deg": opts["friction_angle"],
                          "youngs_modulus": float(youngs_modulus or opts["youngs_modulus"])},
             "wall": {"friction_angle_deg": opts["wall_friction"]},
             "numerics": {"cell_size": float(cell_size or opts["cell_size"])},
-            "run": {"output_interval": 0.05}}
+            "run": {"output_interval": 0.05, "wall_bin_width": float(opts["wall_bin_width"])}}
 
 
 def case_variants(opts) -> list:
-    """``(theta, cell_size, E, series)`` of every case, without repeats: the grid series and
-    the stiffness series at the first half-angle, and the other half-angles."""
+    """``(theta, shape, cell_size, E, series)`` of every case, without repeats: the grid
+    series and the stiffness series at the first half-angle, the other half-angles, and the
+    cones and wedges at rest (``rest``) at ``cell_size`` that are not among them (a cone
+    discharged at that cell size is at rest in its ``filling`` stage)."""
     ref = float(opts["half_angles"][0])
+    h, E0 = float(opts["cell_size"]), float(opts["youngs_modulus"])
     variants = {}
-    for h in opts["cell_sizes"]:
-        variants[(ref, float(h), float(opts["youngs_modulus"]))] = "grid"
+    for cell in opts["cell_sizes"]:
+        variants[(ref, "conical", float(cell), E0)] = "grid"
     for E in opts["youngs_moduli"]:
-        key = (ref, float(opts["cell_size"]), float(E))
-        variants.setdefault(key, "stiffness")
+        variants.setdefault((ref, "conical", h, float(E)), "stiffness")
     for theta in opts["half_angles"][1:]:
-        variants.setdefault((float(theta), float(opts["cell_size"]),
-                             float(opts["youngs_modulus"])), "angle")
-    return [(t, h, E, series) for (t, h, E), series in variants.items()]
+        variants.setdefault((float(theta), "conical", h, E0), "angle")
+    for shape, angles in (("conical", opts["rest_angles"]), ("wedge", opts["rest_wedges"])):
+        for theta in angles:
+            variants.setdefault((float(theta), shape, h, E0), "rest")
+    return [(t, shape, cell, E, series) for (t, shape, cell, E), series in variants.items()]
+
+
+def rest_cases(rows: list, options: dict) -> list:
+    """The rows of the hoppers at rest of ``rest_angles`` and ``rest_wedges`` (at
+    ``cell_size`` and ``youngs_modulus``; a discharged cone's row stands for its angle)."""
+    wanted = ([(float(t), "conical") for t in options["rest_angles"]]
+              + [(float(t), "wedge") for t in options["rest_wedges"]])
+    found = {(r["half_angle_deg"], r.get("shape", "conical")): r for r in rows
+             if r["cell_size_m"] == options["cell_size"]
+             and r["youngs_modulus_Pa"] == options["youngs_modulus"]}
+    return [found[key] for key in wanted if key in found]
 
 
 def setup(quick: bool = False, **options) -> dict:
     """The cases and options (``{"options", "cases", "setting"}``); unknown options raise."""
     opts = _sweep.resolve_options(DEFAULTS, options, QUICK if quick else None)
     cases = []
-    for theta, cell, E, series in case_variants(opts):
-        config = base_config(opts, theta, cell, E)
+    for theta, shape, cell, E, series in case_variants(opts):
+        config = base_config(opts, theta, cell, E, shape)
+        if series == "rest":
+            config["run"]["end_time"] = 0.0
+            cases.append(_sweep.make_case(
+                _sweep.case_name(("wedge" if shape == "wedge" else "theta", float(theta)),
+                                 ("wall", float(opts["wall_friction"])), ("h", 1000 * cell),
+                                 ("E", E / 1e6), ("rest", "")),
+                {"half_angle_deg": float(theta), "shape": shape,
+                 "wall_friction_deg": float(opts["wall_friction"]), "cell_size_m": cell,
+                 "youngs_modulus_Pa": E, "series": series, "end_time_s": 0.0},
+                config, plots=opts["case_plots"]))
+            continue
         end = opts["end_time"]
         if end is None:
             cfg = _sweep._config(config)
@@ -140,9 +175,9 @@ def setup(quick: bool = False, **options) -> dict:
         cases.append(_sweep.make_case(
             _sweep.case_name(("theta", float(theta)), ("wall", float(opts["wall_friction"])),
                              ("h", 1000 * cell), ("E", E / 1e6)),
-            {"half_angle_deg": float(theta), "wall_friction_deg": float(opts["wall_friction"]),
-             "cell_size_m": cell, "youngs_modulus_Pa": E, "series": series,
-             "end_time_s": float(end)},
+            {"half_angle_deg": float(theta), "shape": shape,
+             "wall_friction_deg": float(opts["wall_friction"]), "cell_size_m": cell,
+             "youngs_modulus_Pa": E, "series": series, "end_time_s": float(end)},
             config, plots=True))
     return {"options": opts, "cases": cases, "setting": _sweep.setting_label(quick, options)}
 
