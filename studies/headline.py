@@ -250,17 +250,44 @@ def _bin_janssen(s):
 
 
 def _wall_convergence(s):
-    rows = [r for r in s.table("Convergence and stiffness (relative L2 over the whole wall, "
-                               "45 mm bins)") if r["series"] == "grid"]
-    last = {}
-    for r in rows:
-        last[r["stage"]] = r
+    stages = {}
+    for r in s.table("Convergence and stiffness, bin by bin on the shared bins"):
+        if r["series"] == "grid":
+            stages.setdefault(r["stage"], []).append(r)
+    last = {stage: rows[-1] for stage, rows in stages.items()}
     pair = last["filling"]["pair"]
-    values = {stage: float(r["L2 change %"]) for stage, r in last.items()}
-    return (f"last change ({pair.replace('->', ' to ')}) {last['filling']['L2 change %']} % "
-            f"at rest, {last['early_discharge']['L2 change %']} % with 90 % left, "
-            f"{last['discharge_envelope']['L2 change %']} % for the envelope",
-            {"pair": pair, "last_change_pct": values})
+
+    def worst(r):
+        if r["where"] == "bin wall, first bin above the transition":
+            return (f"{r['corner bin aside %']} % ({r['largest bin diff %']} % in the bin "
+                    "wall's first bin)")
+        return f"{r['largest bin diff %']} %"
+
+    l2 = " → ".join(r["L2 change %"] for r in stages["filling"])
+    return (f"{pair.replace('->', ' to ')}, bin by bin (the lip's two bins aside): largest "
+            f"difference {worst(last['filling'])} at rest, {worst(last['early_discharge'])} "
+            f"with 90 % left, {worst(last['discharge_envelope'])} for the envelope; L2 "
+            f"changes at rest {l2} %",
+            {"pair": pair,
+             "largest_bin_diff_pct": {st: float(r["largest bin diff %"])
+                                      for st, r in last.items()},
+             "corner_bin_aside_pct": {st: float(r["corner bin aside %"])
+                                      for st, r in last.items()},
+             "l2_changes_at_rest_pct": [float(r["L2 change %"]) for r in stages["filling"]]})
+
+
+def _wall_smoothness(s):
+    m = s.finding(r"At rest, ([\d.]+) mm cells, ([\d.]+) mm bins, .*?: RMS deviation from a "
+                  r"cubic over its bins \(.*?\) (.*)\.$")
+    cases = re.findall(r"([\d.]+) deg (cone|wedge) ([\d.]+) / ([\d.]+) / ([\d.]+|n/a) %", m[3])
+    recovered = [float(c[2]) for c in cases]
+    raw = [float(c[3]) for c in cases]
+    names = [f"{c[0]}° {c[1]}" for c in cases]
+    return (f"RMS deviation from a smooth curve at most {max(recovered):g} % (node by node "
+            f"{min(raw):g}–{max(raw):g} %) over {', '.join(names)} ({m[1]} mm cells, {m[2]} mm "
+            "bins)",
+            {"cases": names, "recovered_pct": recovered, "raw_pct": raw,
+             "cell_mm": float(m[1]), "bin_mm": float(m[2])})
 
 
 def _discharge_loads_e(s):
@@ -335,6 +362,7 @@ def _element(s):
 
 V, W, D, L = ("tests/test_validation.py", "tests/test_wall_loads.py", "tests/test_discharge.py",
               "tests/test_wedge.py")
+T = "tests/test_wall_traction.py"
 CLAIMS = (
     Claim("flow_mode_cones", "Mass or funnel flow of a cone against Jenike's critical "
           "half-angle", "flow_mode_map", _flow_mode_cones,
@@ -366,9 +394,13 @@ CLAIMS = (
           (f"{V}::test_filled_cone_pressure_against_walker",), readme=True),
     Claim("bin_janssen", "The bin's wall pressure at rest against Janssen", "wall_pressure",
           _bin_janssen, (f"{W}::test_tall_flat_bin_reaches_janssens_asymptote",)),
+    Claim("wall_smoothness", "The wall pressure along a wall that cuts the cells, at rest",
+          "wall_pressure", _wall_smoothness,
+          (f"{T}::test_the_pressure_on_a_cut_wall_at_rest_is_smooth",)),
     Claim("wall_convergence", "The wall-pressure profile under grid refinement",
           "wall_pressure", _wall_convergence,
-          (f"{V}::test_filled_wall_pressure_converges_with_the_cell_size",), readme=True),
+          (f"{T}::test_the_profile_at_rest_converges_bin_by_bin",
+           f"{V}::test_filled_wall_pressure_converges_with_the_cell_size"), readme=True),
     Claim("discharge_loads_stiffness", "Discharge wall loads against the softened stiffness "
           "E (indicative in the bin)", "wall_pressure", _discharge_loads_e,
           (f"{W}::test_filled_loads_do_not_depend_on_the_stiffness",
