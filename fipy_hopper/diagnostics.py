@@ -595,25 +595,6 @@ def wall_k(wall_loads: WallLoads, p_n, state, geom, margin_bins: int = 2) -> flo
     return float(np.median(p_n[keep] / -szz[keep]))
 
 
-def coarse_wall_profile(s, r, p_n, bin_length: float, s_top: float, width: float):
-    """A wall-pressure profile put on coarser common bins: ``(centres, p_n)`` on bins of
-    ``width`` m of wall from the outlet lip (``s = 0``) up to ``s_top``.  Each common bin's
-    pressure is the force of the fine bins whose centres fall in it (``p_n`` times their wall
-    area ``bin_length r`` per radian) over their area, so the merge conserves the wall force
-    and is exact when ``width`` is a multiple of ``bin_length``; bins with no fine bin are NaN.
-    Profiles of different grids compared on the same ``width`` (say 45 mm: 6, 9, 12 and 18
-    three-cell bins at 7.5, 5, 3.75 and 2.5 mm) measure convergence without interpolation."""
-    s, r, p_n = (np.asarray(a, float) for a in (s, r, p_n))
-    n = int(math.floor(s_top / width + 1e-9))
-    index = np.floor(s / width + 1e-9).astype(int)
-    keep = (index >= 0) & (index < n) & np.isfinite(p_n)
-    area = bin_length * r
-    force = np.bincount(index[keep], (p_n * area)[keep], n)
-    total = np.bincount(index[keep], area[keep], n)
-    centres = (np.arange(n) + 0.5) * width
-    return centres, np.where(total > 0, force / np.where(total > 0, total, 1.0), np.nan)
-
-
 def relative_l2(a, b) -> float:
     """``|a - b|_2 / |b|_2`` over the entries where both are finite."""
     a, b = np.asarray(a, float), np.asarray(b, float)

@@ -254,26 +254,18 @@ def _wall_convergence(s):
     for r in s.table("Convergence and stiffness, bin by bin on the shared bins"):
         if r["series"] == "grid":
             stages.setdefault(r["stage"], []).append(r)
-    last = {stage: rows[-1] for stage, rows in stages.items()}
-    pair = last["filling"]["pair"]
-
-    def worst(r):
-        if r["where"] == "bin wall, first bin above the transition":
-            return (f"{r['corner bin aside %']} % ({r['largest bin diff %']} % in the bin "
-                    "wall's first bin)")
-        return f"{r['largest bin diff %']} %"
-
-    l2 = " → ".join(r["L2 change %"] for r in stages["filling"])
-    return (f"{pair.replace('->', ' to ')}, bin by bin (the lip's two bins aside): largest "
-            f"difference {worst(last['filling'])} at rest, {worst(last['early_discharge'])} "
-            f"with 90 % left, {worst(last['discharge_envelope'])} for the envelope; L2 "
-            f"changes at rest {l2} %",
-            {"pair": pair,
-             "largest_bin_diff_pct": {st: float(r["largest bin diff %"])
-                                      for st, r in last.items()},
-             "corner_bin_aside_pct": {st: float(r["corner bin aside %"])
-                                      for st, r in last.items()},
-             "l2_changes_at_rest_pct": [float(r["L2 change %"]) for r in stages["filling"]]})
+    last = [stages[st][-1] for st in ("filling", "early_discharge", "discharge_envelope")]
+    pair = last[0]["pair"]
+    cone = [r["cone %"] for r in last]
+    wall = [r["bin wall inside %"] for r in last]
+    l2 = [r["L2 change %"] for r in stages["filling"]]
+    return (f"{pair.replace('->', ' to ')}, bin by bin: cone within {' / '.join(cone)} %, bin "
+            f"wall within {' / '.join(wall)} % (at rest / 90 % left / envelope; the lip's, "
+            f"the corner's and the top bins aside); L2 at rest {' → '.join(l2)} %",
+            {"pair": pair, "stages": ["filling", "early_discharge", "discharge_envelope"],
+             "cone_max_diff_pct": [float(v) for v in cone],
+             "bin_wall_max_diff_pct": [float(v) for v in wall],
+             "l2_changes_at_rest_pct": [float(v) for v in l2]})
 
 
 def _wall_smoothness(s):

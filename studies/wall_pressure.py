@@ -421,10 +421,11 @@ def compared_bins(res, stage: str) -> np.ndarray:
 def bin_by_bin(res_a, res_b, stage: str):
     """Two runs' profiles of a stage on the same bins, compared bin by bin: the largest
     relative difference ``|p_a - p_b| / p_b`` over the bins both count
-    (:func:`compared_bins`), its place (``s`` and region), the largest with the transition's
-    corner bin (the bin wall's first) aside, and the relative L2 difference over every bin of
-    the wall, the lip's included (%).  ``None`` when a run misses the stage; ``ValueError``
-    when the bins differ."""
+    (:func:`compared_bins`) and its place (``s``, and which bin: on the cone or the bin wall,
+    the bin wall's first above the transition's corner, the top one at the surface); the
+    largest on the cone and on the bin wall with its first and the top bins aside; and the
+    relative L2 difference over every bin of the wall, the lip's included (all in %).
+    ``None`` when a run misses the stage; ``ValueError`` when the bins differ."""
     a, b = stage_profile(res_a, stage), stage_profile(res_b, stage)
     if a is None or b is None:
         return None
@@ -434,15 +435,30 @@ def bin_by_bin(res_a, res_b, stage: str):
                          "bins: give them the same run.wall_bin_width")
     s_t = float(geometry.transition_arc_length(res_b.config.hopper))
     keep = compared_bins(res_a, stage) & compared_bins(res_b, stage) & (pb > 0)
-    diff = np.where(keep, np.abs(pa - pb) / np.where(keep, pb, 1.0), -1.0)
-    corner = int(np.argmax(s > s_t)) if (s > s_t).any() else -1
-    k = int(np.argmax(diff))
-    where = ("cone" if s[k] < s_t else
-             "bin wall, first bin above the transition" if k == corner else "bin wall")
-    return {"max_diff_pct": 100 * float(diff[k]), "at_s_m": float(s[k]), "where": where,
-            "max_diff_elsewhere_pct": 100 * float(np.delete(diff, corner).max()
-                                                  if corner >= 0 else diff.max()),
+    diff = 100 * np.abs(pa - pb) / np.where(keep, pb, 1.0)
+    special = {int(np.argmax(s > s_t)): "first bin above the transition",
+               int(np.flatnonzero(keep)[-1]): "top bin at the surface"}
+    k = int(np.flatnonzero(keep)[np.argmax(diff[keep])])
+    where = ("cone" if s[k] < s_t else "bin wall") + (f", {special[k]}" if k in special else "")
+    inner = keep.copy()
+    inner[list(special)] = False
+
+    def largest(mask):
+        return float(diff[mask].max()) if mask.any() else math.nan
+
+    return {"max_diff_pct": float(diff[k]), "at_s_m": float(s[k]), "where": where,
+            "cone_max_diff_pct": largest(inner & (s < s_t)),
+            "bin_wall_max_diff_pct": largest(inner & (s > s_t)),
             "l2_change_pct": 100 * relative_l2(pa, pb)}
+
+
+def corner_deficit(res) -> float:
+    """How much less the bin wall's first bin above the transition carries at rest than the
+    next one up, ``100 (1 - p_1 / p_2)`` (%): where the corner's node takes the cone's load
+    along the cone's normal and the bin wall's first cell is under-loaded."""
+    s, p = stage_profile(res, "filling")
+    k = int(np.argmax(s > float(geometry.transition_arc_length(res.config.hopper))))
+    return 100 * (1 - float(p[k] / p[k + 1]))
 
 
 def smoothness_analysis(rows: list) -> list:
@@ -534,10 +550,15 @@ def series_analysis(rows: list) -> tuple:
             key = f"{1000 * ra['cell_size_m']:g}->{1000 * rb['cell_size_m']:g} mm"
             pair = bin_by_bin(a, b, stage)
             to_finest = bin_by_bin(a, finest, stage)
-            for name in ("l2_change_pct", "max_diff_pct", "max_diff_elsewhere_pct"):
+            for name in ("l2_change_pct", "max_diff_pct", "cone_max_diff_pct",
+                         "bin_wall_max_diff_pct"):
                 numbers[f"{name}[{stage}|{key}]"] = pair[name]
             table.append({"series": "grid", "stage": stage, "pair": key, **pair,
                           "l2_from_finest_pct": to_finest["l2_change_pct"]})
+        if stage == "filling":
+            for r, res in runs:
+                numbers[f"corner_deficit_pct[{1000 * r['cell_size_m']:g} mm]"] = \
+                    corner_deficit(res)
         changes = [t["l2_change_pct"] for t in table
                    if t["series"] == "grid" and t["stage"] == stage]
         numbers[f"l2_changes_decrease[{stage}]"] = bool(np.all(np.diff(changes) < 0))
@@ -875,6 +896,13 @@ def write_outputs(out, rows, profiles, comparison, switch, numbers, options, set
     smooth_findings, smooth_numbers = smoothness_findings(smoothness, rows, rest, options)
     findings += smooth_findings
     numbers.update(smooth_numbers)
+    deficits = {k[len("corner_deficit_pct["):-1]: v for k, v in numbers.items()
+                if k.startswith("corner_deficit_pct[")}
+    if deficits:
+        findings.append("At rest the bin wall's first bin above the transition carries less "
+                        "than the next one up (the corner's node takes the cone's load along "
+                        "the cone's normal): by " + ", ".join(
+                            f"{v:.1f} % at {h}" for h, v in deficits.items()) + ".")
     for stage in SERIES_STAGES:
         pairs = [t for t in series_table if t["series"] == "grid" and t["stage"] == stage]
         if pairs:
@@ -884,8 +912,10 @@ def write_outputs(out, rows, profiles, comparison, switch, numbers, options, set
                 "relative difference of a bin " + ", ".join(
                     f"{t['pair']} {t['max_diff_pct']:.1f} % (s = {t['at_s_m']:.3f} m, "
                     f"{t['where']})" for t in pairs)
-                + "; the transition's corner bin aside " + ", ".join(
-                    f"{t['pair']} {t['max_diff_elsewhere_pct']:.1f} %" for t in pairs)
+                + "; on the cone " + ", ".join(
+                    f"{t['pair']} {t['cone_max_diff_pct']:.1f} %" for t in pairs)
+                + "; on the bin wall, its first bin and the top one aside " + ", ".join(
+                    f"{t['pair']} {t['bin_wall_max_diff_pct']:.1f} %" for t in pairs)
                 + "; relative L2 over the whole wall " + ", ".join(
                     f"{t['pair']} {t['l2_change_pct']:.1f} %" for t in pairs)
                 + (" (decreasing)." if numbers.get(f"l2_changes_decrease[{stage}]")
@@ -987,11 +1017,12 @@ def write_outputs(out, rows, profiles, comparison, switch, numbers, options, set
     if series_table:
         tables.append({"title": CONVERGENCE_TABLE,
                        "columns": ["series", "stage", "pair", "largest bin diff %", "at s (m)",
-                                   "where", "corner bin aside %", "L2 change %",
+                                   "where", "cone %", "bin wall inside %", "L2 change %",
                                    "L2 from finest %"],
                        "rows": [[t["series"], t["stage"], t["pair"], round(t["max_diff_pct"], 1),
                                  round(t["at_s_m"], 3), t["where"],
-                                 round(t["max_diff_elsewhere_pct"], 1),
+                                 _sweep.rounded(t["cone_max_diff_pct"], 1),
+                                 _sweep.rounded(t["bin_wall_max_diff_pct"], 1),
                                  round(t["l2_change_pct"], 2),
                                  _sweep.rounded(t["l2_from_finest_pct"], 2)]
                                 for t in series_table]})
@@ -1073,12 +1104,12 @@ def headline(numbers: dict, comparison: list, switch: list, rows: list) -> str:
                      f"{numbers['rest_rms_max_pct[raw]']:.1f} %)")
     last = {}
     for key, value in numbers.items():
-        if key.startswith("max_diff_elsewhere_pct["):
-            stage, pair = key[len("max_diff_elsewhere_pct["):-1].split("|")
+        if key.startswith("cone_max_diff_pct["):
+            stage, pair = key[len("cone_max_diff_pct["):-1].split("|")
             last[stage] = (pair, value, numbers[f"l2_change_pct[{stage}|{pair}]"])
     if last:
-        parts.append(f"last refinement ({next(iter(last.values()))[0]}), largest bin "
-                     "difference but the lip's and the corner's / L2: " + ", ".join(
+        parts.append(f"last refinement ({next(iter(last.values()))[0]}), the cone's largest "
+                     "bin difference / L2 over the wall: " + ", ".join(
                          f"{STAGE_WORDS[st]} {d:.1f} / {l2:.1f} %"
                          for st, (_, d, l2) in last.items()))
     spread = [f"{STAGE_WORDS[st]} {numbers[f'E_spread_pct[{st}]']:.1f} % (cone "
