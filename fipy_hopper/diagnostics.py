@@ -791,30 +791,34 @@ def wall_k(wall_loads: WallLoads, p_n, state, geom, margin_bins: int = 2) -> flo
     return float(np.median(p_n[keep] / -szz[keep]))
 
 
-def coarse_wall_profile(s, r, p_n, bin_length: float, s_top: float, width: float):
-    """A wall-pressure profile put on coarser common bins: ``(centres, p_n)`` on bins of
-    ``width`` m of wall from the outlet lip (``s = 0``) up to ``s_top``.  Each common bin's
-    pressure is the force of the fine bins whose centres fall in it (``p_n`` times their wall
-    area ``bin_length r`` per radian) over their area, so the merge conserves the wall force
-    and is exact when ``width`` is a multiple of ``bin_length``; bins with no fine bin are NaN.
-    Profiles of different grids compared on the same ``width`` (say 45 mm: 6, 9, 12 and 18
-    three-cell bins at 7.5, 5, 3.75 and 2.5 mm) measure convergence without interpolation."""
-    s, r, p_n = (np.asarray(a, float) for a in (s, r, p_n))
-    n = int(math.floor(s_top / width + 1e-9))
-    index = np.floor(s / width + 1e-9).astype(int)
-    keep = (index >= 0) & (index < n) & np.isfinite(p_n)
-    area = bin_length * r
-    force = np.bincount(index[keep], (p_n * area)[keep], n)
-    total = np.bincount(index[keep], area[keep], n)
-    centres = (np.arange(n) + 0.5) * width
-    return centres, np.where(total > 0, force / np.where(total > 0, total, 1.0), np.nan)
-
-
 def relative_l2(a, b) -> float:
     """``|a - b|_2 / |b|_2`` over the entries where both are finite."""
     a, b = np.asarray(a, float), np.asarray(b, float)
     ok = np.isfinite(a) & np.isfinite(b)
     return float(np.linalg.norm(a[ok] - b[ok]) / np.linalg.norm(b[ok]))
+
+
+def smooth_fit_rms(s, p, lo: float, hi: float) -> float:
+    """RMS of the relative deviation of a profile ``p`` (bins at arc lengths ``s``) from a
+    cubic fitted over its finite bins with ``lo < s < hi`` (NaN with fewer than five)."""
+    s, p = np.asarray(s, float), np.asarray(p, float)
+    sel = (s > lo) & (s < hi) & np.isfinite(p)
+    if sel.sum() < 5:
+        return math.nan
+    fit = np.polyval(np.polyfit(s[sel], p[sel], 3), s[sel])
+    return float(np.sqrt(np.mean(((p[sel] - fit) / fit) ** 2)))
+
+
+def bin_scatter(p) -> float:
+    """Mean over a profile's inner bins of ``|p_i - (p_(i-1) + p_(i+1)) / 2| / p_i``, over
+    the bins whose three values are finite (a real peak barely raises it; NaN if none)."""
+    p = np.asarray(p, float)
+    if len(p) < 3:
+        return math.nan
+    with np.errstate(invalid="ignore", divide="ignore"):
+        terms = np.abs(p[1:-1] - 0.5 * (p[:-2] + p[2:])) / p[1:-1]
+    terms = terms[np.isfinite(terms)]
+    return float(np.mean(terms)) if terms.size else math.nan
 
 
 def load_summary(sim) -> dict:

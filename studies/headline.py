@@ -250,17 +250,36 @@ def _bin_janssen(s):
 
 
 def _wall_convergence(s):
-    rows = [r for r in s.table("Convergence and stiffness (relative L2 over the whole wall, "
-                               "45 mm bins)") if r["series"] == "grid"]
-    last = {}
-    for r in rows:
-        last[r["stage"]] = r
-    pair = last["filling"]["pair"]
-    values = {stage: float(r["L2 change %"]) for stage, r in last.items()}
-    return (f"last change ({pair.replace('->', ' to ')}) {last['filling']['L2 change %']} % "
-            f"at rest, {last['early_discharge']['L2 change %']} % with 90 % left, "
-            f"{last['discharge_envelope']['L2 change %']} % for the envelope",
-            {"pair": pair, "last_change_pct": values})
+    stages = {}
+    for r in s.table("Convergence and stiffness, bin by bin on the shared bins"):
+        if r["series"] == "grid":
+            stages.setdefault(r["stage"], []).append(r)
+    last = [stages[st][-1] for st in ("filling", "early_discharge", "discharge_envelope")]
+    pair = last[0]["pair"]
+    cone = [r["cone %"] for r in last]
+    wall = [r["bin wall inside %"] for r in last]
+    l2 = [r["L2 change %"] for r in stages["filling"]]
+    return (f"{pair.replace('->', ' to ')}, bin by bin: cone within {' / '.join(cone)} %, bin "
+            f"wall within {' / '.join(wall)} % (at rest / 90 % left / envelope; the lip's, "
+            f"the corner's and the top bins aside); L2 at rest {' → '.join(l2)} %",
+            {"pair": pair, "stages": ["filling", "early_discharge", "discharge_envelope"],
+             "cone_max_diff_pct": [float(v) for v in cone],
+             "bin_wall_max_diff_pct": [float(v) for v in wall],
+             "l2_changes_at_rest_pct": [float(v) for v in l2]})
+
+
+def _wall_smoothness(s):
+    m = s.finding(r"At rest, ([\d.]+) mm cells, ([\d.]+) mm bins, .*?: RMS deviation from a "
+                  r"cubic over its bins \(.*?\) (.*)\.$")
+    cases = re.findall(r"([\d.]+) deg (cone|wedge) ([\d.]+) / ([\d.]+) / ([\d.]+|n/a) %", m[3])
+    recovered = [float(c[2]) for c in cases]
+    raw = [float(c[3]) for c in cases]
+    names = [f"{c[0]}° {c[1]}" for c in cases]
+    return (f"RMS deviation from a smooth curve at most {max(recovered):g} % (node by node "
+            f"{min(raw):g}–{max(raw):g} %) over {', '.join(names)} ({m[1]} mm cells, {m[2]} mm "
+            "bins)",
+            {"cases": names, "recovered_pct": recovered, "raw_pct": raw,
+             "cell_mm": float(m[1]), "bin_mm": float(m[2])})
 
 
 def _discharge_loads_e(s):
@@ -335,6 +354,7 @@ def _element(s):
 
 V, W, D, L = ("tests/test_validation.py", "tests/test_wall_loads.py", "tests/test_discharge.py",
               "tests/test_wedge.py")
+T = "tests/test_wall_traction.py"
 CLAIMS = (
     Claim("flow_mode_cones", "Mass or funnel flow of a cone against Jenike's critical "
           "half-angle", "flow_mode_map", _flow_mode_cones,
@@ -366,9 +386,13 @@ CLAIMS = (
           (f"{V}::test_filled_cone_pressure_against_walker",), readme=True),
     Claim("bin_janssen", "The bin's wall pressure at rest against Janssen", "wall_pressure",
           _bin_janssen, (f"{W}::test_tall_flat_bin_reaches_janssens_asymptote",)),
+    Claim("wall_smoothness", "The wall pressure along a wall that cuts the cells, at rest",
+          "wall_pressure", _wall_smoothness,
+          (f"{T}::test_the_pressure_on_a_cut_wall_at_rest_is_smooth",)),
     Claim("wall_convergence", "The wall-pressure profile under grid refinement",
           "wall_pressure", _wall_convergence,
-          (f"{V}::test_filled_wall_pressure_converges_with_the_cell_size",), readme=True),
+          (f"{T}::test_the_profile_at_rest_converges_bin_by_bin",
+           f"{V}::test_filled_wall_pressure_converges_with_the_cell_size"), readme=True),
     Claim("discharge_loads_stiffness", "Discharge wall loads against the softened stiffness "
           "E (indicative in the bin)", "wall_pressure", _discharge_loads_e,
           (f"{W}::test_filled_loads_do_not_depend_on_the_stiffness",

@@ -13,6 +13,10 @@ validation results.
 The figures are copied next to the report (``report_figures/<study>/``) so that the report and
 its pictures travel together; ``--no-copy`` links the study outputs in place instead.
 
+``--only STUDY ...`` rewrites those studies' sections, overview rows and figures in the
+existing report and keeps every other section as it is (for a study rerun on a machine that
+does not hold the other studies' outputs).
+
 Written to the default ``studies/REPORT.md``, the report is then read by
 ``studies/headline.py``, which writes ``studies/headline.json`` (the numbers the front door
 publishes, with their studies' commits) and fills the generated regions of ``README.md`` and
@@ -21,7 +25,7 @@ publishes, with their studies' commits) and fills the generated regions of ``REA
 Usage::
 
     python studies/make_report.py [--root studies/output] [--out studies/REPORT.md] [--no-copy]
-                                  [--no-headline]
+                                  [--no-headline] [--only STUDY ...]
 """
 
 from __future__ import annotations
@@ -32,6 +36,7 @@ import datetime
 import json
 import math
 import os
+import re
 import shutil
 import sys
 from pathlib import Path
@@ -76,14 +81,17 @@ def table(columns, rows) -> list:
 
 
 class Figures:
-    """Copies (or links) figures and returns their Markdown paths relative to the report."""
+    """Copies (or links) figures and returns their Markdown paths relative to the report;
+    the copies of the studies ``studies`` (all: ``None``) are removed first."""
 
-    def __init__(self, report: Path, copy: bool):
+    def __init__(self, report: Path, copy: bool, studies=None):
         self.report = report
         self.copy = copy
         self.folder = report.parent / "report_figures"
-        if copy and self.folder.is_dir():
-            shutil.rmtree(self.folder)
+        for folder in ([self.folder] if studies is None
+                       else [self.folder / name for name in studies]):
+            if copy and folder.is_dir():
+                shutil.rmtree(folder)
 
     def link(self, study: str, path: Path) -> str:
         if self.copy:
@@ -180,14 +188,48 @@ def element_section(folder: Path, figures: Figures):
     return lines, headline
 
 
-def build(root: Path, out: Path, copy: bool = True) -> dict:
-    """Write the report; returns ``{"present": [...], "missing": [...], "path": out}``."""
+def report_parts(text: str) -> dict:
+    """``{study: (overview row, section lines)}`` of a report this script wrote."""
+    rows = {m[1]: m[0] for m in re.finditer(r"^\| `(\w+)` \|.*$", text, flags=re.M)}
+    parts = {}
+    for chunk in re.split(r"^(?=## )", text, flags=re.M):
+        found = re.search(r"^Study `(\w+)`", chunk, flags=re.M)
+        if found and found[1] in rows:
+            parts[found[1]] = (rows[found[1]], chunk.rstrip("\n").split("\n") + [""])
+    return parts
+
+
+def build(root: Path, out: Path, copy: bool = True, only=None) -> dict:
+    """Write the report; returns ``{"present": [...], "missing": [...], "path": out}``.
+    ``only``: rewrite those studies and keep the other sections of the report at ``out``."""
     root, out = Path(root), Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    figures = Figures(out, copy)
+    kept = {}
+    if only is not None:
+        unknown = set(only) - set(STUDIES) - {ELEMENT_TESTS}
+        if unknown:
+            raise ValueError(f"no such studies: {sorted(unknown)}")
+        absent = [n for n in only if not (root / n / ("failure_deviators.csv" if n == ELEMENT_TESTS
+                                                     else "study.json")).is_file()]
+        if absent:
+            raise FileNotFoundError(f"no outputs in {root} for {absent}")
+        kept = {k: v for k, v in report_parts(out.read_text(encoding="utf-8")).items()
+                if k not in only}
+    figures = Figures(out, copy, only)
     present, missing, body, overview = [], [], [], []
+
+    def keep(name) -> bool:
+        if name not in kept:
+            return False
+        present.append(name)
+        body.extend(kept[name][1])
+        overview.append(kept[name][0])
+        return True
+
     for name in STUDIES:
         path = root / name / "study.json"
+        if keep(name):
+            continue
         if not path.is_file():
             missing.append(name)
             continue
@@ -196,26 +238,30 @@ def build(root: Path, out: Path, copy: bool = True) -> dict:
         present.append(name)
         body += study_section(name, data, root / name, figures)
         head = data.get("headline") or (data.get("findings") or [""])[0]
-        overview.append([f"`{name}`", data.get("setting", "?"), data.get("cases", ""), head])
-    element = element_section(root / ELEMENT_TESTS, figures)
-    if element is None:
-        missing.append(ELEMENT_TESTS)
-    else:
+        overview.append("| " + " | ".join(_fmt(c) for c in [
+            f"`{name}`", data.get("setting", "?"), data.get("cases", ""), head]) + " |")
+    element = None if keep(ELEMENT_TESTS) else element_section(root / ELEMENT_TESTS, figures)
+    if element is not None:
         present.append(ELEMENT_TESTS)
         body += element[0]
-        overview.append([f"`{ELEMENT_TESTS}`", "", "", element[1]])
+        overview.append("| " + " | ".join(_fmt(c) for c in [
+            f"`{ELEMENT_TESTS}`", "", "", element[1]]) + " |")
+    elif ELEMENT_TESTS not in kept:
+        missing.append(ELEMENT_TESTS)
     now = datetime.datetime.now().astimezone().isoformat(timespec="seconds")
     lines = ["# fipy_hopper validation report", "",
              f"*Generated by `python studies/make_report.py` from the study outputs in "
              f"`{_display(root, out)}` on {now} (git {_git_commit()}). Do not edit by hand: "
-             "rerun the studies and this script.*", "",
+             "rerun the studies and this script."
+             + (f" Rewritten: {', '.join(only)}; the other sections are kept from the report "
+                "before." if only else "") + "*", "",
              "Each study is rerun with `python studies/<study>.py` (a Dask cluster on this "
              "machine's cores by default; `--scheduler ADDRESS` for an existing cluster, "
              "`--serial` without Dask); finished cases are not recomputed.  The correlations "
              "and their verification tags are those of `fipy_hopper.theory`.", ""]
     if overview:
         lines += ["## Overview", ""]
-        lines += table(["study", "setting", "cases", "headline"], overview)
+        lines += table(["study", "setting", "cases", "headline"], []) + overview
         lines.append("")
     if missing:
         lines += ["## Missing studies", "",
@@ -253,8 +299,11 @@ def main(argv=None) -> int:
                         help="do not rewrite studies/headline.json and the README's and "
                              "docs' generated regions from the report (they are rewritten "
                              "only when the report is the default studies/REPORT.md)")
+    parser.add_argument("--only", nargs="+", metavar="STUDY",
+                        help="rewrite only these studies in the existing report, keeping the "
+                             "other sections as they are")
     args = parser.parse_args(argv)
-    result = build(args.root, args.out, args.copy)
+    result = build(args.root, args.out, args.copy, args.only)
     print(f"report written to {result['path']}: {len(result['present'])} studies "
           f"({', '.join(result['present']) or 'none'}); missing: "
           f"{', '.join(result['missing']) or 'none'}")

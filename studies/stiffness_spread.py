@@ -10,8 +10,8 @@ and 0.06 by default: ``docs/physics_and_numerics.md`` §4); each run sets both:
 * the reference hopper (mass flow) for ``reference_time`` s, the wall-pressure study's
   discharge: the steady rate and the wall loads from the wall's reaction, filled, at 90 % of
   the mass left and their envelope over the discharge, compared between the moduli by the
-  relative L2 difference on the wall-pressure study's 45 mm bins
-  (``wall_pressure.common_profile``).
+  relative L2 difference bin by bin (the runs' own bins, the same at every E:
+  ``wall_pressure.stage_profile``).
 
 Written to ``--out`` (default ``studies/output/stiffness_spread``): ``results.csv`` (one row per
 run), ``spread.csv`` (the spreads per hopper, damping and stage), ``study.json`` and
@@ -159,12 +159,12 @@ def analyse(rows, options) -> tuple:
             f"{r['youngs_modulus_MPa']:g} MPa": r.get("steady_discharge_rate_kg_s", math.nan)
             for r in ref}
         for r, res in loaded:
-            envelope = wall_pressure.common_profile(res, "discharge_envelope")
+            envelope = wall_pressure.stage_profile(res, "discharge_envelope")
             if envelope is not None:
                 envelopes[r["case"]] = (*envelope, float(
                     geometry.transition_arc_length(res.config.hopper)))
         for stage in STAGES:
-            profiles = [wall_pressure.common_profile(res, stage) for _, res in loaded]
+            profiles = [wall_pressure.stage_profile(res, stage) for _, res in loaded]
             profiles = [p for p in profiles if p is not None]
             if len(profiles) < 2:
                 continue

@@ -24,16 +24,17 @@ import warnings
 import numpy as np
 import pytest
 
-from fipy_hopper import geometry, theory
+from fipy_hopper import theory
 from fipy_hopper.config import HopperConfig
-from fipy_hopper.diagnostics import coarse_wall_profile, fit_power_law, relative_l2
+from fipy_hopper.diagnostics import fit_power_law, relative_l2
 from fipy_hopper.model import HopperModel
 from fipy_hopper.simulation import Simulation
 
 RHO, PHI, PHI_W = 1500.0, 30.0, 15.0
 
 
-def config(hopper: dict, cell: float, youngs_modulus: float = 5.0e6, end_time=0.8):
+def config(hopper: dict, cell: float, youngs_modulus: float = 5.0e6, end_time=0.8,
+           wall_bin_width="auto"):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")        # coarse outlets: the resolution warning
         return HopperConfig.from_dict({
@@ -42,7 +43,8 @@ def config(hopper: dict, cell: float, youngs_modulus: float = 5.0e6, end_time=0.
                          "youngs_modulus": youngs_modulus},
             "wall": {"friction_angle_deg": PHI_W},
             "numerics": {"cell_size": cell},
-            "run": {"end_time": end_time, "output_interval": 0.02, "markers_per_side": 0}})
+            "run": {"end_time": end_time, "output_interval": 0.02, "markers_per_side": 0,
+                    "wall_bin_width": wall_bin_width}})
 
 
 def steady_rate(hopper: dict, cell: float, youngs_modulus: float = 5.0e6) -> float:
@@ -147,15 +149,16 @@ def test_rate_does_not_depend_on_the_stiffness(convergence_rates):
 REFERENCE = {"bin_diameter": 0.3, "fill_height": 0.3, "half_angle_deg": 20.0,
              "outlet_diameter": 0.06}
 WALL_CELLS = (0.0075, 0.005, 0.00375, 0.0025)
-COMMON_BIN = 0.045          # m of wall: 6, 9, 12 and 18 three-cell bins at 7.5-2.5 mm
+WALL_BIN = 0.015            # m: every grid's wall bins ("auto" at 5 mm and finer)
 
 
 @pytest.fixture(scope="module")
 def filled_reference():
-    """``{cell: (cfg, s, r, z, p_n)}``: the reference hopper filled to rest (fill-only runs)."""
+    """``{cell: (cfg, s, r, z, p_n)}``: the reference hopper filled to rest (fill-only runs),
+    on the same wall bins at every cell size."""
     out = {}
     for cell in WALL_CELLS:
-        cfg = config(REFERENCE, cell, end_time=0.0)
+        cfg = config(REFERENCE, cell, end_time=0.0, wall_bin_width=WALL_BIN)
         sim = Simulation(HopperModel(cfg), progress=False)
         assert sim.fill(), "the fill did not come to rest"
         _, s, r, z, p, _ = sim.record.wall["filling"]
@@ -186,16 +189,17 @@ def test_filled_cone_pressure_against_walker(filled_reference):
 
 def test_filled_wall_pressure_converges_with_the_cell_size(filled_reference):
     """The filled wall profile converges with the cell size (headline ``wall_convergence``;
-    over the whole wall, the outlet lip included, on 45 mm bins).
+    over the whole wall, the outlet lip included, bin by bin on the 15 mm bins that every
+    grid shares).
 
-    Held: the successive changes decrease and the last is below 5 % (the wall-load
-    convergence criterion of the wall-pressure study).  The bins are common to every grid and
-    merge whole 3-cell bins, so the comparison has no interpolation error of its own."""
+    Held: the successive relative L2 changes decrease and the last is below 5 % (the
+    wall-load convergence criterion of the wall-pressure study).  The bins are the same on
+    every grid, so the comparison has no merging or interpolation error of its own."""
+    s = filled_reference[WALL_CELLS[0]][1]
     profiles = []
     for cell in WALL_CELLS:
-        cfg, s, r, z, p = filled_reference[cell]
-        s_top = float(geometry.arc_length(cfg.hopper.fill_level, cfg.hopper))
-        profiles.append(coarse_wall_profile(s, r, p, 3.0 * cell, s_top, COMMON_BIN)[1])
+        np.testing.assert_array_equal(filled_reference[cell][1], s)
+        profiles.append(filled_reference[cell][4])
     changes = [relative_l2(a, b) for a, b in zip(profiles, profiles[1:])]
     assert all(later < earlier for earlier, later in zip(changes, changes[1:])), changes
     assert changes[-1] < 0.05, changes
