@@ -137,6 +137,8 @@ def _validate(args) -> int:
     from .api import expected_quantities
     from .resources import available_memory
 
+    from .diagnostics import stretch_calls
+
     cfg = _load(args.config)
     e = expected_quantities(cfg)
     need, have = cfg.memory_estimate(), available_memory()
@@ -174,8 +176,11 @@ def _validate(args) -> int:
         f"  Jenike theta_c     {theta_c_text} (phi = {cfg.material.friction_angle_deg:g} deg, "
         f"phi_w = {cfg.wall.friction_angle_deg:g} deg"
         + ("" if geom.axisymmetric else "; plane flow: the conical angle + 10 deg") + ")",
-        f"  expected flow      {e['jenike_flow_mode']} flow ({geom.half_angle_deg:g} deg "
-        f"{hopper})",
+        (f"  expected flow      {e['jenike_flow_mode']} flow ({geom.half_angle_deg:g} deg "
+         f"{hopper})" if geom.classic else
+         "  expected flow      by Jenike, per stretch of hopper wall: " + "; ".join(
+             f"{st['wall']} segment {st['segment']}, {st['half_angle_deg']:.1f} deg: "
+             f"{st['jenike_call']}" for st in stretch_calls(cfg, []))),
         f"  run                until {end}, samples every {run.output_interval:g} s, "
         f"fields every {run.field_interval:g} s",
     ]
