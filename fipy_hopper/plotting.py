@@ -468,7 +468,8 @@ def theory_wall_pressure(cfg: HopperConfig, n: int = 120) -> dict:
         sigma_vt = float(vertical(geom.fill_height, rho, D, K, mu))
     except ValueError:
         sigma_vt = rho * theory.G * geom.fill_height
-    if not geom.classic:           # Walker and EN 1991-4's hoppers: a cone under a bin only
+    if not geom.classic:           # EN 1991-4's hoppers: a cone under a bin only
+        curves.update(_stacked_walker(cfg, sigma_vt, slices, hopper_name, n))
         return curves
     s_cone = np.linspace(0.0, s_t, n)
     theta = geom.half_angle
@@ -489,6 +490,49 @@ def theory_wall_pressure(cfg: HopperConfig, n: int = 120) -> dict:
             curves[f"EN 1991-4, {hopper_name}, {mode}"] = (s_cone, np.asarray(en.p_n))
         except ValueError:
             pass
+    return curves
+
+
+def _stacked_walker(cfg: HopperConfig, sigma_vt: float, slices: int, hopper_name: str,
+                    n: int = 60) -> dict:
+    """Walker's slices (D = 1) down a wall of several sloping stretches under its top
+    vertical one, stretch by stretch: each from its own virtual apex (``x = r / tan(beta)``),
+    with the mean vertical stress at its top the one its upper neighbour leaves at its bottom
+    (``sigma_v = p_n / F``), starting from ``sigma_vt`` at the transition.  Drawn only for a
+    half-section without inserts in the material, down to the first flat stretch.  Returns
+    ``{"Walker, <hopper> stretch k, <mode>": (s, p_n)}``."""
+    geom, mat = cfg.hopper, cfg.material
+    if geom.full_section or any(min(z for _, z in i.outline) < geom.fill_level
+                                for i in geom.inserts):
+        return {}
+    wall = cfg.boundary.chain("wall")
+    a, b = wall.ends()
+    sv = wall.s_vertices
+    below = [k for k in range(wall.n_segments) if b[k, 1] <= geom.cone_height + 1e-12]
+    curves = {}
+    for mode in ("filling", "discharge"):
+        top = sigma_vt
+        for k in reversed(below):
+            dx, dz = b[k, 0] - a[k, 0], b[k, 1] - a[k, 1]
+            if dz <= 0.0 or dx <= 0.0:
+                break                          # a floor or a ledge ends the slices
+            beta = math.degrees(math.atan2(dx, dz))
+            tan_b = dx / dz
+            h = b[k, 0] / tan_b                 # the virtual apex to the stretch's top
+            s = np.linspace(sv[k], sv[k + 1], n)
+            x = np.clip((a[k, 0] + (s - sv[k]) / (sv[k + 1] - sv[k]) * dx) / tan_b, 0.0, h)
+            try:
+                p = np.asarray(theory.walker_hopper_wall_pressure(
+                    x, h, beta, mat.density, mat.friction_angle_deg,
+                    cfg.wall.friction_angle_deg, top, mode=mode, S=slices))
+            except ValueError:
+                break
+            curves[f"Walker, {hopper_name} stretch {k}, {mode}"] = (s, p)
+            mu = math.tan(math.radians(cfg.wall.friction_angle_deg))
+            F = float(theory.en1991_steep_filling_F(beta, mu) if mode == "filling" else
+                      theory.walker_discharge_ratio(mat.friction_angle_deg,
+                                                    cfg.wall.friction_angle_deg, beta))
+            top = float(p[0]) / F
     return curves
 
 
@@ -558,7 +602,9 @@ def wall_pressure(run):
                               f"(s along it)")
     curves = theory_wall_pressure(cfg)
     for name, (s, p) in curves.items():
-        colour, ls = next((v for k, v in styles.items() if name.startswith(k)), ("0.4", "-"))
+        colour, ls = next((v for k, v in styles.items() if name.startswith(k)),
+                          (("C0", "-") if name.endswith("filling") else ("C3", "--"))
+                          if name.startswith("Walker") else ("0.4", "-"))
         ax.plot(s, p / 1e3, ls, color=colour, lw=1.2, label=name)
     c_h = theory.en1991_discharge_factors()[0]
     for name, (s, p) in curves.items():
