@@ -119,3 +119,36 @@ def test_flow_pattern_marks_where_the_hopper_wall_slides(tmp_path):
     np.testing.assert_allclose(ends[1][0], [middle[0][0], middle[1][0]], atol=1e-12)
     np.testing.assert_allclose(ends[1][1], [middle[0][1], middle[1][1]], atol=1e-12)
     assert wall_slip_segments(tmp_path / "none", cfg) == []
+
+
+def test_walker_stretch_by_stretch_is_walker_on_a_single_cone():
+    """The slices stacked stretch by stretch reduce to the classic Walker curve on a single
+    cone under a bin (same sigma_vt at the transition), and on a two-slope hopper carry the
+    vertical stress down: the lower stretch's curve starts from what the upper one leaves."""
+    from fipy_hopper.plotting import _stacked_walker
+
+    cfg = cone()
+    classic = theory_wall_pressure(cfg, n=60)
+    sigma_vt = 2000.0
+    g, mat = cfg.hopper, cfg.material
+    s = np.linspace(0.0, cfg.boundary.arc_at_height("wall", g.cone_height), 60)
+    x = s * math.cos(g.half_angle) + g.outlet_radius / math.tan(g.half_angle)
+    h = g.bin_radius / math.tan(g.half_angle)
+    want = theory.walker_hopper_wall_pressure(np.clip(x, 0, h), h, g.half_angle_deg,
+                                              mat.density, mat.friction_angle_deg,
+                                              cfg.wall.friction_angle_deg, sigma_vt)
+    got = _stacked_walker(cfg, sigma_vt, 2, "cone", n=60)["Walker, cone stretch 0, filling"]
+    np.testing.assert_allclose(got[1], want, rtol=1e-9)
+    assert "Walker, cone, filling" in classic
+    two = HopperConfig.from_dict({"hopper": {
+        "shape": "profile", "wall": [[0.03, 0.0], [0.06, 0.1], [0.15, 0.2], [0.15, 0.5]],
+        "fill_level": 0.4}, "numerics": {"cell_size": 0.01}})
+    curves = _stacked_walker(two, sigma_vt, 2, "cone", n=60)
+    upper = curves["Walker, cone stretch 1, filling"]
+    lower = curves["Walker, cone stretch 0, filling"]
+    mu = math.tan(math.radians(two.wall.friction_angle_deg))
+    beta_u = math.degrees(math.atan2(0.09, 0.1))
+    beta_l = math.degrees(math.atan2(0.03, 0.1))
+    carried = upper[1][0] / theory.en1991_steep_filling_F(beta_u, mu)
+    assert lower[1][-1] == pytest.approx(theory.en1991_steep_filling_F(beta_l, mu) * carried,
+                                         rel=1e-9)
