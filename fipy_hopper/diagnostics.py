@@ -497,7 +497,7 @@ class WallSampler:
         mean = self.mean_stress(state)
         ok = np.isfinite(mean[:, 0])
         n_r, n_z = self.nr, self.nz
-        t_r, t_z = -n_z, n_r          # tangent pointing up the wall
+        t_r, t_z = self.bins.tangent[:, 0], self.bins.tangent[:, 1]   # up the wall, any side
         trac_r = mean[:, 0] * n_r + mean[:, 3] * n_z
         trac_z = mean[:, 3] * n_r + mean[:, 1] * n_z
         p_n = np.where(ok, -(trac_r * n_r + trac_z * n_z), np.nan)

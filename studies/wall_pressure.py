@@ -84,7 +84,7 @@ import _sweep  # noqa: E402
 
 from fipy_hopper import geometry, theory  # noqa: E402
 from fipy_hopper.config import HopperConfig  # noqa: E402
-from fipy_hopper.diagnostics import (WallBins, bin_scatter, relative_l2,  # noqa: E402
+from fipy_hopper.diagnostics import (bin_scatter, relative_l2, wall_bins,  # noqa: E402
                                      smooth_fit_rms)
 
 NAME = "wall_pressure"
@@ -413,8 +413,8 @@ def compared_bins(res, stage: str) -> np.ndarray:
     :data:`LIP_BINS` (a re-entrant corner: the stress is singular) and those whose top
     reaches above the material's surface (:func:`surface_arc_length`)."""
     cfg = res.config
-    bins = WallBins.of(geometry.wall_stretches(cfg.hopper), cfg.wall_bin_width_m)
-    top = bins.edges[1:]
+    bins = wall_bins(cfg)
+    top = bins.hi                              # the wall's own chain: positions are its s
     return (np.arange(len(top)) >= LIP_BINS) & (top <= surface_arc_length(res, stage) + 1e-9)
 
 

@@ -487,6 +487,43 @@ def test_discharge_dynamics_reads_the_bin_plug_without_changing_the_run(root):
         assert np.array_equal(getattr(plain, name), getattr(sampled, name)), name
 
 
+# ---------------------------------------------------------------- any silo
+def test_geometries_study_measures_each_silo(root):
+    """The quick geometries study (10 mm cells, 1.5 s): each silo's numbers are there, and
+    one physical fact per silo holds: the expanded-flow hopper's steep lower stretch slides
+    more than its shallow upper one (Jenike: mass below, funnel above); the insert carries a
+    positive load less than the fill's weight, at rest and in discharge; the slot's near and far
+    walls carry the same pressure at rest (the closed slot's silo is mirror-symmetric but
+    for the floor's friction) and not in discharge; the ledge slides less than the hopper
+    below it; the walls' vertical reactions add up to the summary's."""
+    out = run_quick(root, "geometries")
+    data = study_json(out)
+    assert data["setting"] == "quick" and data["cases_failed"] == 0
+    numbers = data["numbers"]
+    assert set(numbers) == {"expanded", "funnel", "insert", "slot", "ledge"}
+    for n in numbers.values():
+        assert n["mass_balance_error"] < 1e-9 and n["fill_equilibrium_residual"] < 0.005
+    lower, upper = numbers["expanded"]["stretches"]
+    assert (lower["jenike_call"], upper["jenike_call"]) == ("mass", "funnel")
+    assert lower["slip_ratio"] > upper["slip_ratio"]
+    ins = numbers["insert"]
+    assert 0.0 < ins["force_rest_N"] < ins["fill_weight_N"]
+    assert 0.0 < ins["force_discharge_max_N"] < ins["fill_weight_N"]
+    for where in ("top", "widest"):
+        assert all(math.isfinite(ins[where][k]) for k in (
+            "ratio_rest_theory", "ratio_rest_simulated", "ratio_discharge_simulated"))
+    pressure = numbers["slot"]["pressure"]
+    assert pressure["filling"]["near_over_far"] == pytest.approx([1.0] * 4, abs=0.05)
+    assert max(abs(r - 1.0) for r in pressure["early_discharge"]["near_over_far"]) > 0.1
+    assert numbers["slot"]["walls_sum_minus_summary_N_m"] == pytest.approx(
+        0.0, abs=1e-6 * numbers["slot"]["fill_weight_N_m"])
+    hopper, ledge = numbers["ledge"]["stretches"]
+    assert ledge["half_angle_deg"] == 90.0 and ledge["slip_ratio"] < hopper["slip_ratio"]
+    for name in ("geometries.png", "slot_walls.png", "flow_pattern_slot.png",
+                 "wall_pressure_insert.png"):
+        assert_png(out / name)
+
+
 # ---------------------------------------------------------------- the report
 def test_stiffness_spread_runs_both_hoppers_with_and_without_the_viscosities(root):
     out = run_quick(root, "stiffness_spread")
@@ -541,7 +578,7 @@ def test_report_is_generated_from_the_outputs(root, flow_map, discharge, wall, c
                                       "convergence",
                                       "discharge_dynamics", "stiffness_spread",
                                       "robustness", "funnel_channel", "element_tests",
-                                      "lagrangian_vs_eulerian", "arching"}
+                                      "lagrangian_vs_eulerian", "arching", "geometries"}
     assert "python studies/robustness.py" in (tmp_path / "partial.md").read_text()
 
 
@@ -564,7 +601,7 @@ def test_report_rewrites_one_study_and_keeps_the_others(wall, tmp_path):
                              "--only", "wall_pressure"]) == 0
     before = make_report.report_parts(committed)
     after = make_report.report_parts(report.read_text())
-    assert set(after) == set(before) and len(before) == 12
+    assert set(after) == set(before) and len(before) == 13
     for name in before:
         assert (after[name] == before[name]) == (name != "wall_pressure"), name
     assert "Smoothness of p_n" in "\n".join(after["wall_pressure"][1])

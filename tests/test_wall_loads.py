@@ -289,3 +289,28 @@ def test_early_funnel_flow_rate_does_not_depend_on_the_stiffness():
         assert sim.summary()["flow_mode"] == "funnel"
         out.append(sim.state.discharged)
     assert out[0] == pytest.approx(out[1], rel=0.03)
+
+
+def test_the_stress_sampled_shear_points_up_every_wall():
+    """The shear estimated from the stresses next to the wall, ``tau = t.sigma.n``, takes the
+    tangent up the wall on a left wall as on a right one: in a full plane section under a
+    uniform stress with shear sigma_xz = s, the right wall (n = +x) reads tau = s and the left
+    wall (n = -x) reads -s, the mirror image's (its normal turned, the tangent up both)."""
+    wall = [[0.03, 0.0], [0.1, 0.0], [0.1, 0.3]]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        cfg = HopperConfig.from_dict({
+            "hopper": {"shape": "profile", "symmetry": "plane", "section": "full",
+                       "fill_level": 0.2, "wall": wall, "left_wall": [[-x, z] for x, z in wall]},
+            "numerics": {"cell_size": 0.01}, "run": {"markers_per_side": 0}})
+    model = HopperModel(cfg, threads=1)
+    state = model.initial_state()
+    state.sigma[...] = (-1000.0, -2000.0, -1000.0, 300.0)
+    sampler = diagnostics.WallSampler(model)
+    _, _, z, p_n, tau = sampler.profile_all(state)
+    bins = sampler.bins
+    for name, sign in (("wall", 1.0), ("left_wall", -1.0)):
+        side = (bins.wall == name) & (np.abs(bins.normal[:, 1]) < 1e-12) & np.isfinite(tau)
+        assert side.sum() > 5, name
+        np.testing.assert_allclose(tau[side], sign * 300.0, rtol=1e-12, err_msg=name)
+        np.testing.assert_allclose(p_n[side], 1000.0, rtol=1e-12, err_msg=name)
