@@ -74,7 +74,6 @@ class HopperGrid:
 def _open_fraction_cells(boundary, r_nodes, z_nodes, n_sub):
     """Open fraction of each cell (r-weighted for an axisymmetric grid), by ``n_sub x n_sub``
     midpoint sub-sampling of ``boundary.in_solid`` (:class:`fipy_hopper.boundary.Boundary`)."""
-    nr, nz = len(r_nodes) - 1, len(z_nodes) - 1
     h_r, h_z = np.diff(r_nodes), np.diff(z_nodes)
     t = (np.arange(n_sub) + 0.5) / n_sub
     rs = r_nodes[:-1, None] + h_r[:, None] * t[None, :]          # (nr, n_sub)

@@ -36,7 +36,6 @@ if str(HERE) not in sys.path:
     sys.path.insert(0, str(HERE))
 import _sweep  # noqa: E402
 
-from fipy_hopper import geometry  # noqa: E402
 from fipy_hopper.config import HopperConfig  # noqa: E402
 from fipy_hopper.model import HopperModel  # noqa: E402
 from fipy_hopper.simulation import Simulation  # noqa: E402

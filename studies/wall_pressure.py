@@ -232,7 +232,6 @@ def theory_curves(cfg: HopperConfig, s, fill: float, stage: str) -> dict:
     in_bin = s > s_t
     depth = geom.cone_height + fill - z
     out = {}
-    nan = np.full_like(s, np.nan)
     discharge = stage != "filling"
     if fill <= 0 or mu <= 0:
         return out

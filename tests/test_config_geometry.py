@@ -1,7 +1,6 @@
 """Configuration validation, the wall geometry and the grid's cut cells."""
 
 import math
-import warnings
 
 import numpy as np
 import pytest

@@ -145,8 +145,6 @@ def test_stress_switches_from_active_to_passive_on_the_cone_axis(mass_flow):
     """On the axis of the cone, at rest the vertical compression is the larger (the active
     state of a fill: sigma1 near vertical), in mass-flow discharge the radial one (the passive,
     arched state: sigma1 across the flow)."""
-    from fipy_hopper.io import cell_fields
-
     sim = mass_flow
     g, geom = sim.model.grid, sim.model.cfg.hopper
     rows = (g.z_cells > 0.3 * geom.cone_height) & (g.z_cells < 0.8 * geom.cone_height)
