@@ -667,8 +667,9 @@ class WallLoads:
             load_h, load_s = np.where(hung, down, 0.0), np.where(stands, down, 0.0)
             below = np.cumsum(load_h) - 0.5 * load_h
             above = np.cumsum(load_s[::-1])[::-1] - 0.5 * load_s
-            meridional[hung & curved] = (below / (c * n_r))[hung & curved]
-            meridional[stands] = (-above / c)[stands]
+            hanging = hung & curved               # a flat floor or ledge is not hung
+            meridional[hanging] = below[hanging] / (c[hanging] * n_r[hanging])
+            meridional[stands] = -above[stands] / c[stands]
             if name == "wall":
                 top = np.flatnonzero(hung)
                 c_t = geom.bin_radius if geom.axisymmetric else 1.0
