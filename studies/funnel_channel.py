@@ -271,7 +271,8 @@ def write_outputs(out, rows, numbers, channel, options, setting, argv=None):
                        _r(r.get("late_rate_kg_s"), 4), _r(r.get("edge_angle_deg"), 1),
                        _r(r.get("core_open_s"), 2)] for r in rows]}
     settings = {k: (list(v) if isinstance(v, tuple) else v) for k, v in options.items()}
-    headline = "Steady-rate changes from 7.5 to 5 to 3.75 mm: " + "; ".join(
+    sizes = " to ".join(f"{1000 * h:g}" for h in sorted(options["cell_sizes"], reverse=True))
+    headline = f"Steady-rate changes from {sizes} mm: " + "; ".join(
         f"{name.replace('_', ', ')} " + ", ".join(
             "n/a" if v is None else f"{100 * v:.1f} %"
             for v in entry["steady_discharge_rate_kg_s_changes"])
