@@ -1,6 +1,6 @@
 """Any silo a designer draws: expanded flow, an insert, an off-centre slot, a central hopper.
 
-Five silos drawn as profiles (``hopper.shape = "profile"``, issue 34), each an ordinary run
+Five silos drawn as profiles (``hopper.shape = "profile"``), each an ordinary run
 directory, with the outlet's radius (half-width) ``outlet_radius`` (30 mm), the bin's
 ``bin_radius`` (150 mm), the walls up to ``top`` (0.5 m) and the fill levelled at
 ``fill_level`` (0.4 m), phi = 30 deg:

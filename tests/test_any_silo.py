@@ -1,4 +1,4 @@
-"""Any silo a designer draws (issue 34): the boundary as data runs the same as the shorthands
+"""Any silo a designer draws: the boundary as data runs the same as the shorthands
 it generalises, a full plane section mirrors the half one, an insert away from the material
 changes nothing, and new shapes keep the mass and the vertical balance (coarse, short runs)."""
 

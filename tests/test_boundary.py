@@ -19,7 +19,7 @@ from fipy_hopper.cli import main
 from fipy_hopper.config import ConfigError, HopperConfig
 
 RHO = 1500.0
-#: the issue's two-slope hopper: a steep stretch, a shallow one, a bin
+#: a two-slope hopper: a steep stretch, a shallow one, a bin
 TWO_SLOPE = [[0.03, 0.0], [0.08, 0.12], [0.15, 0.2], [0.15, 0.6]]
 #: a double cone on the axis (a diamond in the half-section)
 DIAMOND = [[0.0, 0.16], [0.05, 0.12], [0.0, 0.08]]

@@ -82,8 +82,8 @@ def flowing():
 
 
 def test_twice_the_critical_cohesion_arches(arching):
-    """The outlet opens and the flow stops at once with more than 90 % of the mass left (the
-    issue's bar; measured: 99.98 %, 2 g fell out of 11.26 kg); the at-rest rule ends the run
+    """The outlet opens and the flow stops at once with more than 90 % of the mass left (a
+    no-flow call's bar; measured: 99.98 %, 2 g fell out of 11.26 kg); the at-rest rule ends the run
     after its 0.5 s wait plus one 0.25 s window at most, well before ``max_time``."""
     sim, s, _ = arching
     assert s["flow_mode"] == "no_flow"
@@ -126,7 +126,7 @@ def test_a_third_of_the_critical_cohesion_discharges(flowing):
 def test_cohesive_runs_stay_bounded(case, request):
     """Mass balance to 1e-9 of the initial mass (the outlet books the transport's own face
     values: round-off, measured 3e-16); every field finite at every check; alpha in
-    [0, 1 + 1e-3], the bound the issue sets for the tension and separation states, less
+    [0, 1 + 1e-3], the bound of the tension and separation states, less
     round-off traces below 0 (-1e-12, as in tests/test_compaction.py: redistribution leaves
     traces of a few 1e-17, measured -5.7e-17, which carry no stress)."""
     sim, s, watch = request.getfixturevalue(case)

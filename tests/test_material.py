@@ -95,7 +95,9 @@ def cosine(a, b):
 
 
 def check_update(mat, sig, de, sig_new, dep, status):
-    """The guarantees of every update (see the issue): returns the masks used."""
+    """The guarantees of every update: finite; on or inside the yield surface; an elastic step
+    is the trial stress; the apex return is the apex; the plastic strain is C^-1 of the stress
+    returned and parallel to the flow direction there.  Returns the masks used."""
     assert np.isfinite(sig_new).all() and np.isfinite(dep).all()
     trial = elastic_trial(sig, de, mat)
     p, q, _, _ = invariants(sig_new)
