@@ -78,6 +78,12 @@ _r = _sweep.rounded
 NAME = "geometries"
 TITLE = "Any silo: expanded flow, an insert, an off-centre slot and a central hopper"
 CASES = ("expanded", "funnel", "insert", "slot", "ledge")
+
+
+def num(value, spec: str) -> str:
+    """``value`` formatted by ``spec``, or "n/a" where it is None (a ratio of loads where a wall
+    carries nothing)."""
+    return "n/a" if value is None else format(value, spec)
 STAGES = ("filling", "early_discharge", "mid_discharge", "discharge_envelope")
 DEFAULTS = {
     "cell_size": 0.005, "outlet_radius": 0.03, "bin_radius": 0.15, "top": 0.5,
@@ -604,10 +610,10 @@ def findings_of(numbers) -> list:
     if sl and sl.get("pressure"):
         parts = []
         for stage, p in sl["pressure"].items():
-            ratios = ", ".join("n/a" if v is None else f"{v:.2f}" for v in p["near_over_far"])
-            parts.append(f"{stage.replace('_', ' ')} {ratios} (range {p['ratio_min']:.2f} at "
-                         f"z = {p['ratio_min_z_m']:g} m to {p['ratio_max']:.2f} at "
-                         f"{p['ratio_max_z_m']:g} m)")
+            ratios = ", ".join(num(v, ".2f") for v in p["near_over_far"])
+            parts.append(f"{stage.replace('_', ' ')} {ratios} (range {num(p['ratio_min'], '.2f')}"
+                         f" at z = {num(p['ratio_min_z_m'], 'g')} m to "
+                         f"{num(p['ratio_max'], '.2f')} at {num(p['ratio_max_z_m'], 'g')} m)")
         heights = ", ".join(f"{z:g}" for z in next(iter(sl["pressure"].values()))["heights_m"])
         out.append(f"Off-centre slot (flat-bottomed plane silo, full section): p_n near / far "
                    f"wall at z = {heights} m: " + "; ".join(parts) + ".")
@@ -649,8 +655,8 @@ def headline_of(numbers, stretches) -> str:
                      "in discharge")
     early = numbers.get("slot", {}).get("pressure", {}).get("early_discharge")
     if early:
-        parts.append(f"off-centre slot: near / far wall pressure {early['ratio_min']:.2f}-"
-                     f"{early['ratio_max']:.2f} at 90 % left (1.00 at rest)")
+        parts.append(f"off-centre slot: near / far wall pressure {num(early['ratio_min'], '.2f')}-"
+                     f"{num(early['ratio_max'], '.2f')} at 90 % left (1.00 at rest)")
     return "; ".join(parts) + "."
 
 
