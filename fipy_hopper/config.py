@@ -44,6 +44,10 @@ class ResolutionWarning(UserWarning):
     """The grid resolves a feature of the hopper with few cells."""
 
 
+class ArchingWarning(UserWarning):
+    """The outlet is only a few grains wide: it will arch (Beverloo's regime ends)."""
+
+
 class SamplingWarning(UserWarning):
     """The discharge gets few outputs (a field interval longer than ``run.end_time``)."""
 
@@ -112,6 +116,11 @@ def _check_range(key: str, value: Any, low=None, high=None, low_open=False, high
     return value
 
 
+def _is_zero(value: Any) -> bool:
+    """``value`` is the number 0 (not a bool, not a string)."""
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and value == 0
+
+
 def _check_int(key: str, value: Any, low: int, high: int) -> int:
     """An integer (not a bool, not a float) in ``[low, high]``."""
     if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
@@ -142,6 +151,15 @@ DENSITY_RANGE = (1.0, 2.0e4)
 MODULUS_RANGE = (1e3, 1e12)
 #: Cohesion (Pa): up to 100 MPa, the strength of strong rock; granular media have kPa.
 COHESION_MAX = 1e8
+#: The rate dependence above the Mohr–Coulomb limit (material.rate_dependence): the mu(I)
+#: overstress with the grain size (fipy_hopper.material.rate), or none (the plain
+#: rate-independent law of the published method).
+RATE_DEPENDENCES = ("mu_I", "none")
+#: Grain diameter (m): 1 um (fine powders) to 0.1 m (coarse gravel, rock fill).
+GRAIN_DIAMETER_RANGE = (1e-6, 0.1)
+#: An outlet fewer than this many grains wide arches (Beverloo's regime ends; the classic
+#: figure for free-flowing grains is about 5 grain diameters): a warning.
+ARCHING_GRAINS = 5.0
 #: Cell size (m): 0.1 mm (the size of a sand grain) to 10 m.
 CELL_SIZE_RANGE = (1e-4, 10.0)
 #: Simulated times (s): at most 1e6 s (11.6 days; the largest silos empty in hours).
@@ -645,6 +663,15 @@ class MaterialConfig:
 
     Ranges: density ``[1, 20000]`` kg/m3 (:data:`DENSITY_RANGE`), Young's modulus
     ``[1 kPa, 1 TPa]`` (:data:`MODULUS_RANGE`), cohesion ``[0, 100 MPa]``.
+
+    The grains: ``grain_diameter`` d (m, ``[1 um, 0.1 m]``; 1 mm by default, a medium to
+    coarse silica sand: docs/physics_and_numerics.md §2) and ``grain_density`` rho_s (kg/m3,
+    not below the bulk density; 2650, quartz).  ``rate_dependence``: ``"mu_I"`` (the default)
+    adds the mu(I) rise of the friction in flowing material to the Mohr–Coulomb law
+    (:mod:`fipy_hopper.material.rate`: ``friction_rise`` delta_mu = mu_2 - mu_s in ``(0, 2]``,
+    ``inertial_number_i0`` I_0 in ``(0, 10]``), with d as its length; ``"none"`` is the plain
+    rate-independent law of the published method (d then only enters the comparisons with
+    Beverloo's correlation, and may be 0).
     """
 
     density: float = 1500.0
@@ -653,6 +680,11 @@ class MaterialConfig:
     friction_angle_deg: float = 30.0
     dilation_angle_deg: float = 0.0
     cohesion: float = 0.0
+    grain_diameter: float = 1.0e-3
+    grain_density: float = 2650.0
+    rate_dependence: str = "mu_I"
+    friction_rise: float = 0.26
+    inertial_number_i0: float = 0.28
 
     def __post_init__(self):
         _check_range("material.density", self.density, *DENSITY_RANGE, unit=" kg/m3")
@@ -664,14 +696,45 @@ class MaterialConfig:
         _check_range("material.dilation_angle_deg", self.dilation_angle_deg, 0,
                      self.friction_angle_deg, unit=" deg")
         _check_range("material.cohesion", self.cohesion, 0, COHESION_MAX, unit=" Pa")
+        if not isinstance(self.rate_dependence, str) \
+                or self.rate_dependence not in RATE_DEPENDENCES:
+            raise ConfigError(f"material.rate_dependence = {_show(self.rate_dependence)}: "
+                              f"expected one of {', '.join(repr(r) for r in RATE_DEPENDENCES)}")
+        plain = self.rate_dependence == "none"
+        if not (plain and _is_zero(self.grain_diameter)):     # the plain law may have none
+            _check_range("material.grain_diameter", self.grain_diameter,
+                         *GRAIN_DIAMETER_RANGE,
+                         unit=" m" + ('; or 0 with rate_dependence = "none"' if plain else ""))
+        _check_range("material.grain_density", self.grain_density, *DENSITY_RANGE,
+                     unit=" kg/m3")
+        if self.grain_density < self.density:
+            raise ConfigError(f"material.grain_density = {self.grain_density:g} kg/m3 is below "
+                              f"the bulk density material.density = {self.density:g} kg/m3: "
+                              f"allowed range is [{self.density:g}, {DENSITY_RANGE[1]:g}] kg/m3")
+        _check_range("material.friction_rise", self.friction_rise, 0, 2, low_open=True)
+        _check_range("material.inertial_number_i0", self.inertial_number_i0, 0, 10,
+                     low_open=True)
+
+    @property
+    def rheology(self):
+        """The rate dependence of the law: a :class:`fipy_hopper.material.rate.
+        InertialRheology`, or None for ``rate_dependence = "none"``."""
+        if self.rate_dependence == "none":
+            return None
+        from .material.rate import InertialRheology
+        return InertialRheology(grain_diameter=self.grain_diameter,
+                                grain_density=self.grain_density,
+                                friction_rise=self.friction_rise,
+                                inertial_number_i0=self.inertial_number_i0)
 
     def law(self):
         """The constitutive law of this material (:mod:`fipy_hopper.material.law`): a
-        :class:`fipy_hopper.material.MohrCoulomb` in the Abaqus form."""
+        :class:`fipy_hopper.material.MohrCoulomb` in the Abaqus form, with the mu(I)
+        overstress of :attr:`rheology` unless ``rate_dependence = "none"``."""
         from .material import MohrCoulomb
         return MohrCoulomb(E=self.youngs_modulus, nu=self.poisson_ratio, rho=self.density,
                            phi=self.friction_angle_deg, psi=self.dilation_angle_deg,
-                           c=self.cohesion)
+                           c=self.cohesion, rate=self.rheology)
 
     @property
     def p_wave_speed(self) -> float:
@@ -995,6 +1058,11 @@ class HopperConfig:
                               f"{'s' * (len(angles) != 1)}; {what} "
                               f"{self.hopper.n_wall_segments} segments: one angle per segment, "
                               f"from the lip up")
+        if self.numerics.formulation == "lagrangian" and self.material.rate_dependence != "none":
+            raise ConfigError(f"material.rate_dependence = {self.material.rate_dependence!r} "
+                              'applies to numerics.formulation = "eulerian" only; the '
+                              '"lagrangian" model runs the plain law: allowed value "none"')
+        self._check_grains()
         if self.numerics.formulation == "lagrangian" and self.run.opening_time > 0.0:
             raise ConfigError(f"run.opening_time = {self.run.opening_time:g} s applies to "
                               'numerics.formulation = "eulerian" only; allowed range with '
@@ -1082,6 +1150,25 @@ class HopperConfig:
     def step_estimate(self) -> float:
         """Most time steps a run can take: filling up to ``max_fill_time`` plus the discharge."""
         return (self.numerics.max_fill_time + self.run.discharge_time) / self.time_step
+
+    def _check_grains(self) -> None:
+        """The outlet against the grains: no wider grain than the outlet (an error), and an
+        outlet under :data:`ARCHING_GRAINS` grains wide arches (a warning, :class:`
+        ArchingWarning`): Beverloo's regime, and the continuum's, end there."""
+        d = self.material.grain_diameter
+        if d <= 0.0:
+            return
+        width = 2.0 * self.hopper.outlet_radius
+        what = "diameter" if self.hopper.axisymmetric else "width"
+        if d >= width:
+            raise ConfigError(f"material.grain_diameter = {d:g} m is not smaller than the "
+                              f"outlet's {what} {width:g} m: allowed range is (0, {width:g}) m")
+        if width < ARCHING_GRAINS * d:
+            warnings.warn(f"the outlet's {what} {width:g} m is {width / d:.2f} grain diameters "
+                          f"(material.grain_diameter = {d:g} m), fewer than about "
+                          f"{ARCHING_GRAINS:g}: such an outlet arches and does not flow "
+                          f"steadily; Beverloo's correlation and this continuum do not "
+                          f"describe it", ArchingWarning, stacklevel=3)
 
     def _check_grid_size(self) -> None:
         h = self.numerics.cell_size

@@ -216,7 +216,8 @@ def test_no_strain_along_the_wedge_in_cut_cells():
                                                   state.loose, state.v.copy(), contrib,
                                                   carry_runs, load_runs, block_ptr)
             stepping._stress_update(block_ptr, n_blocks, load_runs, state.v, state.sigma,
-                                    state.loose, state.eps_p, model.r_c, model.flux_radius,
+                                    state.loose, state.eps_p, state.flowing, model.r_c,
+                                    model.flux_radius,
                                     model.strain_dims, g.h, model.dt, g.kappa,
                                     model._zface_aperture, model._rface_aperture, model._prm,
                                     return_fast._fast_constants(model._prm),
