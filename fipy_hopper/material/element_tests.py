@@ -12,10 +12,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .mohr_coulomb import MohrCoulomb, elastic_stiffness, invariants
+from .mohr_coulomb import ELASTIC, MohrCoulomb, elastic_stiffness, invariants
+from .rate import overstress, overstress_compiled
 from .return_fast import update
 
-__all__ = ["ElementTestResult", "PATHS", "drive", "element_test"]
+__all__ = ["ElementTestResult", "PATHS", "drive", "element_test", "steady_simple_shear"]
 
 #: Laboratory paths of :func:`element_test`: the strain increment per unit of ``strain`` and the
 #: stress-controlled strain modes (rows; see :func:`drive`).  Homogeneous axisymmetric
@@ -132,3 +133,36 @@ def element_test(mat: MohrCoulomb, path: str, sigma0, strain: float, n_steps: in
         sigma0 = sigma0 * np.array([1.0, 1.0, 1.0, 0.0])
     d_eps = np.tile(np.asarray(unit) * (strain / n_steps), (n_steps, 1))
     return drive(mat, sigma0, d_eps, control, path=path)
+
+
+def steady_simple_shear(mat: MohrCoulomb, normal_stress: float, gamma_dot: float,
+                        strain: float = 0.05, n_steps: int = 100, compiled: bool = True) -> dict:
+    """Simple shear at the shear rate ``gamma_dot`` (1/s) under a held normal stress
+    ``sigma_zz = -normal_stress`` (Pa), from the isotropic state ``-normal_stress I`` to the
+    engineering shear strain ``strain`` in ``n_steps`` steps (:func:`element_test`'s
+    ``simple_shear``: the rate-independent return), then the law's rate-dependent overstress
+    at the last step's strain rate ``D = d_eps / dt``, ``dt = strain / (gamma_dot n_steps)``
+    (:func:`fipy_hopper.material.rate.overstress_compiled`, or its numpy reference with
+    ``compiled=False``).
+
+    Returns ``{"I", "p", "gamma_dot", "tau_plain", "tau", "mu_plain", "mu"}``: the inertial
+    number ``gamma_dot d / sqrt(p / rho_s)`` of the flow (``gamma_dot = sqrt(2 D':D')``; 0
+    for a plain law), the pressure ``p = -tr(sigma) / 3`` (Pa) of the rate-independent stress,
+    the shear stresses ``|sigma_rz|`` without and with the overstress (Pa) and their ratios to
+    ``p``.  In steady flow ``mu - mu_plain`` is the rise ``delta_mu I / (I_0 + I)`` of the
+    mu(I) law."""
+    res = element_test(mat, "simple_shear", -float(normal_stress), strain, n_steps)
+    dt = strain / (gamma_dot * n_steps)
+    D = (res.strain[-1] - res.strain[-2]) / dt
+    sigma = res.stress[-1]
+    flowing = res.status[-1] != ELASTIC
+    rate = mat.rate_parameters()
+    extra = (overstress_compiled if compiled else overstress)(sigma, D, flowing, rate)
+    p = -(sigma[0] + sigma[1] + sigma[2]) / 3.0
+    dev = D[:3] - D[:3].sum() / 3.0
+    rate_of_shear = float(np.sqrt(2.0 * (dev @ dev + 2.0 * D[3] ** 2)))
+    inertial = (rate_of_shear * rate[0] / np.sqrt(p / rate[1])) if rate[0] > 0 else 0.0
+    tau_plain, tau = abs(sigma[3]), abs(sigma[3] + extra[3])
+    return {"I": float(inertial), "p": float(p), "gamma_dot": rate_of_shear,
+            "tau_plain": float(tau_plain), "tau": float(tau),
+            "mu_plain": float(tau_plain / p), "mu": float(tau / p)}

@@ -49,6 +49,7 @@ import numba
 import numpy as np
 
 __all__ = ["InertialRheology", "inertial_number", "friction_rise", "overstress",
+           "overstress_compiled", "deviatoric_rate",
            "overstress_factor", "RATE_PARAMETERS"]
 
 #: the rate parameters in the order the compiled kernels read them (after the law's own)
@@ -152,5 +153,34 @@ def overstress(sigma, D, flowing, rate):
     p_safe = np.where(on, p, 1.0)
     s = np.sqrt(rho_s * p_safe)
     inertial = gamma_dot * d * s / p_safe
-    two_eta = np.where(on, 2.0 * dmu * d * s / (i0 + inertial), 0.0)
+    with np.errstate(invalid="ignore", divide="ignore"):      # masked where not on
+        two_eta = np.where(on, 2.0 * dmu * d * s / (i0 + inertial), 0.0)
     return np.stack([two_eta * a, two_eta * b, two_eta * c, two_eta * D[..., 3]], axis=-1)
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _overstress_points(sigma, D, flowing, rate, out):
+    """:func:`overstress_factor` and :func:`deviatoric_rate` over points ``(n, 4)``: the
+    compiled overstress the fused step adds, on arrays (for the tests and the drivers)."""
+    for k in range(sigma.shape[0]):
+        out[k, 0] = out[k, 1] = out[k, 2] = out[k, 3] = 0.0
+        if not flowing[k]:
+            continue
+        p = -(sigma[k, 0] + sigma[k, 1] + sigma[k, 2]) / 3.0
+        a, b, c, gamma_dot = deviatoric_rate(D[k, 0], D[k, 1], D[k, 2], D[k, 3])
+        f = overstress_factor(p, gamma_dot, rate)
+        out[k, 0], out[k, 1], out[k, 2], out[k, 3] = f * a, f * b, f * c, f * D[k, 3]
+
+
+def overstress_compiled(sigma, D, flowing, rate):
+    """The compiled overstress (Pa, ``(..., 4)``) of :func:`overstress`'s arguments: the same
+    point functions the fused step calls (:func:`overstress_factor`, :func:`deviatoric_rate`)."""
+    sigma, D = np.broadcast_arrays(np.asarray(sigma, float), np.asarray(D, float))
+    shape = sigma.shape
+    flowing = np.broadcast_to(np.asarray(flowing, bool), shape[:-1])
+    out = np.empty((int(np.prod(shape[:-1], dtype=int)), 4))
+    _overstress_points(np.ascontiguousarray(sigma.reshape(-1, 4)),
+                       np.ascontiguousarray(D.reshape(-1, 4)),
+                       np.ascontiguousarray(flowing.reshape(-1)),
+                       np.ascontiguousarray(rate, dtype=float), out)
+    return out.reshape(shape)
