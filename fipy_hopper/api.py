@@ -61,8 +61,9 @@ def _resolve(config_or_path) -> tuple:
 def expected_quantities(cfg: HopperConfig) -> dict:
     """What theory and the numerics say about a configuration before it runs.
 
-    ``beverloo_rate_kg_s`` is Beverloo's flat-bottom rate (C = 0.58, k d = 0) times the
-    Rose-Tanaka hopper factor of the cone; ``jenike_critical_half_angle_deg`` uses the internal
+    ``beverloo_rate_kg_s`` is Beverloo's flat-bottom rate (C = 0.58, k = 1.5, d the
+    material's grain diameter) times the Rose-Tanaka hopper factor of the cone;
+    ``outlet_grains`` the outlet's diameter (slot: width) in grain diameters; ``jenike_critical_half_angle_deg`` uses the internal
     friction angle as the effective angle of internal friction; ``fill_mass_kg`` is the density
     times the filled volume (3D).  For a wedge the masses and rates are per metre of length
     (the keys keep their names here; :func:`per_metre` renames them for the files): Beverloo's
@@ -82,12 +83,14 @@ def expected_quantities(cfg: HopperConfig) -> dict:
     out = {"fill_mass_kg": mat.density * geom.fill_volume(),
            "p_wave_speed_m_s": mat.p_wave_speed,
            "cone_height_m": geom.cone_height}
+    grains = mat.grain_diameter
+    out["outlet_grains"] = geom.outlet_diameter / grains if grains > 0 else math.inf
     if geom.axisymmetric:
-        flat = float(theory.beverloo_rate(mat.density, geom.outlet_diameter))
+        flat = float(theory.beverloo_rate(mat.density, geom.outlet_diameter, d=grains))
         factor = float(theory.rose_tanaka_factor(geom.half_angle_deg))
         critical = theory.jenike_critical_half_angle
     else:     # per metre of slot; no plane hopper factor from a readable source
-        flat = float(theory.beverloo_slot_rate(mat.density, geom.outlet_diameter))
+        flat = float(theory.beverloo_slot_rate(mat.density, geom.outlet_diameter, d=grains))
         factor = 1.0
         critical = theory.jenike_critical_half_angle_plane
     out.update(beverloo_flat_rate_kg_s=flat, rose_tanaka_factor=factor,
@@ -362,6 +365,7 @@ def _summary(sim, cfg, reason: str) -> dict:
     summary["stop_reason"] = reason
     expected = expected_quantities(cfg)
     summary["beverloo_rate_kg_s"] = expected["beverloo_rate_kg_s"]
+    summary["outlet_grains"] = expected["outlet_grains"]
     summary["jenike_critical_half_angle_deg"] = expected["jenike_critical_half_angle_deg"]
     summary["jenike_flow_mode"] = expected["jenike_flow_mode"]
     for key in ("unconfined_yield_strength_Pa", "jenike_critical_outlet_m",

@@ -166,12 +166,14 @@ def _validate(args) -> int:
         f"  time step          {cfg.time_step:.4g} s (at most {cfg.step_estimate():.3g} steps)",
         f"  {hopper + ' height':<18} {geom.cone_height:.4g} m (transition to the bin)",
         f"  fill mass          {e['fill_mass_kg']:.4g} kg{per}",
+        _grain_line(cfg.material, e),
         (f"  Beverloo rate      {e['beverloo_rate_kg_s']:.4g} kg/s = "
-         f"{e['beverloo_flat_rate_kg_s']:.4g} kg/s (flat bottom, C = 0.58) x "
+         f"{e['beverloo_flat_rate_kg_s']:.4g} kg/s (flat bottom, C = 0.58, k = 1.5) x "
          f"{e['rose_tanaka_factor']:.3f} (Rose-Tanaka, {geom.half_angle_deg:g} deg cone)"
          if geom.axisymmetric else
          f"  Beverloo rate      {e['beverloo_rate_kg_s']:.4g} kg/s per m of slot "
-         f"(plane flow, W' = C' rho sqrt(g) B^1.5, C' = 1.03, no hopper factor)"),
+         f"(plane flow, W' = C' rho sqrt(g) (B - k d)^1.5, C' = 1.03, k = 1.5, no hopper "
+         f"factor)"),
         f"  discharge time     about {e['expected_discharge_time_s']:.3g} s at that rate",
         f"  Jenike theta_c     {theta_c_text} (phi = {cfg.material.friction_angle_deg:g} deg, "
         f"phi_w = {cfg.wall.friction_angle_deg:g} deg"
@@ -329,6 +331,18 @@ class _sigterm_as_interrupt:
         if self.previous is not None:
             signal.signal(signal.SIGTERM, self.previous)
         return False
+
+
+def _grain_line(mat, e: dict) -> str:
+    """The grains and the law's rate dependence, for ``validate``."""
+    law = ("mu(I) above the Mohr-Coulomb limit (delta_mu = "
+           f"{mat.friction_rise:g}, I_0 = {mat.inertial_number_i0:g}, rho_s = "
+           f"{mat.grain_density:g} kg/m3)" if mat.rate_dependence == "mu_I"
+           else "none (the plain rate-independent law)")
+    across = (f", the outlet {e['outlet_grains']:.3g} grains across"
+              if mat.grain_diameter > 0 else "")
+    return (f"  grains             d = {mat.grain_diameter:g} m{across}; rate dependence "
+            f"{law}")
 
 
 def _cohesion_lines(cfg, e: dict) -> list:

@@ -1058,10 +1058,6 @@ class HopperConfig:
                               f"{'s' * (len(angles) != 1)}; {what} "
                               f"{self.hopper.n_wall_segments} segments: one angle per segment, "
                               f"from the lip up")
-        if self.numerics.formulation == "lagrangian" and self.material.rate_dependence != "none":
-            raise ConfigError(f"material.rate_dependence = {self.material.rate_dependence!r} "
-                              'applies to numerics.formulation = "eulerian" only; the '
-                              '"lagrangian" model runs the plain law: allowed value "none"')
         self._check_grains()
         if self.numerics.formulation == "lagrangian" and self.run.opening_time > 0.0:
             raise ConfigError(f"run.opening_time = {self.run.opening_time:g} s applies to "

@@ -36,7 +36,9 @@ Element
     ``Gamma`` on a rectangle, orthogonal to linear velocity fields on any quad).
 
 Time step
-    Central difference: ``v += dt (-f_int + f_hg + m g) / m``, contact, then (during filling)
+    Central difference: ``v += dt (-f_int + f_hg + m g) / m`` (in ``f_int`` the stress of a
+    flowing element carries the law's rate-dependent overstress, from the current velocities,
+    as in the Eulerian forces), contact, then (during filling)
     the Eulerian model's mass-proportional damping, applied after the contact as there, so
     that the walls, not the damping, hold what rests on them; the axis; the strain increment
     ``D dt`` and spin from the new velocity on the mid-step configuration ``x + v dt/2``;
@@ -106,7 +108,7 @@ from numba import njit
 from . import geometry
 from .config import HopperConfig
 from .dense_loose import close_loose_volume, separation_strain
-from .material import equivalent_plastic_strain
+from .material import ELASTIC, equivalent_plastic_strain
 from .model import GRAVITY, InstabilityError, runaway_speed
 
 __all__ = ["DistortionLimits", "LagrangianMesh", "LagrangianState",
@@ -575,6 +577,7 @@ class LagrangianState:
     halt_detail: str = ""          # which element, how, when
     halt_kind: str = ""            # inverted | aspect_ratio | min_angle
     halt_element: int = -1
+    flowing: np.ndarray = None     # (n_el,) bool: the last return was plastic (the overstress)
 
     def copy(self) -> "LagrangianState":
         return LagrangianState(**{k: (v.copy() if isinstance(v, np.ndarray) else v)
@@ -610,6 +613,8 @@ class LagrangianModel:
         self.mesh = build_mesh(geom, self.h)
         self.n_cells = self.mesh.n_elements
         self.material = cfg.material.law()
+        #: the law has a rate dependence (an overstress in flowing elements)
+        self._rated = bool(self.material.rate_parameters()[0] != 0.0)
         self.rho = cfg.material.density
         self.c_p = self.material.p_wave_speed
         self.mu_wall = cfg.wall.friction_coefficient
@@ -692,7 +697,8 @@ class LagrangianModel:
                                active=np.ones(m.n_elements, dtype=bool), dt=self.dt0,
                                loose=np.zeros(m.n_elements),
                                wall_impulse=np.zeros((len(self._wall_stations[0]), 2)),
-                               plate_impulse=np.zeros((1, 2)), momentum_budget=np.zeros(4))
+                               plate_impulse=np.zeros((1, 2)), momentum_budget=np.zeros(4),
+                               flowing=np.zeros(m.n_elements, dtype=bool))
 
     def gravity(self, state: LagrangianState) -> float:
         ramp = self.ramp_time
@@ -807,7 +813,14 @@ class LagrangianModel:
         plate's apart, the wall's added to the station nearest to the node's wall point."""
         dt = state.dt
         x, v, conn = state.x, state.v, self.mesh.conn
-        _force_kernel(x, v, conn, state.sigma, state.active, self.hg_scale, self._force)
+        stress = state.sigma
+        if self._rated and state.flowing is not None and state.flowing.any():
+            # the law's rate-dependent overstress in the flowing elements, as in the
+            # Eulerian forces (fipy_hopper.material.rate)
+            D, _ = strain_rate(x, conn, v)
+            stress = stress + self.material.overstress_reference(
+                state.sigma, D, state.flowing & state.active)
+        _force_kernel(x, v, conn, stress, state.active, self.hg_scale, self._force)
         damping = self.fill_damping if state.stage == "filling" else 0.0
         m = self.node_mass[:, None]
         v += dt * self._force / m
@@ -834,6 +847,7 @@ class LagrangianModel:
                                                        return_status=True)
         sig_new[~state.active] = 0.0
         state.sigma = sig_new
+        state.flowing = (status != ELASTIC) & state.active
         state.loose = np.where(state.active, loose + separation_strain(deps_p, status), 0.0)
         state.eps_p += equivalent_plastic_strain(deps_p)
         x += dt * v

@@ -935,6 +935,8 @@ class Simulation:
             "hourglass_coefficient": m.cfg.numerics.hourglass_coefficient,
             "grid_viscosity": m.cfg.numerics.grid_viscosity,
             "bulk_viscosity": m.cfg.bulk_viscosity,
+            "rate_dependence": m.cfg.material.rate_dependence,
+            "grain_diameter_m": m.cfg.material.grain_diameter,
         }
         out["hopper_stretches"] = diagnostics.stretch_calls(
             m.cfg, [np.asarray(r, float) for r, w in zip(rec.wall_slip_stretches, window)
