@@ -301,8 +301,10 @@ class HopperModel:
         n = g.nz * g.nr
         # compiled steps (fipy_hopper.stepping): contacts grouped by node row, list order kept
         # the walls and the plate of every node in contact, grouped by node and row
-        self.contact_groups = momentum.contact_groups(self.contact_list, self.plate_list,
-                                                      g.nz + 1)
+        # ... with each wall's tributary length at its node, which shares a corner node's
+        # impulse among its walls (stepping._contact_node)
+        self.contact_groups = momentum.contact_groups(
+            self.contact_list, self.plate_list, g.nz + 1, weights=self.contact_weights())
         self._face_sign = np.ascontiguousarray(self.face_sign, dtype=float)
         self._work = (np.empty((n, 3), np.int64), np.empty((n, 3), np.int64),
                       np.empty(n + 1, np.int64), np.zeros((8, g.nz, g.nr)), np.zeros(g.nz + 1),
@@ -440,6 +442,26 @@ class HopperModel:
             raise InstabilityError(
                 f"non-finite material fraction or stress at step {state.step}, t = "
                 f"{state.t:.6g} s, cell r = {g.r_cells[i]:.4g} m, z = {g.z_cells[j]:.4g} m")
+
+    def contact_weights(self) -> tuple:
+        """The tributary length (m) of every wall and plate entry at its node: the length of
+        the entry's segment inside the node's dual cell (the square of side ``h`` around it),
+        0 for a tube (frictionless, a guard of the free fall that the material leaves) and
+        for a convex corner's own normal (a vertex).  ``(wall (n_contacts,), plate
+        (n_plate,))``; they share a corner node's impulse among its walls
+        (:func:`fipy_hopper.stepping._contact_node`)."""
+        g, tab = self.grid, self.boundary.table
+        j, i, _, _ = self.contact_list
+        row = self.contact_segment
+        seg = np.maximum(row, 0)
+        wall = _length_in_boxes(g.r_nodes[i], g.z_nodes[j], 0.5 * g.h, tab.a[seg], tab.b[seg])
+        wall = np.where((row < 0) | tab.tube[seg], 0.0, wall)
+        pj, pi, _, _ = self.plate_list
+        x_left, x_right = self.boundary.outlet
+        a = np.tile([x_left, 0.0], (len(pj), 1))
+        b = np.tile([x_right, 0.0], (len(pj), 1))
+        plate = _length_in_boxes(g.r_nodes[pi], g.z_nodes[pj], 0.5 * g.h, a, b)
+        return wall, plate
 
     def wall_entries(self) -> tuple:
         """``(s, normal, segment)`` of every entry of ``contact_list`` (the rows of
@@ -819,6 +841,21 @@ class HopperModel:
         state.layer = layer
         state.loose = loose
         self._mass, self._mass_of = mass_new, new_alpha
+
+
+def _length_in_boxes(x, z, half, a, b) -> np.ndarray:
+    """Length (m) of each segment ``a``-``b`` (n, 2) inside the square of half-side ``half``
+    around ``(x, z)`` (Liang-Barsky clipping)."""
+    d = b - a
+    lo, hi = np.zeros(len(x)), np.ones(len(x))
+    for p, q in ((-d[:, 0], a[:, 0] - (x - half)), (d[:, 0], (x + half) - a[:, 0]),
+                 (-d[:, 1], a[:, 1] - (z - half)), (d[:, 1], (z + half) - a[:, 1])):
+        parallel = p == 0.0
+        t = q / np.where(parallel, 1.0, p)
+        lo = np.where(~parallel & (p < 0), np.maximum(lo, t), lo)
+        hi = np.where(~parallel & (p > 0), np.minimum(hi, t), hi)
+        hi = np.where(parallel & (q < 0), -1.0, hi)          # parallel and outside
+    return np.maximum(hi - lo, 0.0) * np.hypot(d[:, 0], d[:, 1])
 
 
 def _contact_list(passes):

@@ -280,44 +280,147 @@ def _project(vr, vz, n_r, n_z, mu):
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
+def _book(k, kind, entry, contact_impulse, plate_impulse, jr, jz):
+    """Add the impulse ``(jr, jz)`` to constraint ``k``'s entry (wall or plate)."""
+    if kind[k] == 1:
+        plate_impulse[entry[k], 0] += jr
+        plate_impulse[entry[k], 1] += jz
+    else:
+        contact_impulse[entry[k], 0] += jr
+        contact_impulse[entry[k], 1] += jz
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def _book_shares(k0, k1, normal, mu, kind, entry, plate_closed, last, lam, lam_t, total_r,
+                 total_z, contact_impulse, plate_impulse):
+    """Book the compound contact's impulse: to every weighted wall ``k`` (``w_k > 0``) but
+    ``last``, ``w_k (lam (-n_k) + lam_t mu_k t_k)``; to ``last`` the rest of ``(total_r,
+    total_z)``, so that the shares add up to the node's impulse."""
+    rest_r, rest_z = total_r, total_z
+    for k in range(k0, k1):
+        if (kind[k] == 1 and not plate_closed) or normal[k, 2] <= 0.0 or k == last:
+            continue
+        n_r, n_z, w = normal[k, 0], normal[k, 1], normal[k, 2]
+        f = lam_t * mu[k]
+        jr = w * (-(lam * n_r) - f * n_z)
+        jz = w * (f * n_r - lam * n_z)
+        _book(k, kind, entry, contact_impulse, plate_impulse, jr, jz)
+        rest_r = rest_r - jr
+        rest_z = rest_z - jz
+    _book(last, kind, entry, contact_impulse, plate_impulse, rest_r, rest_z)
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
 def _contact_node(v, j, i, mass, k0, k1, normal, mu, kind, entry, plate_closed,
                   contact_impulse, plate_impulse):
     """Contact of node (j, i) with all its walls (constraints ``k0 <= k < k1``; a plate
     constraint, ``kind == 1``, only while ``plate_closed``), in place, and the impulse ``m dv``
-    of each constraint added to its entry.
+    of each constraint added to its entry.  ``normal[k] = (n_r, n_z, w)``: the unit normal
+    into the wall and the wall's tributary length ``w`` at the node (the length of the wall in
+    the node's dual cell; 0 for a tube, for a convex corner's own normal).
 
-    The velocity is the closest to the free one that presses into no wall: unchanged if it
-    presses into none; else the one-wall contact (:func:`_project`, with friction) against the
-    wall whose frictionless projection is closest among those that then press into no other
-    wall; else (a corner that the velocity presses into from both sides) rest, with the
-    impulse split between the two walls whose normals span it.  One wall: the one-wall
-    contact, as before corners were treated.  (Projecting onto the walls one after the other
-    is not this: at the outlet lip, with the plate closed, it turned the weight pressing on
-    the cone and the plate into a steady inward slide of the lip's node, which squeezed the
-    material out of the lip's cells during the fill.)"""
+    One wall: :func:`_project`, the impulse Coulomb contact.  A node at a corner (two or more
+    walls, e.g. the cone and the bin wall at the transition, a ledge, an insert's corner, the
+    lip with the plate) is resolved against its walls together, as one patch of wall made of
+    their tributary lengths.  With ``t_k = (-n_z, n_r)`` each wall's friction cone
+    ``F_k = {lam (-n_k) + f t_k : |f| <= mu_k lam}``, the patch's normal and friction
+    directions are
+
+        N = sum_k w_k (-n_k),   T = sum_k w_k mu_k t_k    (the walls with w_k > 0),
+
+    and its impulses ``J = A N + B T``, ``|B| <= A``, split into one per wall,
+
+        J_k = w_k (A (-n_k) + B mu_k t_k)  in F_k:
+
+    the normal impulses share the patch by the walls' lengths (the same mean pressure on
+    both sides of the corner, as a continuous stress gives across a shallow corner) and the
+    friction is mobilised alike on every wall (``|B| / A`` of Coulomb's limit on each, so
+    ``|J_t,k| <= mu_k J_n,k`` holds on every wall, each in its own frame).  Then, with
+    ``J0 = -m v`` the impulse that stops the node:
+
+    1. no wall pressed (``v.n_k <= 0``): free;
+    2. ``J0 = A N + B T`` with ``|B| <= A``: the patch holds the node, ``v' = 0``, ``J = J0``;
+    3. else the node slides along the wall ``k*`` of the old rule (the closest frictionless
+       projection that presses no other wall) with the impulse on the patch cone's edge
+       that resists the slide, ``J = lam (N + s T)`` (``s`` the sign of ``B``), ``lam`` such
+       that ``v'.n_k* = 0``: accepted when it presses no other wall and slows the slide
+       without reversing it (``|v' . t_k*| <= |v . t_k*|``, so ``|v'| <= |v|``: it
+       dissipates; where another wall's normal would push along the slide, e.g. sliding away
+       from a 90 deg corner, it is refused);
+    4. otherwise (one weighted wall, frictionless walls, or 3 refused), the rule the patch
+       generalises: the one-wall contact against ``k*`` (all of the impulse to it), or, with
+       no such wall, rest with the impulse split between the two walls whose normals span it.
+
+    Why this split: a node at a corner stands for a patch of both walls, and at rest its
+    impulse's split is statically indeterminate (any ``J_a in F_a``, ``J0 - J_a in F_b``).
+    Giving the whole impulse to one wall (the rule before) left the bin wall's first cell
+    above the transition without its share, and the first bin converged at first order;
+    sharing the impulse vector by length broke Coulomb on the bin wall, because that node's
+    impulse sat on the cone's limit (its friction cone's edge, where no share is
+    admissible).  Here the patch's own cone (2) lies inside both walls' cones by construction
+    and the node slides (3) when the patch, not the cone alone, cannot hold it: at rest the
+    corner's impulse settles on the patch cone's edge, where both walls are at their limit
+    and each carries its length's share.  (Projecting onto the walls one after the other is
+    not a corner contact: at the outlet lip, with the plate closed, it turned the weight
+    pressing on the cone and the plate into a steady inward slide of the lip's node, which
+    squeezed the material out of the lip's cells during the fill; 4 keeps the lip's rest.)"""
     vr, vz = v[0, j, i], v[1, j, i]
     if k1 - k0 == 1 and (kind[k0] == 0 or plate_closed):     # one wall: the usual contact
         if vr * normal[k0, 0] + vz * normal[k0, 1] > 0.0:
             wr, wz = _project(vr, vz, normal[k0, 0], normal[k0, 1], mu[k0])
             v[0, j, i], v[1, j, i] = wr, wz
             m = mass[j, i]
-            if kind[k0] == 1:
-                plate_impulse[entry[k0], 0] += m * (wr - vr)
-                plate_impulse[entry[k0], 1] += m * (wz - vz)
-            else:
-                contact_impulse[entry[k0], 0] += m * (wr - vr)
-                contact_impulse[entry[k0], 1] += m * (wz - vz)
+            _book(k0, kind, entry, contact_impulse, plate_impulse, m * (wr - vr),
+                  m * (wz - vz))
         return
+    # the patch of the weighted walls, N and T
+    pressing = 0
+    weighted = 0
+    last = -1
+    big_r = 0.0
+    big_z = 0.0
+    fri_r = 0.0
+    fri_z = 0.0
+    for k in range(k0, k1):
+        if kind[k] == 1 and not plate_closed:
+            continue
+        if vr * normal[k, 0] + vz * normal[k, 1] > 0.0:
+            pressing += 1
+        w = normal[k, 2]
+        if w > 0.0:
+            wm = w * mu[k]
+            big_r = big_r - w * normal[k, 0]
+            big_z = big_z - w * normal[k, 1]
+            fri_r = fri_r - wm * normal[k, 1]
+            fri_z = fri_z + wm * normal[k, 0]
+            weighted += 1
+            last = k
+    if pressing == 0:
+        return
+    m = mass[j, i]
+    j0r = -(m * vr)
+    j0z = -(m * vz)
+    det = big_r * fri_z - big_z * fri_r
+    size = (abs(big_r) + abs(big_z)) * (abs(fri_r) + abs(fri_z))
+    patch = weighted >= 2 and abs(det) > 1e-9 * size
+    a = 0.0
+    b = 0.0
+    if patch:
+        a = (j0r * fri_z - j0z * fri_r) / det
+        b = (big_r * j0z - big_z * j0r) / det
+        if a >= 0.0 and abs(b) <= a:                           # 2: the patch holds it
+            v[0, j, i], v[1, j, i] = 0.0, 0.0
+            _book_shares(k0, k1, normal, mu, kind, entry, plate_closed, last, a, b, j0r, j0z,
+                         contact_impulse, plate_impulse)
+            return
     best = -1
     best_gap = np.inf
-    pressing = 0
     for k in range(k0, k1):
         if kind[k] == 1 and not plate_closed:
             continue
         vn = vr * normal[k, 0] + vz * normal[k, 1]
         if vn <= 0.0:
             continue
-        pressing += 1
         fr, fz = vr - vn * normal[k, 0], vz - vn * normal[k, 1]
         tol = 1e-14 * (abs(vr) + abs(vz))
         feasible = True
@@ -329,42 +432,70 @@ def _contact_node(v, j, i, mass, k0, k1, normal, mu, kind, entry, plate_closed,
                 break
         if feasible and vn < best_gap:
             best, best_gap = k, vn
-    if pressing == 0:
-        return
-    m = mass[j, i]
-    if best >= 0:
+    if patch and b != 0.0 and best >= 0 and normal[best, 2] > 0.0:    # 3: slide, the patch
+        s = 1.0 if b > 0.0 else -1.0
+        e_r = big_r + s * fri_r
+        e_z = big_z + s * fri_z
+        n_r, n_z = normal[best, 0], normal[best, 1]
+        push = -(e_r * n_r + e_z * n_z)
+        if push > 0.0:
+            c = (vr * n_r + vz * n_z) / push
+            wr = vr + c * e_r
+            wz = vz + c * e_z
+            u = vz * n_r - vr * n_z                  # v . t_k*, before and after
+            u_new = wz * n_r - wr * n_z
+            ok = u * u_new >= 0.0 and abs(u_new) <= abs(u)
+            tol = 1e-14 * (abs(vr) + abs(vz))
+            for q in range(k0, k1):
+                if q == best or (kind[q] == 1 and not plate_closed):
+                    continue
+                if wr * normal[q, 0] + wz * normal[q, 1] > tol:
+                    ok = False
+            if ok:
+                v[0, j, i], v[1, j, i] = wr, wz
+                lam = m * c
+                _book_shares(k0, k1, normal, mu, kind, entry, plate_closed, last, lam,
+                             s * lam, m * (wr - vr), m * (wz - vz), contact_impulse,
+                             plate_impulse)
+                return
+    if best >= 0:                                              # 4: one wall
         wr, wz = _project(vr, vz, normal[best, 0], normal[best, 1], mu[best])
         v[0, j, i], v[1, j, i] = wr, wz
-        if kind[best] == 1:
-            plate_impulse[entry[best], 0] += m * (wr - vr)
-            plate_impulse[entry[best], 1] += m * (wz - vz)
-        else:
-            contact_impulse[entry[best], 0] += m * (wr - vr)
-            contact_impulse[entry[best], 1] += m * (wz - vz)
+        _book(best, kind, entry, contact_impulse, plate_impulse, m * (wr - vr), m * (wz - vz))
         return
-    # a corner: the node stops; -v = a n_a + b n_b with a, b >= 0 for a pair of walls
+    # ... or a corner pressed from both sides: rest, J0 split between two walls k, q as
+    # J0 = l_k e_k + l_q e_q, l >= 0, e = -n + s mu t: both at the limit of their friction on
+    # the side the impulse left the patch cone (s = sign B), else frictionless, else the
+    # other side; the first pair that spans J0
     v[0, j, i], v[1, j, i] = 0.0, 0.0
-    dr, dz = -vr, -vz
-    for a_k in range(k0, k1):
-        if kind[a_k] == 1 and not plate_closed:
-            continue
-        for b_k in range(a_k + 1, k1):
-            if kind[b_k] == 1 and not plate_closed:
+    s_first = -1.0 if b < 0.0 else 1.0
+    tol = -1e-12 * (abs(j0r) + abs(j0z))
+    for p in range(3):
+        s = s_first if p == 0 else (0.0 if p == 1 else -s_first)
+        for a_k in range(k0, k1):
+            if kind[a_k] == 1 and not plate_closed:
                 continue
-            det = normal[a_k, 0] * normal[b_k, 1] - normal[a_k, 1] * normal[b_k, 0]
-            if abs(det) < 1e-12:
-                continue
-            a = (dr * normal[b_k, 1] - dz * normal[b_k, 0]) / det
-            b = (normal[a_k, 0] * dz - normal[a_k, 1] * dr) / det
-            if a >= -1e-12 * (abs(dr) + abs(dz)) and b >= -1e-12 * (abs(dr) + abs(dz)):
-                for k, lam in ((a_k, a), (b_k, b)):
-                    if kind[k] == 1:
-                        plate_impulse[entry[k], 0] += m * lam * normal[k, 0]
-                        plate_impulse[entry[k], 1] += m * lam * normal[k, 1]
-                    else:
-                        contact_impulse[entry[k], 0] += m * lam * normal[k, 0]
-                        contact_impulse[entry[k], 1] += m * lam * normal[k, 1]
-                return
+            fa = s * mu[a_k]
+            ea_r = -normal[a_k, 0] - fa * normal[a_k, 1]
+            ea_z = fa * normal[a_k, 0] - normal[a_k, 1]
+            for b_k in range(a_k + 1, k1):
+                if kind[b_k] == 1 and not plate_closed:
+                    continue
+                fb = s * mu[b_k]
+                eb_r = -normal[b_k, 0] - fb * normal[b_k, 1]
+                eb_z = fb * normal[b_k, 0] - normal[b_k, 1]
+                det = ea_r * eb_z - ea_z * eb_r
+                if abs(det) < 1e-12:
+                    continue
+                la = (j0r * eb_z - j0z * eb_r) / det
+                lb = (ea_r * j0z - ea_z * j0r) / det
+                if la >= tol and lb >= tol:
+                    jr = la * ea_r
+                    jz = la * ea_z
+                    _book(a_k, kind, entry, contact_impulse, plate_impulse, jr, jz)
+                    _book(b_k, kind, entry, contact_impulse, plate_impulse, j0r - jr,
+                          j0z - jz)
+                    return
     # no pair spans the stop (round-off): all of it to the wall pressed hardest
     k = k0
     most = -np.inf
@@ -374,12 +505,7 @@ def _contact_node(v, j, i, mass, k0, k1, normal, mu, kind, entry, plate_closed,
         vn = vr * normal[q, 0] + vz * normal[q, 1]
         if vn > most:
             k, most = q, vn
-    if kind[k] == 1:
-        plate_impulse[entry[k], 0] += m * dr
-        plate_impulse[entry[k], 1] += m * dz
-    else:
-        contact_impulse[entry[k], 0] += m * dr
-        contact_impulse[entry[k], 1] += m * dz
+    _book(k, kind, entry, contact_impulse, plate_impulse, j0r, j0z)
 
 
 @numba.njit(cache=True, error_model="numpy")
