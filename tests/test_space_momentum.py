@@ -105,3 +105,51 @@ def test_lumped_mass_sums_to_the_cells_mass():
     w = rng.uniform(0, 1, SHAPE) * H ** 3
     m = sm.node_mass(1500.0, alpha, w)
     assert m.sum() == pytest.approx(1500.0 * (alpha * w).sum(), rel=1e-13)
+
+
+def test_compiled_forces_and_node_update_equal_the_numpy_reference_to_the_bit():
+    """The compiled corner forces (internal force of alpha (sigma + eta_b tr(D) I), hourglass)
+    of a list of carrying cells and the node update (gather in corner order, velocity,
+    gravity, light nodes at rest), without walls: the same numbers as the numpy functions."""
+    from fipy_hopper.space import stepping
+    rng = np.random.default_rng(7)
+    shape = SHAPE
+    alpha = rng.uniform(0, 1, shape)
+    alpha[rng.uniform(size=shape) < 0.3] = 0.0
+    alpha[0, 0, 0] = 5e-4                                    # carrying, not loaded
+    sigma = rng.normal(size=shape + (6,)) * 1e3
+    v = rng.normal(size=(3,) + tuple(n + 1 for n in shape)) * 0.1
+    w = rng.uniform(0.2, 1, shape) * H ** 3
+    hg = rng.uniform(0, 1, shape)
+    eta_b, alpha_min, rho = 3.0, 1e-3, 1500.0
+    loaded = alpha >= alpha_min
+    D, _ = sm.strain_rate(v, H)
+    p_b = eta_b * (D[..., 0] + D[..., 1] + D[..., 2])
+    stress = sigma.copy()
+    stress[..., :3] = np.where(loaded[..., None], sigma[..., :3] + p_b[..., None], sigma[..., :3])
+    expected = (-sm.corner_forces(alpha[..., None] * stress, w, H)
+                + sm.hourglass_corner_forces(v, hg * alpha))
+    cells = np.argwhere(alpha != 0.0).astype(np.int64)
+    contrib = np.zeros((8, 3) + shape)
+    stepping.cell_forces(cells, len(cells), alpha, sigma, v, w, H, hg, alpha_min, eta_b,
+                         contrib)
+    carrying = alpha != 0.0
+    assert np.array_equal(contrib[:, :, carrying], expected[:, :, carrying])
+    # the node update
+    m = sm.node_mass(rho, alpha, w)
+    light = 1e-12 * rho * H ** 3
+    dt, gravity = 1e-4, 9.81
+    force = sm.gather(np.where(carrying, expected, 0.0))
+    heavy = m > light
+    safe = np.where(heavy, m, 1.0)
+    ref = v + dt * force / safe
+    ref[2] = v[2] + dt * (force[2] / safe - gravity)
+    ref = np.where(heavy[None], ref, 0.0)
+    nodes = np.zeros((m.size, 5), np.int64)
+    nodes[:, :3] = np.argwhere(np.ones(m.shape, bool))
+    vc = v.copy()
+    none = np.zeros((0, 3))
+    stepping.node_update(nodes, len(nodes), vc, m, contrib, gravity, dt, 0.0, light, none,
+                         np.zeros(0), np.zeros(0, np.int8), np.zeros(0, np.int64), True, False,
+                         False, none, none, np.zeros(4))
+    assert np.array_equal(vc, ref)
