@@ -161,3 +161,29 @@ def test_discharge_mass_balance():
     assert abs(model.mass_in_hopper(s) + s.discharged - m0) <= 1e-9 * m0
     assert abs(model.total_mass(s) + s.lost - m0) <= 1e-9 * m0
     assert s.discharged > 0.05 * m0 and s.lost > 0.0
+
+
+def test_quarter_half_and_whole_silo_give_the_same_results():
+    """400 steps of the small centred silo's fill computed as a quarter, a half and the whole:
+    the mass, the vertical reaction of the walls and the plate (whole silo) agree to 1e-9, and
+    the velocities and stresses of the quarter's cells to 1e-6 of their scales (round-off,
+    amplified by the steps; measured 7e-11 m/s of 1.2e-3 m/s and 2e-8 Pa).  Broken before the
+    mirror planes acted ahead of the contact (the friction of the wall nodes on a plane saw
+    the unbalanced force across it): 10 % in the velocities."""
+    out = {}
+    for part in ("quarter", "half", "none"):
+        model = SpaceModel(small_silo(mirror_planes=part))
+        s = model.initial_state()
+        while s.step < 400:
+            model.advance(s, 400 - s.step)
+        g = model.grid
+        x0, y0 = np.searchsorted(g.x_nodes, 0.0), np.searchsorted(g.y_nodes, 0.0)
+        reaction = (s.wall_impulse[:, 2].sum() + s.plate_impulse[:, 2].sum()) * model.section_factor
+        out[part] = (model.total_mass(s), reaction, s.v[:, :, y0:, x0:], s.sigma[:, y0:, x0:])
+    q = out["quarter"]
+    for part in ("half", "none"):
+        mass, reaction, v, sigma = out[part]
+        assert mass == pytest.approx(q[0], rel=1e-12)
+        assert reaction == pytest.approx(q[1], rel=1e-9)
+        assert np.abs(v - q[2]).max() <= 1e-6 * np.abs(q[2]).max()
+        assert np.abs(sigma - q[3]).max() <= 1e-6 * np.abs(q[3]).max()

@@ -323,6 +323,10 @@ class SpaceModel:
         v = state.v + dt * force / safe
         v[2] = state.v[2] + dt * (force[2] / safe - gravity)
         v = np.where(heavy[None], v, 0.0)
+        if g.mirror_x:                 # the mirror planes before the contact too: its
+            v[0, :, :, 0] = 0.0        # friction must not see the unbalanced force across
+        if g.mirror_y:                 # the plane
+            v[1, :, 0, :] = 0.0
         sc.contact_nodes(v, m, self.contacts, state.plate_closed, state.wall_impulse,
                          state.plate_impulse)
         if filling and self.fill_damping > 0.0:

@@ -236,9 +236,10 @@ def node_update(nodes, n_nodes, v, mass, contrib, gravity, dt, damping, light_ma
                 wall_impulse, plate_impulse, budget):
     """Velocities of the nodes ``nodes[:n_nodes]`` (k, j, i, first constraint, end): the sum
     of the eight cells' corner forces (order 0..7), ``v + dt (f / m - g e_z)`` (rest if no
-    heavier than ``light_mass``), the contact (:func:`contact_node`), the damping
-    ``v / (1 + c_d dt)`` and the mirror planes (``v_x = 0`` on ``i = 0``, ``v_y = 0`` on ``j =
-    0``).  ``budget[0:3]`` gets the vertical impulses of gravity, damping and stopped nodes."""
+    heavier than ``light_mass``), the mirror planes (``v_x = 0`` on ``i = 0``, ``v_y = 0`` on
+    ``j = 0``: before the contact, whose friction must not see the unbalanced force across
+    the plane, and again after it), the contact (:func:`contact_node`) and the damping
+    ``v / (1 + c_d dt)``.  ``budget[0:3]`` gets the vertical impulses of gravity, damping and stopped nodes."""
     nz, ny, nx = contrib.shape[2], contrib.shape[3], contrib.shape[4]
     scale = 1.0 / (1.0 + damping * dt)
     for q in range(n_nodes):
@@ -261,6 +262,10 @@ def node_update(nodes, n_nodes, v, mass, contrib, gravity, dt, damping, light_ma
             v[0, k, j, i] = 0.0
             v[1, k, j, i] = 0.0
             v[2, k, j, i] = 0.0
+        if mirror_x and i == 0:
+            v[0, k, j, i] = 0.0
+        if mirror_y and j == 0:
+            v[1, k, j, i] = 0.0
         c0, c1 = nodes[q, 3], nodes[q, 4]
         if c1 > c0:
             contact_node(v, k, j, i, m, c0, c1, normal, mu, kind, entry, plate_closed,
