@@ -9,7 +9,6 @@ import pytest
 
 from fipy_hopper.config import HopperGeometry
 from fipy_hopper.space import contact as sc
-from fipy_hopper.space import momentum as sm
 from fipy_hopper.space import stepping
 from fipy_hopper.space.config import SpaceConfig, small_silo
 from fipy_hopper.space.model import SpaceModel

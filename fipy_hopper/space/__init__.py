@@ -17,5 +17,11 @@ Modules:
 * ``momentum``: trilinear hexahedra with one-point quadrature, hourglass control, strain
   rate, spin, Jaumann rotation and the open divergence (numpy reference and compiled);
 * ``transport``: the bounded van Leer transport on the 3D index grid (compiled), held to the
-  numpy reference and to FiPy's ``VanLeerConvectionTerm`` on ``Grid3D``.
+  numpy reference and to FiPy's ``VanLeerConvectionTerm`` on ``Grid3D``;
+* ``contact``: the wall and plate constraints as data and the numpy reference of the contact;
+* ``stepping``: the compiled material steps (forces, node update, contact, stress update,
+  faces);
+* ``model``: :class:`SpaceModel`, the model (initial state, steps, transport, masses).
+
+What exists and what is tested: ``docs/three_d.md``.
 """

@@ -232,14 +232,16 @@ def contact_node(v, k, j, i, m, k0, k1, normal, mu, kind, entry, plate_closed, w
 
 
 @_jit
-def node_update(nodes, n_nodes, v, mass, contrib, gravity, dt, damping, light_mass, normal, mu, kind, entry, plate_closed, mirror_x, mirror_y,
-                wall_impulse, plate_impulse, budget):
+def node_update(nodes, n_nodes, v, mass, contrib, gravity, dt, damping, light_mass, normal, mu,
+                kind, entry, plate_closed, mirror_x, mirror_y, wall_impulse, plate_impulse,
+                budget):
     """Velocities of the nodes ``nodes[:n_nodes]`` (k, j, i, first constraint, end): the sum
     of the eight cells' corner forces (order 0..7), ``v + dt (f / m - g e_z)`` (rest if no
     heavier than ``light_mass``), the mirror planes (``v_x = 0`` on ``i = 0``, ``v_y = 0`` on
     ``j = 0``: before the contact, whose friction must not see the unbalanced force across
     the plane, and again after it), the contact (:func:`contact_node`) and the damping
-    ``v / (1 + c_d dt)``.  ``budget[0:3]`` gets the vertical impulses of gravity, damping and stopped nodes."""
+    ``v / (1 + c_d dt)``.  ``budget[0:3]`` gets the vertical impulses of gravity, damping and
+    stopped nodes."""
     nz, ny, nx = contrib.shape[2], contrib.shape[3], contrib.shape[4]
     scale = 1.0 / (1.0 + damping * dt)
     for q in range(n_nodes):
@@ -400,8 +402,9 @@ def material_steps(max_steps, clock, v, mass, alpha, sigma, loose, eps_p, flux_z
         gravity = g_full * min(1.0, t / ramp_time) if ramp_time > 0.0 else g_full
         cell_forces(carry, n_carry, alpha, sigma, v, open_volume, h, hg_base, alpha_min,
                     bulk_viscosity, contrib)
-        node_update(nodes, n_nodes, v, mass, contrib, gravity, dt, damping, light_mass, normal, mu, kind, entry, plate_closed, mirror_x, mirror_y,
-                    wall_impulse, plate_impulse, budget)
+        node_update(nodes, n_nodes, v, mass, contrib, gravity, dt, damping, light_mass, normal,
+                    mu, kind, entry, plate_closed, mirror_x, mirror_y, wall_impulse,
+                    plate_impulse, budget)
         stress_update(loaded, n_loaded, v, sigma, loose, eps_p, kappa, aperture_z, aperture_y,
                       aperture_x, h, dt, prm, sig_in, dep_in, sig_out, dep_out, status)
         speed = faces(k0, k1, v, dt, open_z, open_y, open_x, flux_z, flux_y, flux_x)
