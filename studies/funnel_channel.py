@@ -2,11 +2,11 @@
 
 The funnel-flow hopper of ``robustness.py`` (the reference hopper with a 60 deg cone and
 phi_w = 25 deg, E = 5 MPa) and the reference hopper itself (20 deg, phi_w = 15 deg, mass flow)
-are discharged for ``end_time`` (3 s) at the cell sizes ``cell_sizes`` (7.5, 5 and 3.75 mm),
-each as the package runs by default (``plain``) and with a viscosity of fixed size
-(``viscous``: ``numerics.grid_viscosity`` b = 0.25 over ``numerics.viscosity_length`` l = 5 mm,
-``eta = b rho sqrt(g l) l = 0.41 Pa s`` on every grid, the order of a 1 mm sand's rate
-dependence in the mu(I) law).  Measured from each run directory:
+are discharged for ``end_time`` (3 s) at the cell sizes ``cell_sizes`` (7.5 to 1.875 mm),
+each with the package's default law (``default``: the mu(I) rate dependence with the grain
+size d = 1 mm) and, for the funnel, with the plain rate-independent law of the published method
+(``rate_independent``: ``material.rate_dependence = "none"``, no length).  Measured from each
+run directory:
 
 * the rate ``W(t)`` (``timeseries.csv``) and the mass discharged in ``end_time``;
 * the mean rate over ``early`` (0.5-1.5 s) and ``late`` (2.5 s to the end) from the
@@ -51,8 +51,9 @@ TITLE = "Funnel flow under refinement: the flow channel's edge and the rate"
 _REF = HopperConfig()
 DEFAULTS = {
     "hoppers": {"funnel": (60.0, 25.0), "reference": (20.0, 15.0)},   # (theta, phi_w) deg
-    "variants": {"plain": {}, "viscous": {"grid_viscosity": 0.25, "viscosity_length": 0.005}},
-    "cell_sizes": (0.0075, 0.005, 0.00375),
+    "variants": {"default": {}, "rate_independent": {"rate_dependence": "none"}},
+    "funnel_only_variants": ("rate_independent",),
+    "cell_sizes": (0.0075, 0.005, 0.00375, 0.0025, 0.001875),
     "end_time": 3.0, "field_interval": 0.25,
     "early": (0.5, 1.5), "late_from": 2.5,
     "edge_time": 1.0, "edge_top": 0.25, "core_rows_from": 0.1,
@@ -60,7 +61,7 @@ DEFAULTS = {
     "fill_height": _REF.hopper.fill_height, "bin_height": _REF.hopper.bin_height,
     "case_plots": False,
 }
-QUICK = {"hoppers": {"funnel": (60.0, 25.0)}, "variants": {"plain": {}},
+QUICK = {"hoppers": {"funnel": (60.0, 25.0)}, "variants": {"default": {}},
          "cell_sizes": (0.01, 0.0075), "end_time": 0.6, "field_interval": 0.2,
          "early": (0.2, 0.4), "late_from": 0.4, "edge_time": 0.4, "bin_diameter": 0.16,
          "fill_height": 0.1, "bin_height": 0.12, "edge_top": 0.1, "core_rows_from": 0.05}
@@ -70,17 +71,19 @@ def setup(quick: bool = False, **options) -> dict:
     """The cases and options (``{"options", "cases", "setting"}``); unknown options raise."""
     opts = _sweep.resolve_options(DEFAULTS, options, QUICK if quick else None)
     cases = []
-    for (hopper, (theta, wall)), (variant, numerics), h in (
+    for (hopper, (theta, wall)), (variant, material), h in (
             (a, b, c) for a in opts["hoppers"].items() for b in opts["variants"].items()
             for c in opts["cell_sizes"]):
+        if hopper != "funnel" and variant in opts["funnel_only_variants"]:
+            continue
         config = {"hopper": {"bin_diameter": opts["bin_diameter"],
                              "outlet_diameter": opts["outlet_diameter"],
                              "half_angle_deg": float(theta),
                              "fill_height": opts["fill_height"],
                              "bin_height": opts["bin_height"]},
-                  "material": {"youngs_modulus": 5.0e6},
+                  "material": {"youngs_modulus": 5.0e6, **material},
                   "wall": {"friction_angle_deg": float(wall)},
-                  "numerics": {"cell_size": float(h), **numerics},
+                  "numerics": {"cell_size": float(h)},
                   "run": {"end_time": opts["end_time"], "output_interval": 0.05,
                           "field_interval": opts["field_interval"]}}
         cases.append(_sweep.make_case(
