@@ -455,6 +455,52 @@ class Boundary:
         """Height of the highest wall point (m)."""
         return max(p[1] for c in self.walls for p in c.points)
 
+    # ------------------------------------------------------------------ sizes of the section
+    @property
+    def x_extent(self) -> tuple:
+        """``(x_min, x_max)`` (m) of the section: the axis (a half-section) or the left wall's
+        leftmost point, and the (right) wall's rightmost point."""
+        right = max(p[0] for p in self.chain("wall").points)
+        if self.section.half:
+            return 0.0, right
+        return min(p[0] for p in self.chain("left_wall").points), right
+
+    @property
+    def width(self) -> float:
+        """The silo's widest span (m): twice the wall's largest ``x`` of a half-section (the
+        diameter, or the width of a plane silo), or from wall to wall of a full section."""
+        x_min, x_max = self.x_extent
+        return 2.0 * x_max if self.section.half else x_max - x_min
+
+    def span_at(self, z: float) -> float:
+        """The silo's width (m) at height ``z``: from wall to wall (twice the wall's ``x`` in a
+        half-section: the diameter, or the plane silo's width)."""
+        (rows, below, _), *rest = self._profiles
+        right = float(wall_x(z, rows, below))
+        if not rest:
+            return 2.0 * right
+        return right - float(wall_x(z, rest[0][0], rest[0][1]))
+
+    def transition(self, chain="wall") -> Optional[Corner]:
+        """The corner of a wall where its top vertical stretch begins (a hopper's or a flat
+        floor's junction with the bin wall above it), or None when the wall's top segment is
+        not vertical (no bin wall stands on the rest)."""
+        c = self.chain(chain)
+        p = c.points
+        k = len(p) - 1
+        while k > 0 and p[k - 1][0] == p[k][0]:
+            k -= 1
+        if k in (0, len(p) - 1):
+            return None
+        return next((q for q in c.corners if q.segment == k), None)
+
+    def transition_height(self, chain="wall") -> float:
+        """The height (m) of a wall's :meth:`transition`: below it the wall hangs from it, above
+        it the bin wall stands on it; the wall's top when it has none (all of it hangs)."""
+        corner = self.transition(chain)
+        return float(corner.point[1]) if corner is not None else \
+            float(self.chain(chain).points[-1][1])
+
     def with_friction(self, wall_deg: float, segment_deg: Sequence[float] = None) -> "Boundary":
         """A copy whose walls have friction ``segment_deg`` (one per segment of ``wall``) or
         ``wall_deg``, and inserts without an angle of their own ``wall_deg`` (deg)."""

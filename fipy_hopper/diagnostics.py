@@ -623,61 +623,19 @@ class WallLoads:
     def membrane_forces(self, start: dict, end: dict, p_n, tau=None):
         """The forces in the wall per unit length of its circumference (N/m; per metre of a
         wedge's length), tension positive, from the recovered traction over a window, as a
-        shell of revolution carries them (membrane theory):
-
-        * hoop ``N_theta = p_n r / n_r`` per bin (the normal pressure over the wall's second
-          radius of curvature, ``r / cos(theta)`` in the cone, ``R`` in the bin; NaN on a flat
-          floor and for a wedge, whose plates carry ``p_n`` in bending);
-        * meridional ``N_m`` along each wall (``wall``, ``left_wall``; NaN on inserts): the
-          hopper (the wall below the transition, ``z < cone_height``) hangs from the
-          transition, so at a bin centre on it ``N_m = V / (c cos(theta))``, ``V`` the
-          downward load (per radian) of the material on the hopper below that point,
-          ``c = r`` (1 for a wedge), ``theta`` the local slope from the vertical
-          (``cos(theta) = |n_r|``); the bin's wall stands on the transition, so above it
-          ``N_m = -U / c``, ``U`` the downward load (per radian) on the wall above that point,
-          a compression (NaN on a flat floor or ledge, which is not hung);
-        * at the transition ``(N_m of the hopper there, the bin wall's axial compression
-          there)`` (N/m) of the (right) wall, from the hopper's and the bin wall's shares of
-          its vertical reaction, so that ``section factor * c_t * (cos(theta) N_hopper +
-          N_bin) = the wall's vertical force``.
-
-        A bin's vertical load is its traction's: ``A_b (-p_n n_z + tau t_z)`` (upward on the
-        material), with ``p_n``, ``tau`` the window's recovered bin means (:meth:`profile`,
-        computed here when not given); each stretch's loads add up to its entries' vertical
-        reaction.  Loads are taken at the bin centres by the midpoint rule (half the own
-        bin's).  Returns ``(hoop, meridional, (hopper_tension_t, bin_compression_t))``.
-        """
-        geom = self.model.cfg.hopper
+        shell of revolution carries them: the hoop force per bin (:meth:`hoop_force`) and the
+        meridional force per bin and at the transition of :func:`membrane_statics` (the
+        window's recovered bin means ``p_n``, ``tau``: :meth:`profile`, computed here when not
+        given).  Returns ``(hoop, meridional, (hopper_tension_t, bin_compression_t))``, the
+        last the (right) wall's transition's (NaN without one), so that ``section factor * c_t
+        * (cos(theta) N_hopper + N_bin)`` is the wall's vertical force."""
         if tau is None:
             p_n, tau = self.profile(start, end)[3:]
-        bins = self.bins
-        down = bins.area * (-p_n * bins.normal[:, 1] + tau * bins.tangent[:, 1])   # N/rad
-        c = np.abs(bins.r) if geom.axisymmetric else np.ones_like(bins.r)
-        n_r = np.abs(bins.normal[:, 0])
-        meridional = np.full(len(down), np.nan)
-        at_transition = (math.nan, math.nan)
-        z_t = geom.cone_height
-        for name in ("wall", "left_wall"):
-            on = bins.wall == name
-            if not on.any():
-                continue
-            curved = n_r > 1e-12
-            hung = on & (bins.z < z_t)
-            stands = on & ~hung & curved
-            load_h, load_s = np.where(hung, down, 0.0), np.where(stands, down, 0.0)
-            below = np.cumsum(load_h) - 0.5 * load_h
-            above = np.cumsum(load_s[::-1])[::-1] - 0.5 * load_s
-            hanging = hung & curved               # a flat floor or ledge is not hung
-            meridional[hanging] = below[hanging] / (c[hanging] * n_r[hanging])
-            meridional[stands] = -above[stands] / c[stands]
-            if name == "wall":
-                top = np.flatnonzero(hung)
-                c_t = geom.bin_radius if geom.axisymmetric else 1.0
-                at_transition = (float(np.sum(load_h)) / (c_t * n_r[top[-1]])
-                                 if len(top) and n_r[top[-1]] > 1e-12 else math.nan,
-                                 float(np.sum(load_s)) / c_t)
-        hoop = self.hoop_force(p_n)
-        return hoop, meridional, at_transition
+        meridional, corners = membrane_statics(self.model.cfg.boundary, self.bins, p_n, tau)
+        at = next((c for c in corners if c["wall"] == "wall" and c["transition"]), None)
+        at_transition = ((at["meridional_below_N_m"], -at["meridional_above_N_m"])
+                         if at is not None else (math.nan, math.nan))
+        return self.hoop_force(p_n), meridional, at_transition
 
     def chain_forces(self, start: dict, end: dict) -> dict:
         """The mean force of each wall and insert on the material over a window,
@@ -694,51 +652,11 @@ class WallLoads:
                 for k, c in enumerate(bnd.chains) if c.kind != "tube"}
 
     def corner_forces(self, p_n, tau) -> list:
-        """The forces at every corner of the walls (``wall``, ``left_wall``) for the bins'
-        recovered ``p_n`` and ``tau`` of a window, as the membrane statics of
-        :meth:`membrane_forces` give them (the hopper, below ``cone_height``, hung from the
-        transition; the bin wall standing on it): per corner a dict of its ``wall``, ``s_m``,
-        ``r_m``, ``z_m``, the meridional forces on the segments below and above it
-        (``meridional_below_N_m``, ``meridional_above_N_m``, N/m, tension positive), the
-        horizontal pull the corner takes, ``horizontal_pull_N_m = N_b sin(b_b) - N_a
-        sin(b_a)`` (``b`` a segment's slope from the vertical; inward positive), and for a
-        section of revolution the ring there, ``ring_compression_N = r`` times that pull.
-        NaN next to a horizontal floor or ledge (not hung)."""
-        bins, geom = self.bins, self.model.cfg.hopper
-        bnd = self.model.cfg.boundary
-        down = bins.area * (-p_n * bins.normal[:, 1] + tau * bins.tangent[:, 1])
-        out = []
-        for name in ("wall", "left_wall"):
-            if name not in [c.name for c in bnd.chains]:
-                continue
-            chain = bnd.chain(name)
-            on = bins.wall == name
-            normals = chain.normals
-            for corner in chain.corners:
-                k = corner.segment                       # the segment above the corner
-                x, z = corner.point
-                if z >= bnd.fill_level:
-                    continue
-                c = abs(x) if geom.axisymmetric else 1.0
-                below, above = normals[k - 1], normals[k]
-                n_b, n_a = abs(below[0]), abs(above[0])
-                hung = on & (bins.z < geom.cone_height)
-                load_below = float(np.sum(down[hung & (bins.s < corner.s)]))
-                load_above = float(np.sum(down[on & ~hung & (bins.s > corner.s)]))
-                m_b = load_below / (c * n_b) if n_b > 1e-12 and z <= geom.cone_height \
-                    else math.nan
-                if z < geom.cone_height:
-                    m_a = load_below / (c * n_a) if n_a > 1e-12 else math.nan
-                else:
-                    m_a = -load_above / c if n_a > 1e-12 else math.nan
-                pull = m_b * abs(below[1]) - (m_a * abs(above[1]) if math.isfinite(m_a)
-                                              and abs(above[1]) > 0 else 0.0)
-                out.append({"wall": name, "s_m": float(corner.s), "r_m": float(x),
-                            "z_m": float(z), "meridional_below_N_m": m_b,
-                            "meridional_above_N_m": m_a, "horizontal_pull_N_m": pull,
-                            "ring_compression_N": (pull * abs(x) if geom.axisymmetric
-                                                   else math.nan)})
-        return out
+        """The forces at every corner of the walls for the bins' recovered ``p_n`` and
+        ``tau`` of a window (:func:`membrane_statics`), one dict per corner without its
+        ``transition`` flag (a record holds numbers and names only)."""
+        _, corners = membrane_statics(self.model.cfg.boundary, self.bins, p_n, tau)
+        return [{k: v for k, v in c.items() if k != "transition"} for c in corners]
 
     def balance(self, start: dict, end: dict) -> dict:
         """The vertical momentum balance of the whole grid over a window, as mean forces in N
@@ -770,6 +688,80 @@ class WallLoads:
         out["relative_residual"] = (abs(out["residual"]) / out["weight"]
                                     if out["weight"] > 0 else math.nan)
         return out
+
+
+def vertical_loads(bins: WallBins, p_n, tau) -> np.ndarray:
+    """The vertical load of each bin's recovered traction on the material, ``A_b (-p_n n_z +
+    tau t_z)`` (N per radian; per metre of a plane wall; upward on the material, so the
+    material's load on the wall downward), taken at the bin centre."""
+    return bins.area * (-np.asarray(p_n, float) * bins.normal[:, 1]
+                        + np.asarray(tau, float) * bins.tangent[:, 1])
+
+
+def membrane_statics(boundary, bins: WallBins, p_n, tau) -> tuple:
+    """The membrane statics of the walls (``wall``, ``left_wall``) under the bins' traction
+    ``p_n``, ``tau`` (Pa): the meridional force per bin and the forces at every corner, one
+    computation for both.
+
+    The supports: each wall hangs from its :meth:`~fipy_hopper.boundary.Boundary.transition`
+    (the bottom of its top vertical stretch) and its bin wall stands on it.  With ``V`` the
+    material's downward load (per radian; per metre of a plane wall) on the wall below a
+    point, ``U`` that on the wall above it (:func:`vertical_loads`, summed bin by bin), ``c``
+    the point's radius (1 in plane flow) and ``beta`` the slope from the vertical of the
+    segment there (``cos(beta) = |n_x|``), the meridional force (N/m, tension positive) is
+
+        N_m = V / (c cos(beta))   below the transition (hung),
+        N_m = -U / c              above it (standing: a compression),
+
+    NaN on a horizontal floor or ledge (``cos(beta) = 0``: it carries its load in bending,
+    not hung).  Per bin the load is taken at the bin centre (half its own bin's).  At a
+    corner (a point of the chain's :attr:`~fipy_hopper.boundary.Chain.corners`, at arc length
+    ``s``) the same forces on the segments below and above it, ``N_b`` and ``N_a``, leave a
+    horizontal pull ``N_b sin(beta_b) - N_a sin(beta_a)`` (inward positive) that a ring there
+    takes: in a section of revolution the ring's compression is ``c`` times the pull (N).
+
+    Returns ``(meridional, corners)``: ``meridional`` (nb,) N/m (NaN off the walls), and one
+    dict per corner of ``wall``, ``s_m``, ``r_m``, ``z_m``, ``transition`` (True at the
+    wall's transition), ``meridional_below_N_m``, ``meridional_above_N_m``,
+    ``horizontal_pull_N_m`` and ``ring_compression_N`` (NaN in plane flow)."""
+    axisymmetric = boundary.section.axisymmetric
+    down = vertical_loads(bins, p_n, tau)
+    c = np.abs(bins.r) if axisymmetric else np.ones_like(bins.r)
+    n_r = np.abs(bins.normal[:, 0])
+    curved = n_r > 1e-12
+    meridional = np.full(len(down), np.nan)
+    corners = []
+    for chain in boundary.walls:
+        on = bins.wall == chain.name
+        z_t = boundary.transition_height(chain.name)
+        hung = on & (bins.z < z_t)
+        stands = on & ~hung & curved
+        load_h, load_s = np.where(hung, down, 0.0), np.where(stands, down, 0.0)
+        below = np.cumsum(load_h) - 0.5 * load_h
+        above = np.cumsum(load_s[::-1])[::-1] - 0.5 * load_s
+        hanging = hung & curved
+        meridional[hanging] = below[hanging] / (c[hanging] * n_r[hanging])
+        meridional[stands] = -above[stands] / c[stands]
+        transition = boundary.transition(chain.name)
+        for corner in chain.corners:
+            x, z = corner.point
+            radius = abs(x) if axisymmetric else 1.0
+            n_b, n_a = chain.normals[corner.segment - 1], chain.normals[corner.segment]
+            load_below = float(np.sum(load_h[bins.s < corner.s]))
+            load_above = float(np.sum(load_s[bins.s > corner.s]))
+            m_b = load_below / (radius * abs(n_b[0])) if abs(n_b[0]) > 1e-12 else math.nan
+            if z < z_t:
+                m_a = load_below / (radius * abs(n_a[0])) if abs(n_a[0]) > 1e-12 else math.nan
+            else:
+                m_a = -load_above / radius if abs(n_a[0]) > 1e-12 else math.nan
+            pull = m_b * abs(n_b[1]) - (m_a * abs(n_a[1]) if math.isfinite(m_a)
+                                        and abs(n_a[1]) > 0 else 0.0)
+            corners.append({"wall": chain.name, "s_m": float(corner.s), "r_m": float(x),
+                            "z_m": float(z), "transition": corner == transition,
+                            "meridional_below_N_m": m_b, "meridional_above_N_m": m_a,
+                            "horizontal_pull_N_m": pull,
+                            "ring_compression_N": pull * abs(x) if axisymmetric else math.nan})
+    return meridional, corners
 
 
 def wall_k(wall_loads: WallLoads, p_n, state, geom, margin_bins: int = 2) -> float:
@@ -835,18 +827,23 @@ def load_summary(sim) -> dict:
     * ``overpressure_factor_bin_max``, ``overpressure_factor_cone_max``: the largest ratio of
       the discharge envelope to the filled pressure in the bin (above the transition zone)
       and in the cone, with EN 1991-4's discharge factor ``en1991_discharge_factor_bin``;
-    * ``switch_peak_Pa``, ``switch_peak_s_m``: the envelope's peak within a bin diameter of
-      the transition, and ``walker_switch_pressure_Pa``, Walker's passive pressure just below
-      the transition for the Janssen vertical stress there (with the measured ``K``);
-    * the forces in the wall at the transition per unit length of circumference (N/m,
-      :meth:`WallLoads.membrane_forces`), at rest and the larger of the 90 % and 50 % stages:
-      ``hopper_meridional_tension_N_m`` / ``..._discharge_N_m`` (the hopper hangs from the
-      transition), ``bin_wall_axial_compression_N_m`` / ``..._discharge_N_m`` (the bin's
-      wall friction carried down to it), ``transition_ring_compression_N`` / ``..._discharge_N``
-      (the ring that takes the inward pull of the hopper's tension, ``N_m sin(theta) R``), and
+    * ``corners``: every corner of the walls with its forces and switch peak
+      (:func:`_insert_and_corner_loads`); the wall's transition's values are also given at
+      the top level (:func:`_transition_forces`), the same numbers:
+      ``switch_peak_Pa``, ``switch_peak_s_m`` (the envelope's peak within a bin diameter of
+      the transition), and the forces in the wall at the transition per unit length of
+      circumference (N/m, :func:`membrane_statics`), at rest and the larger of the 90 % and
+      50 % stages: ``hopper_meridional_tension_N_m`` / ``..._discharge_N_m`` (the hopper
+      hangs from the transition), ``bin_wall_axial_compression_N_m`` / ``..._discharge_N_m``
+      (the bin's wall friction carried down to it), ``transition_ring_compression_N`` /
+      ``..._discharge_N`` (the ring that takes the inward pull of the hopper's tension,
+      ``N_m sin(beta) r`` with ``beta`` the slope of the segment under the transition);
+      NaN where they do not apply (no transition; no hopper: a flat floor; the ring: a plane
+      section);
+    * ``walker_switch_pressure_Pa``, Walker's passive pressure just below the transition for
+      the Janssen vertical stress there (with the measured ``K``), and
       ``janssen_wall_axial_compression_N_m``, Janssen's at the transition for the fill's
-      height with the measured ``K``.  NaN where they do not apply (no hopper: a flat floor;
-      the ring: a wedge).
+      height with the measured ``K``: for the silos the classic theories cover.
     """
     from . import theory
 
@@ -858,9 +855,9 @@ def load_summary(sim) -> dict:
            "wall_k_bin": getattr(rec, "wall_k", nan), "overpressure_factor_bin_max": nan,
            "overpressure_factor_cone_max": nan,
            "en1991_discharge_factor_bin": theory.en1991_discharge_factors()[0],
-           "switch_peak_Pa": nan, "switch_peak_s_m": nan, "walker_switch_pressure_Pa": nan,
-           **_transition_forces(rec, geom),
-           "janssen_wall_axial_compression_N_m": nan}
+           "walker_switch_pressure_Pa": nan, "janssen_wall_axial_compression_N_m": nan}
+    corners = _insert_and_corner_loads(rec, m.cfg)
+    out.update(_transition_forces(corners.get("corners", [])))
     rest = rec.rest_balance
     if rest and rest.get("weight", 0) > 0:
         out.update(fill_weight_N=rest["weight"], fill_wall_vertical_N=rest["wall"],
@@ -880,21 +877,18 @@ def load_summary(sim) -> dict:
         s, p_fill = rec.wall["filling"][1][on_wall], rec.wall["filling"][4][on_wall]
         envelope = rec.wall["discharge_envelope"][4][on_wall]
         bnd = m.cfg.boundary
-        s_t = bnd.arc_at_height("wall", geom.cone_height)
-        s_top = bnd.arc_at_height("wall", geom.fill_level)
+        z_t = bnd.transition_height("wall")
+        s_t = bnd.arc_at_height("wall", z_t)
+        s_top = bnd.arc_at_height("wall", bnd.fill_level)
         loaded = p_fill > 0.05 * np.nanmax(p_fill)
         ratio = np.where(loaded, envelope / np.where(loaded, p_fill, 1.0), np.nan)
-        near = geom.bin_diameter
+        near = bnd.span_at(z_t)
         in_bin = (s > s_t + 0.5 * near) & (s < s_top - 0.25 * near)
         in_cone = (s < s_t - 0.1 * near) & (s > 0.25 * near)
         if np.isfinite(ratio[in_bin]).any():
             out["overpressure_factor_bin_max"] = float(np.nanmax(ratio[in_bin]))
         if np.isfinite(ratio[in_cone]).any():
             out["overpressure_factor_cone_max"] = float(np.nanmax(ratio[in_cone]))
-        zone = np.abs(s - s_t) <= near
-        if zone.any():
-            k = np.flatnonzero(zone)[np.argmax(envelope[zone])]
-            out["switch_peak_Pa"], out["switch_peak_s_m"] = float(envelope[k]), float(s[k])
         if geom.cone_height > 0 and geom.classic:
             if mu > 0:
                 janssen = (theory.janssen_vertical_stress if geom.axisymmetric
@@ -909,7 +903,7 @@ def load_summary(sim) -> dict:
                  else theory.janssen_plane_wall_axial_force)
         out["janssen_wall_axial_compression_N_m"] = float(axial(
             geom.fill_height, mat.density, geom.bin_diameter, K, mu))
-    out.update(_insert_and_corner_loads(rec, m.cfg))
+    out.update(corners)
     return out
 
 
@@ -917,9 +911,9 @@ def _insert_and_corner_loads(rec, cfg) -> dict:
     """The inserts' and the corners' numbers of :func:`load_summary`: per insert the
     material's downward load on it at rest, ``<insert>_vertical_force_N``, and the largest
     over the discharge's load windows, ``<insert>_vertical_force_discharge_max_N`` (N, 3D);
-    and ``corners``, the forces at every corner of the walls at rest and, as
-    ``..._discharge``, the larger in size of the 90 % and 50 % stages
-    (:meth:`WallLoads.corner_forces`)."""
+    and ``corners``, the forces at every corner of the walls (:func:`membrane_statics`) at
+    rest and, as ``..._discharge``, the larger in size of the 90 % and 50 % stages, with its
+    ``transition`` flag and its switch peak (:func:`corner_switch_peaks`)."""
     out = {}
     rest = getattr(rec, "chain_forces", {}).get("filling", {})
     for insert in cfg.boundary.inserts:
@@ -931,36 +925,59 @@ def _insert_and_corner_loads(rec, cfg) -> dict:
     if "filling" in corners:
         rows = [dict(c) for c in corners["filling"]]
         stages = [corners[s] for s in ("early_discharge", "mid_discharge") if s in corners]
+        peaks = corner_switch_peaks(rec, cfg.boundary, rows)
         for k, row in enumerate(rows):
+            transition = cfg.boundary.transition(row["wall"])
+            row["transition"] = transition is not None and transition.s == row["s_m"]
             for key in ("meridional_below_N_m", "meridional_above_N_m", "horizontal_pull_N_m",
                         "ring_compression_N"):
                 values = [st[k][key] for st in stages if len(st) > k
                           and math.isfinite(st[k][key])]
                 row[key.replace("_N", "_discharge_N", 1)] = (
                     max(values, key=abs) if values else math.nan)
+            row["switch_peak_Pa"], row["switch_peak_s_m"] = peaks[k]
         out["corners"] = rows
     return out
 
 
-def _transition_forces(rec, geom) -> dict:
-    """The transition's forces of :func:`load_summary` from ``rec.wall_forces``."""
-    ring = (math.sin(geom.half_angle) * geom.bin_radius
-            if geom.axisymmetric and geom.cone_height > 0 else math.nan)
-    forces = getattr(rec, "wall_forces", {})
+def corner_switch_peaks(rec, boundary, rows) -> list:
+    """Per corner row (its ``wall`` and ``s_m``), ``(p, s)``: the discharge envelope's
+    largest recovered ``p_n`` (Pa) on the corner's wall within the silo's width at the
+    corner's height (:meth:`~fipy_hopper.boundary.Boundary.span_at`: the bin's diameter at a
+    hopper's transition) of it along the wall, and its arc length ``s`` (m); NaN without an
+    envelope."""
+    nan = (math.nan, math.nan)
+    if "discharge_envelope" not in rec.wall:
+        return [nan] * len(rows)
+    s, envelope = rec.wall["discharge_envelope"][1], rec.wall["discharge_envelope"][4]
+    names = np.asarray(rec.wall_names) if rec.wall_names else np.full(len(s), "wall")
+    out = []
+    for row in rows:
+        near = boundary.span_at(row["z_m"])
+        zone = np.flatnonzero((names == row["wall"]) & (np.abs(s - row["s_m"]) <= near)
+                              & np.isfinite(envelope))
+        if not len(zone):
+            out.append(nan)
+            continue
+        k = zone[np.argmax(envelope[zone])]
+        out.append((float(envelope[k]), float(s[k])))
+    return out
 
-    def at(stages):
-        values = [np.asarray(forces[s][2], float) for s in stages if s in forces]
-        if not values:
-            return math.nan, math.nan
-        return tuple(float(np.max([v[k] for v in values])) for k in range(2))
 
-    rest, flow = at(("filling",)), at(("early_discharge", "mid_discharge"))
-    return {"hopper_meridional_tension_N_m": rest[0],
-            "bin_wall_axial_compression_N_m": rest[1],
-            "transition_ring_compression_N": rest[0] * ring,
-            "hopper_meridional_tension_discharge_N_m": flow[0],
-            "bin_wall_axial_compression_discharge_N_m": flow[1],
-            "transition_ring_compression_discharge_N": flow[0] * ring}
+def _transition_forces(rows) -> dict:
+    """The transition's numbers of :func:`load_summary`: those of the corner rows'
+    (:func:`_insert_and_corner_loads`) transition of the (right) wall, NaN without one."""
+    at = next((r for r in rows if r["wall"] == "wall" and r["transition"]), None)
+    nan = math.nan
+    get = (lambda key, sign=1.0: sign * at[key]) if at is not None else (lambda *_: nan)
+    return {"hopper_meridional_tension_N_m": get("meridional_below_N_m"),
+            "bin_wall_axial_compression_N_m": get("meridional_above_N_m", -1.0),
+            "transition_ring_compression_N": get("ring_compression_N"),
+            "hopper_meridional_tension_discharge_N_m": get("meridional_below_discharge_N_m"),
+            "bin_wall_axial_compression_discharge_N_m":
+                get("meridional_above_discharge_N_m", -1.0),
+            "transition_ring_compression_discharge_N": get("ring_compression_discharge_N"),
+            "switch_peak_Pa": get("switch_peak_Pa"), "switch_peak_s_m": get("switch_peak_s_m")}
 
 
 # ---------------------------------------------------------------- stress pattern
