@@ -156,21 +156,26 @@ def normal_load(impulse, normals):
 
 def wall_slip_measures(model, state, previous_impulse=None,
                        rule: FlowModeRule = FlowModeRule()):
-    """``(ratio, fraction, stretch ratios, profile)`` of :class:`FlowModeRule` from a model's
-    wall contact: the smallest wall slip ratio over the hopper stretches, the slip fraction of
-    that stretch, every stretch's ratio, and the loaded hopper contacts as rows
-    ``(s, r, z, u/U)`` (their wall point, m, and slip ratio; (0, 4) when none).  The loads are
-    ``state.wall_impulse`` less ``previous_impulse`` (its value at the previous sample;
-    ``None``: since the start), the slip and axis speeds the model's :meth:`contact_slip`
-    (read from the state, which is left as it is)."""
+    """``(ratio, fraction, stretch ratios, stretch fractions, profile)`` of
+    :class:`FlowModeRule` from a model's wall contact at one sample: the smallest wall slip
+    ratio over the hopper stretches, the slip fraction of that stretch, every stretch's ratio
+    and slip fraction (one per :func:`hopper_rows`, NaN where a stretch has no loaded
+    contact), and the loaded hopper contacts as rows ``(s, r, z, u/U)`` (their wall point, m,
+    and slip ratio; (0, 4) when none).  The loads are ``state.wall_impulse`` less
+    ``previous_impulse`` (its value at the previous sample; ``None``: since the start), the
+    slip and axis speeds the model's :meth:`contact_slip` (read from the state, which is left
+    as it is)."""
     s, normals, segment = model.wall_entries()
     impulse = state.wall_impulse if previous_impulse is None else (
         state.wall_impulse - previous_impulse)
     slip, axis_speed = model.contact_slip(state)
     bnd = model.cfg.boundary
-    stretch = hopper_stretches(segment, hopper_rows(bnd))
+    rows = hopper_rows(bnd)
+    stretch = hopper_stretches(segment, rows)
     load = normal_load(impulse, normals)
-    ratios, fractions = wall_slip(load, slip, axis_speed, s, stretch, rule)
+    measured = wall_slip(load, slip, axis_speed, s, stretch, rule)
+    ratios, fractions = (np.concatenate([m, np.full(len(rows) - len(m), math.nan)])
+                         for m in measured)
     on = np.flatnonzero((stretch >= 0) & (load > 0.0) & (axis_speed > 0.0) & np.isfinite(slip))
     on = on[np.argsort(s[on], kind="stable")]
     chain = bnd.table.chain[np.maximum(segment[on], 0)]
@@ -179,34 +184,59 @@ def wall_slip_measures(model, state, previous_impulse=None,
         r_w[chain == c], z_w[chain == c] = bnd.wall_point(int(c), s[on][chain == c])[:2]
     profile = np.column_stack([s[on], r_w, z_w, slip[on] / axis_speed[on]])
     if not np.isfinite(ratios).any():
-        return math.nan, math.nan, ratios, profile
+        return math.nan, math.nan, ratios, fractions, profile
     worst = int(np.nanargmin(ratios))
-    return float(ratios[worst]), float(fractions[worst]), ratios, profile
+    return float(ratios[worst]), float(fractions[worst]), ratios, fractions, profile
+
+
+def axis_columns(grid, boundary, centre_column: int) -> np.ndarray:
+    """Per node row of the grid, the node column whose downward speed is the flow-mode rule's
+    axis speed at that height: the centreline's (``centre_column``), or where that node lies
+    in the solid or within half a cell of it (an insert on the axis), the nearest node column
+    of the row to the centreline at least half a cell from every wall and insert: the
+    material's nearest column beside the insert.  A row with no such node keeps the
+    centreline's (its speed, zero, gives no ratio)."""
+    h = grid.h
+    offset = np.abs(grid.r_nodes - boundary.section.centreline)
+    X, Z = np.meshgrid(grid.r_nodes, grid.z_nodes)
+    clear = boundary.signed_distance(X, Z) >= 0.5 * h
+    ranked = np.where(clear, offset[None, :], np.inf)
+    nearest = np.argmin(ranked, axis=1)
+    keep = clear[:, centre_column] | ~np.isfinite(ranked[np.arange(len(nearest)), nearest])
+    return np.where(keep, centre_column, nearest).astype(np.int64)
 
 
 def flow_mode_measures(model, state, rule: FlowModeRule = FlowModeRule()):
-    """Mass-flow index and stagnant fraction of the cone from the current velocity field."""
+    """Mass-flow index and stagnant fraction of the hopper (the wall below its transition,
+    :meth:`~fipy_hopper.boundary.Boundary.transition_height`) from the current velocity
+    field.  The index's axis speed is that of the full cells within two cells of the row's
+    open cell nearest to the centreline (the axis, or beside an insert on it the material's
+    nearest column)."""
     g = model.grid
-    geom = model.cfg.hopper
+    bnd = model.cfg.boundary
+    z_t = bnd.transition_height("wall")
     vz_cell = 0.25 * (state.v[1, :-1, :-1] + state.v[1, :-1, 1:] + state.v[1, 1:, :-1]
                       + state.v[1, 1:, 1:])
     down = -vz_cell
     R, Z = np.meshgrid(g.r_cells, g.z_cells)
-    d = model.cfg.boundary.signed_distance(R, Z)
-    centre = abs(g.r_cells - model.cfg.boundary.section.centreline) < 2.0 * g.h
+    d = bnd.signed_distance(R, Z)
+    offset = np.abs(g.r_cells - bnd.section.centreline)
     full = state.alpha > 0.5
     ratios = []
     for frac in rule.heights:
-        zc = frac * geom.cone_height
-        row = int(np.argmin(np.abs(g.z_cells - zc)))
+        row = int(np.argmin(np.abs(g.z_cells - frac * z_t)))
+        open_ = g.kappa[row] > 0
+        if not open_.any():
+            continue
+        centre = offset - offset[open_].min() < 1.5 * g.h     # two columns from the axis
         near_wall = (d[row] >= 1.0 * g.h) & (d[row] <= 2.5 * g.h) & full[row]
-        axis = centre & full[row]
+        axis = centre & open_ & full[row]
         if near_wall.any() and axis.any():
             v_axis = float(np.mean(down[row, axis]))
             if v_axis > 1e-9:
                 ratios.append(float(np.mean(down[row, near_wall])) / v_axis)
     index = float(np.mean(ratios)) if ratios else math.nan
-    cone = full & (Z > 0) & (Z < geom.cone_height) & (g.kappa > 0)
+    cone = full & (Z > 0) & (Z < z_t) & (g.kappa > 0)
     if cone.any():
         weights = (state.alpha * model.open_volume)[cone]
         mean_down = float(np.sum(down[cone] * weights) / np.sum(weights))
@@ -219,13 +249,17 @@ def flow_mode_measures(model, state, rule: FlowModeRule = FlowModeRule()):
 
 def bin_lateral_stress_ratio(model, state) -> float:
     """The bin's lateral stress ratio ``K = sum(w sigma_rr) / sum(w sigma_zz)`` (-), ``w`` the
-    material volume ``alpha kappa V``, over the full cells (``alpha >= 0.99``) of the bin from
-    a quarter of its diameter above the transition to a quarter below the material's surface
-    (the highest cell of the bin with ``alpha >= 1/2``): about ``nu / (1 - nu)`` in a bin
-    filled at rest, larger where discharge switches the stress state.  NaN when the band holds
+    material volume ``alpha kappa V``, over the full cells (``alpha >= 0.99``) of the bin (above
+    the wall's transition, :meth:`~fipy_hopper.boundary.Boundary.transition`) from a quarter
+    of its width above the transition to a quarter below the material's surface (the highest
+    cell of the bin with ``alpha >= 1/2``): about ``nu / (1 - nu)`` in a bin filled at rest,
+    larger where discharge switches the stress state.  NaN without a bin, when the band holds
     no cell (a bin emptied below it) or no compression."""
-    g, geom = model.grid, model.cfg.hopper
-    z_t, quarter = geom.cone_height, 0.25 * geom.bin_diameter
+    g, bnd = model.grid, model.cfg.boundary
+    if bnd.transition("wall") is None:
+        return math.nan
+    z_t = bnd.transition_height("wall")
+    quarter = 0.25 * bnd.span_at(z_t)
     Z = np.broadcast_to(g.z_cells[:, None], state.alpha.shape)
     in_bin = (Z > z_t) & (g.kappa > 0)
     filled = in_bin & (state.alpha >= 0.5)
@@ -240,26 +274,61 @@ def bin_lateral_stress_ratio(model, state) -> float:
     return float(np.sum(weights * state.sigma[..., 0][band])) / vertical
 
 
-def stretch_calls(cfg, samples, rule: FlowModeRule = FlowModeRule()) -> list:
+def counted_stretches(cfg) -> np.ndarray:
+    """Which stretches of hopper wall (:func:`hopper_rows`) enter the overall calls
+    (:func:`overall_call`): those at least one cell long (the grid resolves them: a sliver
+    shorter than a cell neither carries a contact of its own nor describes the hopper) whose
+    bottom lies below the fill level (the material fills them)."""
+    tab, bnd = cfg.boundary.table, cfg.boundary
+    rows = hopper_rows(bnd)
+    length = np.hypot(*(tab.b[rows] - tab.a[rows]).T)
+    bottom = np.minimum(tab.a[rows, 1], tab.b[rows, 1])
+    return (length >= cfg.numerics.cell_size) & (bottom < bnd.fill_level)
+
+
+def overall_call(calls) -> str:
+    """The overall call from the calls of the stretches that count (:func:`counted_stretches`):
+    ``"funnel"`` when any says funnel (the material rests against part of the hopper wall),
+    else ``"mass"`` when at least one says mass (it slides along every measured stretch), else
+    ``"unknown"`` (no stretch measured: a run too short, or no hopper wall in the material)."""
+    calls = list(calls)
+    if "funnel" in calls:
+        return "funnel"
+    return "mass" if "mass" in calls else "unknown"
+
+
+def stretch_calls(cfg, samples, fractions=(), rule: FlowModeRule = FlowModeRule()) -> list:
     """The call per stretch of hopper wall (:func:`hopper_rows`): a dict of its ``wall``,
-    ``segment``, ``z_m`` (its bottom and top), ``half_angle_deg`` (its slope from the
-    vertical), ``wall_friction_deg``, ``slip_ratio`` (the median of the samples' ratios of
-    that stretch), the ``call`` (``"mass"`` where it slides: ``slip_ratio >= rule.slip_ratio``,
-    else ``"funnel"``: a stagnant zone on it), and Jenike's critical half-angle for its wall
-    friction with the call it gives for that slope (``jenike_critical_half_angle_deg``,
-    ``jenike_call``; conical or plane by the section)."""
+    ``segment``, ``z_m`` (its bottom and top), ``length_m``, ``half_angle_deg`` (its slope
+    from the vertical), ``wall_friction_deg``, ``counted`` (whether it enters the overall
+    calls, :func:`counted_stretches`), ``samples`` (the samples in which it was measured),
+    ``slip_ratio`` and ``slip_fraction`` (the medians of those samples' ratios and slip
+    fractions of that stretch: ``samples``, ``fractions``, one row per sample), the ``call``
+    (:func:`classify_flow_mode`: ``"mass"`` where it slides, ``slip_ratio >=
+    rule.slip_ratio``, ``"funnel"`` where it does not: a stagnant zone on it, ``"unknown"``
+    without a sample), and Jenike's critical half-angle for its wall friction with the call it
+    gives for that slope (``jenike_critical_half_angle_deg``, ``jenike_call``; conical or
+    plane by the section; ``"unknown"`` outside the range of Jenike's fit)."""
     from . import theory
 
     bnd, mat = cfg.boundary, cfg.material
     tab = bnd.table
-    ratios = np.asarray(samples, float) if len(samples) else np.zeros((0, 0))
+    counted = counted_stretches(cfg)
+
+    def table(values):
+        values = np.asarray(values, float) if len(values) else np.zeros((0, 0))
+        return values if values.ndim == 2 else np.zeros((0, 0))
+
+    ratios, shares = table(samples), table(fractions)
     out = []
     for k, row in enumerate(hopper_rows(bnd)):
         a, b = tab.a[row], tab.b[row]
         angle = float(np.degrees(np.arctan2(abs(b[0] - a[0]), b[1] - a[1])))
-        values = ratios[:, k] if ratios.ndim == 2 and ratios.shape[1] > k else np.zeros(0)
-        values = values[np.isfinite(values)]
-        slip = float(np.median(values)) if values.size else math.nan
+        values = ratios[:, k] if ratios.shape[1] > k else np.zeros(0)
+        measured = np.isfinite(values)
+        slip = float(np.median(values[measured])) if measured.any() else math.nan
+        share = shares[:, k][measured] if shares.shape[1] > k else np.zeros(0)
+        share = share[np.isfinite(share)]
         phi_w = float(tab.friction_deg[row])
         geometry = "conical" if bnd.section.axisymmetric else "plane"
         critical = (theory.jenike_critical_half_angle if geometry == "conical"
@@ -269,19 +338,39 @@ def stretch_calls(cfg, samples, rule: FlowModeRule = FlowModeRule()) -> list:
             jenike = str(theory.jenike_flow_mode(angle, mat.friction_angle_deg, phi_w,
                                                  geometry=geometry))
         except ValueError:
-            theta_c, jenike = math.nan, "funnel"
+            theta_c, jenike = math.nan, "unknown"
         out.append({"wall": bnd.chains[tab.chain[row]].name, "segment": int(tab.segment[row]),
-                    "z_m": [float(a[1]), float(b[1])], "half_angle_deg": angle,
-                    "wall_friction_deg": phi_w, "slip_ratio": slip,
+                    "z_m": [float(a[1]), float(b[1])],
+                    "length_m": float(np.hypot(*(b - a))), "half_angle_deg": angle,
+                    "wall_friction_deg": phi_w, "counted": bool(counted[k]),
+                    "samples": int(measured.sum()), "slip_ratio": slip,
+                    "slip_fraction": float(np.median(share)) if share.size else math.nan,
                     "call": classify_flow_mode(slip, rule),
                     "jenike_critical_half_angle_deg": theta_c, "jenike_call": jenike})
     return out
 
 
+def flow_call(stretches) -> dict:
+    """The overall flow-mode numbers of the per-stretch calls (:func:`stretch_calls`), by the
+    documented rule (:func:`overall_call` over the stretches that count): ``flow_mode``,
+    ``wall_slip_ratio`` and ``wall_slip_fraction`` (the measured counted stretch with the
+    smallest slip ratio: the call is mass exactly when it reaches the threshold) and
+    ``jenike_flow_mode`` (the same rule over the stretches' Jenike calls)."""
+    counted = [st for st in stretches if st["counted"]]
+    measured = [st for st in counted if math.isfinite(st["slip_ratio"])]
+    worst = min(measured, key=lambda st: st["slip_ratio"]) if measured else None
+    return {"flow_mode": overall_call(st["call"] for st in counted),
+            "wall_slip_ratio": worst["slip_ratio"] if worst else math.nan,
+            "wall_slip_fraction": worst["slip_fraction"] if worst else math.nan,
+            "jenike_flow_mode": overall_call(st["jenike_call"] for st in counted)}
+
+
 def classify_flow_mode(slip_ratio, rule: FlowModeRule = FlowModeRule()) -> str:
-    """``"mass"`` or ``"funnel"`` by :class:`FlowModeRule` from the wall slip ratio (the
-    smallest over the hopper stretches); funnel when it was not measured (NaN)."""
-    return "mass" if np.isfinite(slip_ratio) and slip_ratio >= rule.slip_ratio else "funnel"
+    """``"mass"`` or ``"funnel"`` by :class:`FlowModeRule` from a stretch's wall slip ratio;
+    ``"unknown"`` when it was not measured (NaN)."""
+    if not np.isfinite(slip_ratio):
+        return "unknown"
+    return "mass" if slip_ratio >= rule.slip_ratio else "funnel"
 
 
 @dataclass(frozen=True)
@@ -323,7 +412,9 @@ def empty_channel(model, state, rule: OutcomeRule = OutcomeRule()):
     """``(diameter, height)`` (m) of the empty channel of :class:`OutcomeRule` from the outlet
     through the material to its top, measured from the section's centreline outwards (in a
     full section on its right side); ``(nan, nan)`` where the material closes the centreline
-    (or there is none)."""
+    (or there is none).  In each row the channel's first cell is the first open cell from
+    the centreline: beside an insert on the axis, the material's column next to the insert
+    (the insert itself is solid, not an empty channel)."""
     g = model.grid
     centre = centreline(model)
     c0 = int(np.searchsorted(g.r_cells, centre))   # the first cell column past the centreline
@@ -334,7 +425,9 @@ def empty_channel(model, state, rule: OutcomeRule = OutcomeRule()):
         return math.nan, math.nan
     j0, top = int(np.flatnonzero(above)[0]), int(rows[-1])
     band = full[j0:top + 1]
-    if band[:, 0].any():
+    open_ = np.asarray(g.kappa)[j0:top + 1, c0:] > 0.0
+    first = np.argmax(open_, axis=1)                   # first open cell from the centreline
+    if band[np.arange(len(band)), first].any():
         return math.nan, math.nan
     held = band.any(axis=1)
     k = np.argmax(band, axis=1)[held]                  # first full cell from the centreline

@@ -480,12 +480,16 @@ class HopperModel:
         """``(slip, axis_speed)`` (m/s) of every entry of ``contact_list``: the slip speed
         down the wall of the entry's node (its velocity in ``state.v``, after the step's
         contact) and the downward speed of the node of the same row on the centreline (the
-        axis)."""
+        axis; beside an insert on it, the material's nearest node column:
+        :func:`~fipy_hopper.diagnostics.axis_columns`)."""
         from . import diagnostics
         j, i, normals, _ = self.contact_list
         side = self.boundary.table.side[self.contact_owner]
+        if not hasattr(self, "_axis_columns"):
+            self._axis_columns = diagnostics.axis_columns(self.grid, self.boundary,
+                                                          self.centre_column)
         return (diagnostics.entry_slip(state.v[:, j, i].T, normals, side),
-                -state.v[1, j, self.centre_column])
+                -state.v[1, j, self._axis_columns[j]])
 
     def flow_mode_measures(self, state: State, rule) -> tuple:
         from . import diagnostics

@@ -216,6 +216,8 @@ class RunRecord:
     wall_slip_fraction: list = field(default_factory=list)   # -, share of the hopper wall
     # per sample, the wall slip ratio of each stretch of hopper wall (diagnostics.hopper_rows)
     wall_slip_stretches: list = field(default_factory=list)
+    # per sample, the wall slip fraction of each stretch of hopper wall
+    wall_slip_stretch_fractions: list = field(default_factory=list)
     # rows (s, r, z, slip / axis speed) of the loaded hopper-wall contacts at the last sample
     # of the flow-mode window (wall_slip.csv, the flow-pattern picture)
     wall_slip_profile: list = field(default_factory=list)
@@ -539,10 +541,11 @@ class Simulation:
         rec.mass_flow_index.append(index)
         rec.stagnant_fraction.append(stagnant)
         previous = self._readings.get("sample")     # the wall's impulse at the last sample
-        slip, share, ratios, profile = diagnostics.wall_slip_measures(
+        slip, share, ratios, shares, profile = diagnostics.wall_slip_measures(
             m, st, previous["wall"] if previous is not None else None, self.flow_rule)
         rec.wall_slip_ratio.append(slip)
         rec.wall_slip_stretches.append([float(r) for r in ratios])
+        rec.wall_slip_stretch_fractions.append([float(f) for f in shares])
         rec.wall_slip_fraction.append(share)
         if len(rec.t) > 1 and _before_flow_window_end(t, mass, rec.initial_mass) \
                 and len(profile):
@@ -889,17 +892,21 @@ class Simulation:
         t = np.asarray(rec.t)
         masses = np.asarray(rec.mass_in_hopper)
         m0 = rec.initial_mass
-        window = (masses <= 0.9 * m0) & _before_flow_window_end(t, masses, m0)
-        index, stagnant, slip, share = (
-            _window_median(getattr(rec, name), window) for name in (
-                "mass_flow_index", "stagnant_fraction", "wall_slip_ratio", "wall_slip_fraction"))
+        window, window_name = flow_mode_window(t, masses, m0)
+        index, stagnant = (_window_median(getattr(rec, name), window)
+                           for name in ("mass_flow_index", "stagnant_fraction"))
+        stretches = diagnostics.stretch_calls(
+            m.cfg, [r for r, w in zip(rec.wall_slip_stretches, window) if w],
+            [f for f, w in zip(rec.wall_slip_stretch_fractions, window) if w], self.flow_rule)
+        calls = diagnostics.flow_call(stretches)
+        slip, share = calls["wall_slip_ratio"], calls["wall_slip_fraction"]
         remaining = m.mass_in_hopper(st)
         if np.isfinite(m0) and m0 > 0:
             balance = abs(remaining + st.discharged - m0) / m0
             left = remaining / m0
         else:
             balance = left = math.nan
-        mode = diagnostics.classify_flow_mode(slip, self.flow_rule) if len(t) else "none"
+        mode = calls["flow_mode"] if len(t) else "none"
         stopped = self.flow_stopped_time()
         channel, height = math.nan, math.nan
         if math.isfinite(stopped):
@@ -912,6 +919,8 @@ class Simulation:
             "flow_mode": mode,
             "wall_slip_ratio": slip,
             "wall_slip_fraction": share,
+            "flow_mode_window": window_name,
+            "flow_mode_samples": int(np.sum(window)),
             "mass_flow_index": index,
             "stagnant_fraction": stagnant,
             "initial_mass_kg": m0 if np.isfinite(m0) else m.mass_in_hopper(st),
@@ -936,19 +945,31 @@ class Simulation:
             "grid_viscosity": m.cfg.numerics.grid_viscosity,
             "bulk_viscosity": m.cfg.bulk_viscosity,
         }
-        out["hopper_stretches"] = diagnostics.stretch_calls(
-            m.cfg, [np.asarray(r, float) for r, w in zip(rec.wall_slip_stretches, window)
-                    if w], self.flow_rule)
+        out["hopper_stretches"] = stretches
         out.update(diagnostics.load_summary(self))
         out.update(m.summary_extras(st))
         return out
 
 
+def flow_mode_window(t, mass, m0) -> tuple:
+    """``(window, name)``: which time-series samples the flow-mode numbers are medians over
+    (a boolean per sample) and what they are.  ``"mass_left"``: the samples at least 0.1 s
+    after the opening with 90 % to 40 % of the initial mass ``m0`` left; where none is (a
+    short run), ``"short_run"``: every sample at least 0.1 s after the opening (the opening's
+    transient left out); ``"none"`` when there is none of those either (the flow-mode numbers
+    are then NaN and the calls ``"unknown"``)."""
+    t, mass = np.asarray(t, float), np.asarray(mass, float)
+    window = (mass <= 0.9 * m0) & _before_flow_window_end(t, mass, m0)
+    if window.any():
+        return window, "mass_left"
+    window = t > 0.1
+    return window, ("short_run" if window.any() else "none")
+
+
 def _window_median(values, window) -> float:
-    """The median of a per-sample measure over the samples of ``window`` (all but the first
-    when the window is empty), NaN samples left out; NaN when none is finite."""
-    values = np.asarray(values, float)
-    chosen = values[window] if window.any() else values[1:]
+    """The median of a per-sample measure over the samples of ``window``, NaN samples left
+    out; NaN when none is finite."""
+    chosen = np.asarray(values, float)[window]
     return float(np.nanmedian(chosen)) if np.isfinite(chosen).any() else math.nan
 
 
