@@ -28,8 +28,9 @@ def steady_rate(t, mass_in_hopper, discharge_rate, t_open=0.0, upper=0.9, lower=
     hopper still held between ``lower`` and ``upper`` of its initial mass (the start transient
     and the final emptying of the cone are excluded).  The steady rate is the median of ``W``
     over the plateau, the spread its interquartile range relative to the median.  When no sample
-    qualifies (a short run), the samples of the last 75% of the run are used.  Returns
-    ``(rate, spread, n_samples)``; ``rate`` is NaN when there is nothing to measure.
+    qualifies (a short run), the samples of the last 75% of the run are used.  Samples without
+    a rate (NaN: the last one when it covers less than half an interval) are left out.
+    Returns ``(rate, spread, n_samples)``; ``rate`` is NaN when there is nothing to measure.
     """
     t = np.asarray(t, float)
     m = np.asarray(mass_in_hopper, float)
@@ -37,9 +38,9 @@ def steady_rate(t, mass_in_hopper, discharge_rate, t_open=0.0, upper=0.9, lower=
     if len(t) == 0:
         return math.nan, math.nan, 0
     m0 = m[0] if len(m) else 0.0
-    sel = (t >= t_open + settle_time) & (m <= upper * m0) & (m >= lower * m0)
+    sel = (t >= t_open + settle_time) & (m <= upper * m0) & (m >= lower * m0) & np.isfinite(w)
     if sel.sum() < 3:
-        sel = t >= t_open + 0.25 * (t[-1] - t_open)
+        sel = (t >= t_open + 0.25 * (t[-1] - t_open)) & np.isfinite(w)
     if sel.sum() == 0:
         return math.nan, math.nan, 0
     ws = w[sel]
@@ -437,6 +438,42 @@ def empty_channel(model, state, rule: OutcomeRule = OutcomeRule()):
     r0, r1 = g.r_cells[c0 + k - 1] - centre, g.r_cells[c0 + k] - centre
     radius = r0 + (rule.full - a0) / (a1 - a0) * (r1 - r0)
     return 2.0 * float(np.median(radius)), float(g.z_nodes[top + 1])
+
+
+def heap_angle(model, state, full: float = 0.5) -> float:
+    """The angle (deg from the horizontal) of the free surface of the material left in the
+    hopper once the flow has stopped: in each open cell column above the outlet plane the
+    surface is where ``alpha`` falls below ``full`` going up from the highest cell holding
+    more (linear between cell centres; a column whose next cell up is closed, under an
+    insert, has no free surface there), and the angle is that of the least-squares line
+    through the surface heights against the distance from the centreline, over the columns
+    holding material, the column at the wall left out (its cell is cut).  Set it against the
+    angle of repose (for this Mohr-Coulomb material about its friction angle).  NaN with
+    fewer than three such columns, or on a model without a grid (the Lagrangian mode)."""
+    g = getattr(model, "grid", None)
+    if g is None:
+        return math.nan
+    alpha = np.asarray(state.alpha, float)
+    kappa = np.asarray(g.kappa, float)
+    rows = np.flatnonzero(g.z_cells > 0.0)
+    held = (alpha > full) & (g.z_cells > 0.0)[:, None]
+    x, z = [], []
+    for i in range(alpha.shape[1]):
+        top = np.flatnonzero(held[:, i])
+        if not len(top):
+            continue
+        j = int(top[-1])
+        if j + 1 >= alpha.shape[0] or kappa[j + 1, i] <= 0.0 or j < rows[0]:
+            continue
+        if kappa[j, i] < 1.0 and (i + 1 == alpha.shape[1] or kappa[j, i + 1] <= 0.0):
+            continue                                  # the cut cell at the wall
+        frac = (alpha[j, i] - full) / max(alpha[j, i] - alpha[j + 1, i], 1e-12)
+        x.append(abs(g.r_cells[i] - model.cfg.boundary.section.centreline))
+        z.append(g.z_cells[j] + min(frac, 1.0) * g.h)
+    if len(x) < 3:
+        return math.nan
+    slope = np.polyfit(np.asarray(x), np.asarray(z), 1)[0]
+    return float(np.degrees(np.arctan(abs(slope))))
 
 
 def classify_outcome(mode: str, stopped: bool, left_fraction: float, channel_diameter: float,

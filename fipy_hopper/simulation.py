@@ -73,9 +73,16 @@ from .protocol import halt_reason
 #: The flow has stopped (stop reason ``"at_rest"``) when, later than ``AT_REST_AFTER`` s after
 #: the outlet is fully open (``run.opening_time`` after the opening began), every sample of
 #: the last ``AT_REST_WINDOW`` s had a discharge rate below ``AT_REST_RATE`` of the initial
-#: mass per second: a heel on a shallow cone, an arch over the outlet, a rathole (named by
-#: :class:`fipy_hopper.diagnostics.OutcomeRule`).
+#: mass per second (an arch over the outlet, a rathole: little ever moves out), or below
+#: ``AT_REST_SHARE`` of the steady discharge rate so far (:func:`~fipy_hopper.diagnostics.
+#: steady_rate`) with the material at rest, its rms speed ``sqrt(2 KE / M)`` below
+#: ``AT_REST_SPEED`` of the outlet's free-fall speed ``sqrt(g B_0)`` (``B_0`` the outlet's
+#: width: the heel of a flat floor or a shallow cone, whose dead zones creep on at a small
+#: fraction of the discharge rate and would never drain below ``empty_fraction``).  The
+#: summary names which (:class:`fipy_hopper.diagnostics.OutcomeRule`) and what is left
+#: (``remaining_mass_kg``, ``heap_angle_deg``).
 AT_REST_AFTER, AT_REST_WINDOW, AT_REST_RATE = 0.5, 0.25, 1e-3
+AT_REST_SHARE, AT_REST_SPEED = 0.01, 0.01
 #: Stages whose wall loads are measured from the moment this fraction of the mass is left
 #: (the default :class:`StageMark` s).
 STAGE_MARKS = {"early_discharge": 0.9, "mid_discharge": 0.5}
@@ -270,6 +277,7 @@ class Simulation:
         self.flow_rule = flow_rule
         self.outcome_rule = outcome_rule
         self._rest_samples = 0           # samples that the last check found at rest (0: flowing)
+        self._rest_rate = math.nan       # kg/s: the rate below which it found them at rest
         self.record = RunRecord()
         #: what runs at the checks (simulated-time schedules, in order): the stability check
         #: first, then the callbacks (field writers, studies' probes: :meth:`add_callback`)
@@ -426,8 +434,9 @@ class Simulation:
             t_dis = st.t - self.t_open
             mass = m.mass_in_hopper(st)
             self._discharge_windows(mass, m0)
-            resting = t_dis > AT_REST_AFTER + run.opening_time and self._at_rest()
-            self._rest_samples = len(rec.rate) if resting else 0
+            self._rest_rate = (self._at_rest() if t_dis > AT_REST_AFTER + run.opening_time
+                               else math.nan)
+            self._rest_samples = len(rec.rate) if math.isfinite(self._rest_rate) else 0
             reason = ""
             for rule in self.stop_rules:
                 applies = rule.applies(self, t_dis, mass)
@@ -476,27 +485,42 @@ class Simulation:
         return bool(self.record.rest_balance) and not self.record.fill_at_rest
 
     # -------------------------------------------------------------- measuring
-    def _at_rest(self) -> bool:
-        rec = self.record
-        n = max(1, int(round(AT_REST_WINDOW / self.model.cfg.run.output_interval)))
+    def _at_rest(self) -> float:
+        """The rate (kg/s) below which every sample of the last :data:`AT_REST_WINDOW` s
+        lies, if the flow has stopped by either rule of :data:`AT_REST_AFTER` (little moves
+        out; or the discharge has dwindled to a creep with the material at rest), else NaN."""
+        rec, m = self.record, self.model
+        n = max(1, int(round(AT_REST_WINDOW / m.cfg.run.output_interval)))
         if len(rec.rate) < n:
-            return False
-        recent = np.asarray(rec.rate[-n:])
-        return bool(np.all(np.abs(recent) < AT_REST_RATE * max(rec.initial_mass, 1e-9)))
+            return math.nan
+        recent = np.abs(np.asarray(rec.rate[-n:]))
+        little = AT_REST_RATE * max(rec.initial_mass, 1e-9)
+        if np.all(recent < little):
+            return little
+        if not recent.max() < AT_REST_SHARE * np.nanmax(rec.rate):   # the steady rate's bound
+            return math.nan
+        dwindled = AT_REST_SHARE * diagnostics.steady_rate(rec.t, rec.mass_in_hopper,
+                                                           rec.rate)[0]
+        if not np.all(recent < dwindled):
+            return math.nan
+        x0, x1 = m.cfg.boundary.outlet
+        mass = m.total_mass(self.state)
+        speed = math.sqrt(2.0 * m.kinetic_energy(self.state) / mass) if mass > 0 else 0.0
+        return dwindled if speed < AT_REST_SPEED * math.sqrt(GRAVITY * (x1 - x0) * (
+            2.0 if m.cfg.boundary.section.half else 1.0)) else math.nan
 
     def flow_stopped_time(self) -> float:
         """When the flow stopped (s after the opening), NaN if it had not by the end of the
-        run: if the last check of the discharge found the flow at rest (the ``at_rest`` rule,
+        run: if the last check of the discharge found the flow at rest (:meth:`_at_rest`,
         :data:`AT_REST_AFTER`; evaluated whatever ``end_time``), the end of the last sample
-        interval before that check with a rate of at least ``AT_REST_RATE`` of the initial
-        mass per second, or 0 if there was none (the outlet opened on an arch).  The sample
-        taken when the run stops is left out: its interval can be a few steps, over which the
-        elastic sway of an arch moves more than the rule's rate."""
+        interval before that check with a rate of at least the rate it found the flow below,
+        or 0 if there was none (the outlet opened on an arch).  The sample taken when the run
+        stops is left out: its interval can be a few steps, over which the elastic sway of an
+        arch moves more than the rule's rate."""
         rec, n = self.record, self._rest_samples
         if not n:
             return math.nan
-        fast = np.flatnonzero(np.abs(np.asarray(rec.rate[:n]))
-                              >= AT_REST_RATE * max(rec.initial_mass, 1e-9))
+        fast = np.flatnonzero(np.abs(np.asarray(rec.rate[:n])) >= self._rest_rate)
         return float(rec.t[fast[-1]]) if len(fast) else 0.0
 
     def _eta(self, t_dis: float, mass: float) -> str:
@@ -532,7 +556,12 @@ class Simulation:
         mass = m.mass_in_hopper(st)
         rate = 0.0
         if rec.t:
-            rate = (st.discharged - rec.discharged[-1]) / (t - rec.t[-1])
+            # the mass is booked at the transports, every few steps: over an interval much
+            # shorter than output_interval (the sample taken when the run stops) a rate
+            # would be a lump's, not the flow's; it is not given
+            span = t - rec.t[-1]
+            rate = ((st.discharged - rec.discharged[-1]) / span
+                    if span >= 0.5 * m.cfg.run.output_interval else math.nan)
         rec.t.append(t)
         rec.mass_in_hopper.append(mass)
         rec.discharged.append(st.discharged)
@@ -928,6 +957,8 @@ class Simulation:
             "remaining_mass_fraction": left,
             "flow_stopped_time_s": stopped,
             "rathole_diameter_m": channel if mode == "rathole" else math.nan,
+            "heap_angle_deg": (diagnostics.heap_angle(m, st) if math.isfinite(stopped)
+                               else math.nan),
             "discharged_kg": st.discharged,
             "mass_balance_error": balance,
             "discharge_time_s": float(t[-1]) if len(t) else 0.0,
