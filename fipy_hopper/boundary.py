@@ -18,8 +18,8 @@ half-section), outside every insert.  ``X(z)`` is the wall's ``x`` at height ``z
 below the outlet plane (the tube), the first segment's (from the lip) whose heights hold ``z``
 (at a horizontal segment its start: a floor or ledge belongs to the solid), and above the top
 the wall goes on straight up.  Each tube starts at ``z = -FAR`` and each wall's top is carried
-on to ``z = FAR``, as in :mod:`fipy_hopper.geometry`, whose cone and wedge a boundary
-reproduces bit for bit (the same arithmetic on the same vertices).
+on to ``z = FAR``.  The conical and wedge shorthands are boundaries of three points (the
+lip, the transition, the top): the one geometry of the code.
 
 Arc length ``s`` (m) runs along each chain from its lowest point: a wall's lip, the lowest
 vertex of a closed insert (counter-clockwise), the lower axis end of an insert on the axis.
@@ -45,6 +45,11 @@ SYMMETRIES = ("axisymmetric", "plane")
 SECTIONS = ("half", "full")
 #: Angles (deg) below which two consecutive segments count as one straight line.
 STRAIGHT_DEG = 1e-9
+#: A wall describes a cone (a wedge, a flat floor) under a bin (:func:`hopper_shape`) when,
+#: below its top vertical stretch, the segments within ``SAME_SLOPE_DEG`` of the longest one's
+#: slope make up at least ``SAME_SLOPE_SHARE`` of the length: a sliver of another slope (a
+#: 1 um segment at the lip) does not make another hopper, a second slope of any length does.
+SAME_SLOPE_DEG, SAME_SLOPE_SHARE = 0.5, 0.99
 
 
 @dataclass(frozen=True)
@@ -289,6 +294,45 @@ def wall_x(z, rows: np.ndarray, x_below: float):
     return x
 
 
+@dataclass(frozen=True)
+class HopperShape:
+    """What a wall of one slope under a vertical bin wall is, in the shorthand's sizes (m,
+    deg): ``half_angle_deg`` the hopper's slope from the vertical (90: a flat floor),
+    ``outlet_x`` the lip's ``x``, ``bin_x`` the bin wall's, ``transition_height`` the height of
+    the junction (:meth:`Boundary.transition`)."""
+
+    half_angle_deg: float
+    outlet_x: float
+    bin_x: float
+    transition_height: float
+
+
+def hopper_shape(wall) -> Optional[HopperShape]:
+    """The :class:`HopperShape` of a wall ``[(x, z), ...]`` from its lip up, or None when it
+    describes no cone (wedge, flat floor) under a bin: a top segment that is not vertical, or
+    below the top vertical stretch more than one slope by length (``SAME_SLOPE_DEG``,
+    ``SAME_SLOPE_SHARE``; the segments of that slope rising outwards).  The half-angle is the
+    length-weighted mean slope of the segments of that slope (the longest one's to round-off
+    when there is one), to 1e-9 deg."""
+    p = [tuple(map(float, q)) for q in wall]
+    k = len(p) - 1
+    while k > 0 and p[k - 1][0] == p[k][0]:
+        k -= 1
+    if k in (0, len(p) - 1):
+        return None
+    dx = np.array([b[0] - a[0] for a, b in zip(p[:k], p[1:k + 1])])
+    dz = np.array([b[1] - a[1] for a, b in zip(p[:k], p[1:k + 1])])
+    length = np.hypot(dx, dz)
+    angle = np.degrees(np.arctan2(np.abs(dx), dz))
+    longest = int(np.argmax(length))
+    same = np.abs(angle - angle[longest]) <= SAME_SLOPE_DEG
+    if length[same].sum() < SAME_SLOPE_SHARE * length.sum() or np.any(dx[same] <= 0.0):
+        return None
+    theta = angle[longest] + float(np.sum(length[same] * (angle[same] - angle[longest]))
+                                   / np.sum(length[same]))
+    return HopperShape(round(float(theta), 9), p[0][0], p[k][0], p[k][1])
+
+
 def nearest_on_segments(x, z, a, b) -> tuple:
     """The nearest point ``(px, pz)`` of points ``(x, z)`` on the segments ``a[k] -> b[k]``
     (``(n, 2)`` each), the index of that segment (the first nearest) and ``t`` in ``[0, 1]``
@@ -472,14 +516,27 @@ class Boundary:
         x_min, x_max = self.x_extent
         return 2.0 * x_max if self.section.half else x_max - x_min
 
+    def wall_x(self, z, chain="wall"):
+        """A wall's ``x`` (m) at heights ``z`` (:func:`wall_x`: the lip's below the outlet
+        plane, a floor's start, straight up above the top)."""
+        rows, below, _ = self._profiles[[c.name for c in self.walls].index(
+            self.chain(chain).name)]
+        return wall_x(z, rows, below)
+
     def span_at(self, z: float) -> float:
         """The silo's width (m) at height ``z``: from wall to wall (twice the wall's ``x`` in a
         half-section: the diameter, or the plane silo's width)."""
-        (rows, below, _), *rest = self._profiles
-        right = float(wall_x(z, rows, below))
-        if not rest:
+        right = float(self.wall_x(z))
+        if self.section.half:
             return 2.0 * right
-        return right - float(wall_x(z, rest[0][0], rest[0][1]))
+        return right - float(self.wall_x(z, "left_wall"))
+
+    @cached_property
+    def hopper_shape(self) -> Optional[HopperShape]:
+        """The wall's :class:`HopperShape` in a half-section (:func:`hopper_shape`): a cone, a
+        wedge or a flat floor under a bin, with its sizes; None for any other wall and for a
+        full section."""
+        return hopper_shape(self.chain("wall").points) if self.section.half else None
 
     def transition(self, chain="wall") -> Optional[Corner]:
         """The corner of a wall where its top vertical stretch begins (a hopper's or a flat
@@ -500,6 +557,12 @@ class Boundary:
         corner = self.transition(chain)
         return float(corner.point[1]) if corner is not None else \
             float(self.chain(chain).points[-1][1])
+
+    def transition_s(self, chain="wall") -> float:
+        """The arc length (m) of a wall's :meth:`transition` along it (the wall's length when
+        it has none)."""
+        corner = self.transition(chain)
+        return float(corner.s) if corner is not None else self.chain(chain).length
 
     def with_friction(self, wall_deg: float, segment_deg: Sequence[float] = None) -> "Boundary":
         """A copy whose walls have friction ``segment_deg`` (one per segment of ``wall``) or
@@ -666,7 +729,7 @@ class Boundary:
         the solid) and it lies less than ``reach`` in front of it or anywhere behind it.  Near
         a concave corner a point is in contact with both segments; near a convex corner (a
         lip) a point projecting beyond both belongs to none (:meth:`wall_normal` gives its
-        normal).  The rule of ``geometry.segment_contacts``, segment by segment.
+        normal).
         """
         x = np.asarray(x, dtype=float)
         z = np.asarray(z, dtype=float)

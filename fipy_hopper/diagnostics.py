@@ -440,6 +440,29 @@ def empty_channel(model, state, rule: OutcomeRule = OutcomeRule()):
     return 2.0 * float(np.median(radius)), float(g.z_nodes[top + 1])
 
 
+def material_speed(model, state, full: float = 0.5) -> float:
+    """The rms speed (m/s) of the material in the hopper (above the outlet plane): on the
+    Eulerian grid over the cells holding more than ``full`` material (the mean of their four
+    nodes' velocities), weighted by their material volume ``alpha kappa V``; on the
+    Lagrangian mesh over the active elements (their nodes' mean), by volume.  A node of
+    almost no mass (a trace at a free surface, which gravity alone moves) does not count, as
+    it would in the kinetic energy.  0 where there is no material."""
+    g = getattr(model, "grid", None)
+    if g is None:                                       # the Lagrangian mesh
+        conn = model.mesh.conn
+        v = state.v[conn].mean(axis=1)
+        sel = state.active & (state.x[conn, 1].mean(axis=1) > 0.0)
+        w = model.volume0[sel]
+        speed2 = np.sum(v[sel] ** 2, axis=1)
+    else:
+        v = state.v
+        vc = 0.25 * (v[:, :-1, :-1] + v[:, :-1, 1:] + v[:, 1:, :-1] + v[:, 1:, 1:])
+        sel = (state.alpha > full) & (g.z_cells > 0.0)[:, None]
+        w = (state.alpha * model.open_volume)[sel]
+        speed2 = (vc[0] ** 2 + vc[1] ** 2)[sel]
+    return float(math.sqrt(np.sum(w * speed2) / np.sum(w))) if np.sum(w) > 0 else 0.0
+
+
 def heap_angle(model, state, full: float = 0.5) -> float:
     """The angle (deg from the horizontal) of the free surface of the material left in the
     hopper once the flow has stopped: in each open cell column above the outlet plane the
@@ -896,15 +919,17 @@ def membrane_statics(boundary, bins: WallBins, p_n, tau) -> tuple:
 
 def wall_k(wall_loads: WallLoads, p_n, state, geom, margin_bins: int = 2) -> float:
     """The lateral pressure ratio measured at the bin wall: the median over the bin wall's
-    bins (the wall's top vertical stretch, above ``cone_height``) of ``p_n / (-sigma_zz)``,
+    bins (the wall's top vertical stretch, above its transition) of ``p_n / (-sigma_zz)``,
     ``p_n`` from the reaction and ``sigma_zz`` the mean vertical stress of the cells next to
     the wall (:meth:`WallSampler.mean_stress`), leaving out ``margin_bins`` bins next to the
     transition and next to the free surface."""
     bins = wall_loads.bins
     s = bins.s
     bnd = wall_loads.model.cfg.boundary
-    s_t = bnd.arc_at_height("wall", geom.cone_height)
-    s_top = bnd.arc_at_height("wall", geom.fill_level)
+    if bnd.transition("wall") is None:
+        return math.nan
+    s_t = bnd.transition_s("wall")
+    s_top = bnd.arc_at_height("wall", bnd.fill_level)
     margin = margin_bins * bins.width
     szz = wall_loads.sampler.mean_stress(state)[:, 1]
     keep = ((bins.wall == "wall") & (np.abs(bins.normal[:, 1]) < 1e-9)
@@ -1008,7 +1033,7 @@ def load_summary(sim) -> dict:
         envelope = rec.wall["discharge_envelope"][4][on_wall]
         bnd = m.cfg.boundary
         z_t = bnd.transition_height("wall")
-        s_t = bnd.arc_at_height("wall", z_t)
+        s_t = bnd.transition_s("wall")
         s_top = bnd.arc_at_height("wall", bnd.fill_level)
         loaded = p_fill > 0.05 * np.nanmax(p_fill)
         ratio = np.where(loaded, envelope / np.where(loaded, p_fill, 1.0), np.nan)
@@ -1019,21 +1044,24 @@ def load_summary(sim) -> dict:
             out["overpressure_factor_bin_max"] = float(np.nanmax(ratio[in_bin]))
         if np.isfinite(ratio[in_cone]).any():
             out["overpressure_factor_cone_max"] = float(np.nanmax(ratio[in_cone]))
-        if geom.cone_height > 0 and geom.classic:
-            if mu > 0:
-                janssen = (theory.janssen_vertical_stress if geom.axisymmetric
-                           else theory.janssen_plane_vertical_stress)
-                sigma_vt = float(janssen(geom.fill_height, mat.density, geom.bin_diameter, K,
-                                         mu))
-                out["walker_switch_pressure_Pa"] = float(theory.walker_switch_pressure(
-                    sigma_vt, K, mat.friction_angle_deg, m.cfg.wall.friction_angle_deg,
-                    geom.half_angle_deg).hopper)
-    if mu > 0 and geom.classic:
+    classic = m.cfg.boundary.hopper_shape if geom.classic else None
+    if classic is not None and mu > 0 and m.cfg.boundary.fill_level > classic.transition_height:
+        depth = m.cfg.boundary.fill_level - classic.transition_height
+        if "filling" in rec.wall and "discharge_envelope" in rec.wall \
+                and classic.half_angle_deg < 90.0:
+            janssen = (theory.janssen_vertical_stress if geom.axisymmetric
+                       else theory.janssen_plane_vertical_stress)
+            sigma_vt = float(janssen(depth, mat.density, 2.0 * classic.bin_x, K, mu))
+            out["walker_switch_pressure_Pa"] = float(theory.walker_switch_pressure(
+                sigma_vt, K, mat.friction_angle_deg, m.cfg.wall.friction_angle_deg,
+                classic.half_angle_deg).hopper)
         axial = (theory.janssen_wall_axial_force if geom.axisymmetric
                  else theory.janssen_plane_wall_axial_force)
         out["janssen_wall_axial_compression_N_m"] = float(axial(
-            geom.fill_height, mat.density, geom.bin_diameter, K, mu))
+            depth, mat.density, 2.0 * classic.bin_x, K, mu))
     out.update(corners)
+    if classic is None:           # no closed form for this silo: left out, not NaN
+        del out["walker_switch_pressure_Pa"], out["janssen_wall_axial_compression_N_m"]
     return out
 
 
