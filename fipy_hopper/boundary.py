@@ -118,12 +118,21 @@ class Section:
 
 @dataclass(frozen=True)
 class Segment:
-    """A straight wall segment from ``a`` to ``b`` (m), ``s`` from ``s_start`` (m)."""
+    """A straight wall segment from ``a`` to ``b`` (m), the arc length ``s`` (m) running from
+    ``s_start`` at ``a``: segment ``index`` of the chain named ``chain``, with the solid on
+    its right (``side`` +1: a wall followed up from its lip) or left (-1: a left wall, an
+    insert followed counter-clockwise), its wall friction, and whether its areas are per
+    radian of an axisymmetric wall (``c = r``) or per metre of a plane one (``c = 1``).  The
+    wall loads' stretches are segments too (:func:`fipy_hopper.diagnostics.wall_stretches`)."""
 
     a: tuple
     b: tuple
     friction_deg: float = math.nan
     s_start: float = 0.0
+    chain: str = "wall"
+    index: int = 0
+    side: int = 1
+    axisymmetric: bool = True
 
     @property
     def length(self) -> float:
@@ -137,6 +146,36 @@ class Segment:
     def angle_deg(self) -> float:
         """Angle of the segment's line from the vertical, in ``[0, 90]`` deg."""
         return math.degrees(math.atan2(abs(self.b[0] - self.a[0]), abs(self.b[1] - self.a[1])))
+
+    @property
+    def tangent(self) -> np.ndarray:
+        """Unit tangent from ``a`` to ``b``."""
+        d = np.subtract(self.b, self.a, dtype=float)
+        return d / np.hypot(*d)
+
+    @property
+    def normal(self) -> np.ndarray:
+        """Unit normal into the solid: the tangent turned clockwise, or anticlockwise for
+        ``side = -1``."""
+        t = self.tangent
+        return self.side * np.array([t[1], -t[0]])
+
+    def point(self, s):
+        """``(x, z)`` of the point at arc length ``s`` (m)."""
+        u = np.asarray(s, float) - self.s_start
+        t = self.tangent
+        return self.a[0] + u * t[0], self.a[1] + u * t[1]
+
+    def weight(self, s):
+        """The area weight ``c(s)``: the radius ``r(s)`` (m) per radian, or 1 (plane)."""
+        s = np.asarray(s, float)
+        return self.point(s)[0] if self.axisymmetric else np.ones_like(s)
+
+    def area(self, s1, s2):
+        """Wall area ``int_s1^s2 c ds`` (m^2 per radian; m^2 per metre of a plane wall),
+        0 where ``s2 <= s1``."""
+        s1, s2 = np.asarray(s1, float), np.asarray(s2, float)
+        return np.where(s2 > s1, (s2 - s1) * self.weight(0.5 * (s1 + s2)), 0.0)
 
 
 @dataclass(frozen=True)
@@ -213,7 +252,8 @@ class Chain:
     def segments(self) -> tuple:
         a, b = self.ends()
         return tuple(Segment(tuple(a[k]), tuple(b[k]), self.friction_deg[k]
-                             if self.friction_deg else math.nan, float(self.s_vertices[k]))
+                             if self.friction_deg else math.nan, float(self.s_vertices[k]),
+                             self.name, k, self.side)
                      for k in range(self.n_segments))
 
     @property

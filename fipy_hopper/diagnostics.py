@@ -12,11 +12,10 @@ state, never change it.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .wall_traction import WallStretch
 
 
 # ---------------------------------------------------------------- discharge rate
@@ -519,11 +518,11 @@ KNOT_CELLS = 4.0
 
 def wall_stretches(cfg) -> list:
     """The straight stretches of wall the material can load
-    (:class:`~fipy_hopper.wall_traction.WallStretch`, one per segment of the boundary's walls
+    (:class:`~fipy_hopper.boundary.Segment` s, one per segment of the boundary's walls
     and inserts; the free-fall tubes left out): a wall's segments up to the fill level (the
     one through it cut there), every segment of every insert.  Their arc length ``s_start`` is
     the boundary's position along all the chains (:meth:`Boundary.position`), their
-    ``segment`` the chain's segment index and ``name`` the chain's name."""
+    ``index`` the chain's segment index and ``chain`` the chain's name."""
     bnd = cfg.boundary
     out = []
     for ci, chain in enumerate(bnd.chains):
@@ -537,8 +536,8 @@ def wall_stretches(cfg) -> list:
                     break
                 if b[1] > bnd.fill_level > a[1]:
                     b = a + (b - a) * (bnd.fill_level - a[1]) / (b[1] - a[1])
-            out.append(WallStretch(tuple(a), tuple(b), offset + seg.s_start,
-                                   bnd.section.axisymmetric, chain.name, k, chain.side))
+            out.append(replace(seg, a=tuple(a), b=tuple(b), s_start=offset + seg.s_start,
+                               axisymmetric=bnd.section.axisymmetric))
     return out
 
 
@@ -578,7 +577,7 @@ class WallBins:
             centres = 0.5 * (edges[1:] + edges[:-1])
             r, z = st.point(centres)
             n = len(centres)
-            parts.append((np.full(n, st.name, dtype=object), centres - offsets[st.name],
+            parts.append((np.full(n, st.chain, dtype=object), centres - offsets[st.chain],
                           centres, r, z, np.tile(st.normal, (n, 1)),
                           np.tile(st.tangent, (n, 1)), st.area(edges[:-1], edges[1:]),
                           np.full(n, k), edges[:-1], edges[1:]))
@@ -699,10 +698,10 @@ class WallLoads:
         width = model.cfg.wall_bin_width_m
         self.recoveries = []
         for k, st in enumerate(stretches):
-            ci = bnd.chain_index(st.name)
-            last = k + 1 == len(stretches) or stretches[k + 1].name != st.name
+            ci = bnd.chain_index(st.chain)
+            last = k + 1 == len(stretches) or stretches[k + 1].chain != st.chain
             # a wall's segments above the fill level load its top stretch
-            on = (segment >= st.segment) if last else (segment == st.segment)
+            on = (segment >= st.index) if last else (segment == st.index)
             members = np.flatnonzero((chain == ci) & on & ~tab.tube[rows])
             self.recoveries.append(StretchRecovery.build(st, members, position[members],
                                                          width, KNOT_CELLS * model.cell_size))

@@ -107,7 +107,7 @@ from .boundary import _wall_x_point, nearest_point
 from .config import HopperConfig
 from .dense_loose import close_loose_volume, separation_strain
 from .material import equivalent_plastic_strain
-from .model import GRAVITY, InstabilityError, runaway_speed
+from .model import GRAVITY, InstabilityError, ramped_gravity, runaway_speed
 
 __all__ = ["DistortionLimits", "LagrangianMesh", "LagrangianState",
            "LagrangianModel", "build_mesh", "element_gradients", "internal_force",
@@ -272,6 +272,26 @@ def element_quality(x, conn):
         A / edges.max(axis=1)
 
 
+def coulomb(vr, vz, n_r, n_z, mu, dvn):
+    """The velocity ``(vr, vz)`` after a contact that removes ``dvn`` of its normal part
+    (``n`` into the wall) and reduces its tangential speed by ``mu dvn``, not below zero: the
+    discrete form of ``|impulse_t| <= mu impulse_n``.  Scalars or arrays alike: the one
+    Coulomb rule of the Lagrangian contact (:func:`_contact_kernel`, compiled, and
+    :func:`contact_reference`); the Eulerian contact removes the whole normal speed the
+    same way (``stepping._project``)."""
+    vr = vr - dvn * n_r
+    vz = vz - dvn * n_z
+    vn = vr * n_r + vz * n_z
+    t_r = vr - vn * n_r
+    t_z = vz - vn * n_z
+    speed = np.sqrt(t_r * t_r + t_z * t_z)
+    scale = np.maximum(0.0, 1.0 - mu * dvn / (speed + (speed <= 0.0) * 1.0)) * (speed > 0.0)
+    return vn * n_r + scale * t_r, vn * n_z + scale * t_z
+
+
+_coulomb = njit(cache=True, error_model="numpy", inline="always")(coulomb)
+
+
 def contact_reference(x, v, dt, segments, passes=2, plate_segment=-1):
     """Numpy reference of :func:`_contact_kernel`: returns the new velocities and the velocity
     changes made by segment ``plate_segment``.
@@ -291,13 +311,8 @@ def contact_reference(x, v, dt, segments, passes=2, plate_segment=-1):
             gap = np.maximum(0.0, -((x - [ar, az]) @ n))
             dvn = v @ n - gap / dt
             hit = (t >= -1e-9) & (t <= 1.0 + 1e-9) & behind & (dvn > 0.0)
-            vv = v - np.where(hit, dvn, 0.0)[:, None] * n
-            vn = vv @ n
-            tang = vv - vn[:, None] * n
-            speed = np.linalg.norm(tang, axis=1)
-            scale = np.where(speed > 0.0, np.maximum(0.0, 1.0 - mu * np.where(hit, dvn, 0.0)
-                                                     / np.where(speed > 0, speed, 1.0)), 0.0)
-            v = np.where(hit[:, None], vn[:, None] * n + scale[:, None] * tang, v)
+            new = coulomb(v[:, 0], v[:, 1], nr, nz, mu, np.where(hit, dvn, 0.0))
+            v = np.where(hit[:, None], np.stack(new, axis=1), v)
             if k == plate_segment:
                 dv_plate += v - before
     return v, dv_plate
@@ -487,17 +502,7 @@ def _contact_kernel(x, v, dt, segments, n_segments, passes, plate_segment, dv_pl
                 dvn = vn - gap / dt
                 if dvn <= 0.0:
                     continue
-                vr = v[i, 0] - dvn * nr_
-                vz = v[i, 1] - dvn * nz_
-                vn2 = vr * nr_ + vz * nz_
-                tr = vr - vn2 * nr_
-                tz = vz - vn2 * nz_
-                speed = math.sqrt(tr * tr + tz * tz)
-                scale = 0.0
-                if speed > 0.0:
-                    scale = max(0.0, 1.0 - mu * dvn / speed)
-                new_r = vn2 * nr_ + scale * tr
-                new_z = vn2 * nz_ + scale * tz
+                new_r, new_z = _coulomb(v[i, 0], v[i, 1], nr_, nz_, mu, dvn)
                 if k == plate_segment:
                     dv_plate[i, 0] += new_r - v[i, 0]
                     dv_plate[i, 1] += new_z - v[i, 1]
@@ -669,10 +674,8 @@ class LagrangianModel:
                                plate_impulse=np.zeros((1, 2)), momentum_budget=np.zeros(4))
 
     def gravity(self, state: LagrangianState) -> float:
-        ramp = self.ramp_time
-        if state.stage == "filling" and ramp > 0:
-            return GRAVITY * min(1.0, state.t / ramp)
-        return GRAVITY
+        """Gravity (m/s^2, downward) at this time (:func:`~fipy_hopper.model.ramped_gravity`)."""
+        return ramped_gravity(state, self.ramp_time)
 
     def open_outlet(self, state: LagrangianState) -> None:
         """Remove the outlet plate: discharge starts."""

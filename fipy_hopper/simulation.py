@@ -777,14 +777,9 @@ class Simulation:
         wall, wall_stress, wall_forces, wall_raw = {}, {}, {}, {}
         for stage, t_stage in meta["wall_times"].items():
             wall[stage] = (t_stage,) + tuple(arrays.pop(f"wall__{stage}__{k}") for k in range(5))
-            if f"wallraw__{stage}__0" in arrays:
-                wall_raw[stage] = tuple(arrays.pop(f"wallraw__{stage}__{k}") for k in range(2))
-            if f"wallstress__{stage}__0" in arrays:
-                wall_stress[stage] = tuple(arrays.pop(f"wallstress__{stage}__{k}")
-                                           for k in range(2))
-            if f"wallforces__{stage}__0" in arrays:   # not written by older checkpoints
-                wall_forces[stage] = tuple(arrays.pop(f"wallforces__{stage}__{k}")
-                                           for k in range(3))
+            wall_raw[stage] = tuple(arrays.pop(f"wallraw__{stage}__{k}") for k in range(2))
+            wall_stress[stage] = tuple(arrays.pop(f"wallstress__{stage}__{k}") for k in range(2))
+            wall_forces[stage] = tuple(arrays.pop(f"wallforces__{stage}__{k}") for k in range(3))
         self._readings = {}
         for name, scalars in meta.get("readings", {}).items():
             reading = dict(scalars)
@@ -800,9 +795,10 @@ class Simulation:
         self.state = type(self.state)(**meta["state"], **arrays)
         self.record = RunRecord(**meta["record"], wall=wall, wall_stress=wall_stress,
                                 wall_forces=wall_forces, wall_raw=wall_raw)
-        for name in ("bin_lateral_stress_ratio", "wall_slip_ratio", "wall_slip_fraction"):
-            values = getattr(self.record, name)          # not recorded by older checkpoints
-            values[:0] = [math.nan] * (len(self.record.t) - len(values))
+        n = len(self.record.wall_slip_stretches[-1]) if self.record.wall_slip_stretches else 0
+        for name in ("wall_slip_stretch_fractions",):    # a per-sample measure this version
+            values = getattr(self.record, name)          # adds: not measured before it
+            values[:0] = [[math.nan] * n] * (len(self.record.t) - len(values))
         self.t_open = meta["t_open"]
         self.next_sample = meta["next_sample"]
         self.next_load_sample = meta.get("next_load_sample", math.nan)
@@ -869,8 +865,7 @@ class Simulation:
                 ok = same_kind(value, like) and not (isinstance(like, int) and value < 0)
             if not ok:
                 fail(f"its record's {key} is not {type(like).__name__} of the run's kind")
-        lengths = {len(record.get(k, [])) for k in series[:-1]}
-        if len(lengths) > 1 or len(record.get(series[-1], [])) > max(lengths):
+        if len({len(record.get(k, [])) for k in series}) > 1:
             fail("its record's time series have different lengths")
         n_bins = len(self.wall_sampler.centres)
         stages = set(WALL_STAGES) | {mark.name for mark in self.stage_marks}
@@ -878,6 +873,11 @@ class Simulation:
         for stage, t_stage in meta["wall_times"].items():
             if stage not in stages or not is_number(t_stage):
                 fail(f"its wall samples name an unknown stage {str(stage)[:40]!r}")
+            for name, count in (("wall", 5), ("wallraw", 2), ("wallstress", 2),
+                                ("wallforces", 3)):
+                for k in range(count):
+                    if f"{name}__{stage}__{k}" not in arrays:
+                        fail(f"array '{name}__{stage}__{k}' is missing")
             shapes.update({f"wall__{stage}__{k}": (n_bins,) for k in range(5)})
             shapes.update({f"wallstress__{stage}__{k}": (n_bins,) for k in range(2)})
             shapes.update({f"wallraw__{stage}__{k}": (n_bins,) for k in range(2)})
@@ -905,6 +905,9 @@ class Simulation:
                        if present for k in range(3)})
         shapes["envelope"] = shapes["envelope_raw"] = (n_bins,)
         state_arrays = set(vars(self.state))
+        for key, value in vars(self.state).items():
+            if isinstance(value, np.ndarray) and key not in arrays:
+                fail(f"array {key!r} of the state is missing")
         for key, array in arrays.items():
             if key in state_arrays:
                 continue
