@@ -604,14 +604,17 @@ def _check_inserts(geom: "HopperGeometry") -> None:
             friction = _check_range(f"{key}.friction_angle_deg", friction, 0, 90,
                                     high_open=True, unit=" deg")
         outline = f"{key}.outline"
-        if polygon_integrals(pts)[0] == 0.0:
+        (x0, z0), (x1, z1) = pts[0], pts[1]
+        if all((x1 - x0) * (z - z0) == (z1 - z0) * (x - x0) for x, z in pts[2:]):
             raise ConfigError(f"{outline} encloses no area (its points are on one line): "
                               f"expected a closed polygon")
         crossing = self_crossing(pts, closed=True)
-        if crossing:
+        if crossing:              # a bow-tie too: its signed area may be zero
             i, j = crossing
             raise ConfigError(f"{outline} crosses itself: its edge from {_point_text(pts[i])} "
                               f"meets the edge from {_point_text(pts[j])}")
+        if polygon_integrals(pts)[0] == 0.0:       # (not reached: kept as the last guard)
+            raise ConfigError(f"{outline} encloses no area: expected a closed polygon")
         for i, (x, z) in enumerate(pts):
             where = f"{outline}[{i}] = {_point_text((x, z))}"
             if z < 0.0:
