@@ -55,6 +55,7 @@ def test_the_flow_mode_map_count_is_read_from_the_report():
     """The map's agreement comes from its table's rows on the map's own cells: one row
     flipped, one fewer; a flipped grid-check row (on finer cells) counts in the grid check."""
     before = {c["key"]: c for c in headline.build(REPORT_TEXT)["claims"]}["flow_mode_cones"]
+    assert "in-sample" in before["result"] and "not placed on" in before["result"]
     values = before["values"]
     agree, cases = values["agree"], values["cases"]
     own = "| 10 | 10 | 5 | 44.8 | mass | mass | 0.81 | 1 | 0 | 0.87 | yes |"
