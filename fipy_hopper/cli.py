@@ -50,10 +50,11 @@ class _Parser(argparse.ArgumentParser):
 
 def _parser() -> argparse.ArgumentParser:
     p = _Parser(prog=PROG, description=(
-        "Eulerian Mohr-Coulomb simulation of granular flow in silos and hoppers (conical, "
-        "axisymmetric, or wedge-shaped, in plane strain; on FiPy): filling, discharge rate, "
-        "flow mode and wall loads, compared with Beverloo, Jenike, Janssen, Walker and "
-        "EN 1991-4."),
+        "Eulerian Mohr-Coulomb simulation of the filling and discharge of silos and hoppers "
+        "on FiPy: a conical or wedge-shaped hopper under a bin, or any wall drawn as straight "
+        "segments with inserts, in an axisymmetric or a plane section; the discharge rate, "
+        "the flow mode per stretch of hopper wall and the wall loads, compared with "
+        "Beverloo, Jenike, Janssen, Walker and EN 1991-4 where they describe the silo."),
         epilog="Exit codes: 0 success, 1 the run failed (or a fill-only run's fill did not "
         "come to rest), 2 bad input, 130 interrupted.")
     p.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
