@@ -68,3 +68,94 @@ def test_a_flat_floor_stops_when_its_flow_has_stopped_and_reports_its_heel(tmp_p
         left * summary["initial_mass_kg_m"], rel=1e-12)
     assert summary["flow_mode"] == "funnel"
     assert 0.0 < summary["heap_angle_deg"] <= cfg.material.friction_angle_deg
+
+
+def _labels(fig) -> list:
+    return [line.get_label() for ax in fig.axes for line in ax.get_lines()]
+
+
+@pytest.fixture(scope="module")
+def fill_only(tmp_path_factory):
+    """A small cone filled and brought to rest, no discharge (end_time = 0)."""
+    data = {"hopper": {"bin_diameter": 0.2, "bin_height": 0.2, "fill_height": 0.15},
+            "numerics": {"cell_size": 0.01, "gravity_ramp_time": 0.05},
+            "run": {"field_interval": 0.1, "markers_per_side": 0}}
+    out = tmp_path_factory.mktemp("fill") / "run"
+    return fh.run(config(data, end_time=0.0), out, threads=1), out
+
+
+def test_a_fill_only_run_is_described_by_its_loads_at_rest(fill_only, capsys):
+    """Its wall pressure is drawn against the theories at rest only (no discharge curve, no
+    C_h), its stress picture's title is whole, and the terminal summary gives the loads at
+    rest (the weight and what carries it, the transition's forces) rather than n/a."""
+    from fipy_hopper import plotting
+    from fipy_hopper.cli import _print_summary
+
+    summary, out = fill_only
+    assert summary["stop_reason"] == "filled" and summary["flow_mode"] == "none"
+    labels = _labels(plotting.wall_pressure(out))
+    assert any(label.startswith("Walker, cone, filling") for label in labels)
+    assert not any("discharge" in label for label in labels), labels
+    title = plotting.stress_pattern(out)._suptitle.get_text()
+    assert "\n" in title and "mobilised friction" in title
+    _print_summary(summary, out)
+    text = capsys.readouterr().out
+    weight = summary["fill_weight_N"]
+    assert f"{weight:.4g} N: the walls carry" in text and "weight at rest" in text
+    assert f"{summary['hopper_meridional_tension_N_m']:.4g} N/m" in text
+    assert "steady discharge rate" not in text
+
+
+def test_the_stress_picture_tells_stress_free_material_from_empty(fill_only):
+    """Material present but stress-free is drawn grey, not white: a grey layer covers exactly
+    the cells holding material (alpha > 1/2) under the mobilised friction, which is masked
+    where it is undefined (stress-free), so those cells show the grey; empty cells stay white;
+    the legend says which is which."""
+    import numpy as np
+    from fipy_hopper import plotting
+
+    _, out = fill_only
+    fig = plotting.stress_pattern(out)
+    ax = fig.axes[0]
+    grey = [m for m in ax.collections if getattr(m.get_cmap(), "N", 0) == 1]
+    assert len(grey) == 1
+    snap = plotting.load_snapshot(out, plotting.snapshots(out)[-1])
+    drawn = ~np.ma.getmaskarray(grey[0].get_array()).reshape(snap["alpha"].shape)
+    assert np.array_equal(drawn, snap["alpha"] > 0.5)
+    assert {t.get_text() for t in ax.get_legend().get_texts()} == {"material, stress-free",
+                                                                  "empty"}
+
+
+def test_one_K_for_both_of_janssens_curves_and_it_is_named(fill_only):
+    """wall_forces.png sets the hoop force and the meridional force against Janssen with the
+    same K (the one measured at the bin wall), named in both labels."""
+    from fipy_hopper import plotting
+
+    summary, out = fill_only
+    labels = [label for label in _labels(plotting.wall_forces(out))
+              if label.startswith("Janssen")]
+    K = summary["wall_k_bin"]
+    assert len(labels) == 2 and all(f"K = {K:.2f} measured at the bin wall" in label
+                                    for label in labels), labels
+
+
+def test_an_inserts_pressure_is_drawn_along_the_insert_on_its_own_axis(tmp_path):
+    """A hopper with an insert on the axis, filled: the insert's pressure is on a panel of
+    its own, against the arc length along the insert (to its length), not on the wall's."""
+    from fipy_hopper import plotting
+
+    data = {"hopper": {"shape": "profile", "fill_level": 0.3,
+                       "wall": [[0.03, 0.0], [0.15, 0.2], [0.15, 0.4]],
+                       "inserts": [{"outline": [[0.0, 0.1], [0.05, 0.15], [0.0, 0.2]]}]},
+            "numerics": {"cell_size": 0.01, "gravity_ramp_time": 0.05},
+            "run": {"field_interval": 0.1, "markers_per_side": 0}}
+    cfg = config(data, end_time=0.0)
+    fh.run(cfg, tmp_path / "run", threads=1)
+    fig = plotting.wall_pressure(tmp_path / "run")
+    panels = {ax.get_title(): ax for ax in fig.axes}
+    inserts = panels["Inserts (no closed form)"]
+    assert [line.get_label() for line in inserts.get_lines()] == ["insert_1, at rest"]
+    s = inserts.get_lines()[0].get_xdata()
+    assert 0.0 < s.max() <= cfg.boundary.chain("insert_1").length
+    wall = next(ax for title, ax in panels.items() if title.startswith("Wall pressure"))
+    assert not any("insert" in line.get_label() for line in wall.get_lines())
