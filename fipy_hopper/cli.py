@@ -418,7 +418,10 @@ def _print_summary(s: dict, out) -> None:
         print(f"  outcome                {s.get('flow_mode')}: the flow stopped {stopped:.3g} s "
               f"after the opening with {100 * left:.2f} % of the mass left"
               + (f", a rathole {channel:.3g} m wide"
-                 if channel is not None and channel == channel else ""))
+                 if channel is not None and channel == channel else "")
+              + (f", its surface at {s['heap_angle_deg']:.1f} deg from the horizontal (against "
+                 f"the angle of repose)" if s.get("heap_angle_deg") is not None
+                 and s["heap_angle_deg"] == s["heap_angle_deg"] else ""))
 
 
 def main(argv=None) -> int:

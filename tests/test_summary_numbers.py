@@ -49,7 +49,7 @@ def test_steady_rate_leaves_out_the_samples_without_a_rate():
     assert (value, n) == (15.0, 4)
 
 
-def test_a_flat_floor_stops_when_its_flow_has_stopped_and_reports_its_heel(tmp_path):
+def test_a_flat_floor_stops_when_its_flow_has_stopped_and_reports_its_heel(tmp_path, capsys):
     """A flat-bottomed plane silo (a slot in a flat floor) with end_time = "empty": its dead
     zones never drain, so the run ends "at_rest" (the rate below 1 % of the steady rate, the
     material at rest) long before max_time, with the heel it leaves: its mass (more than
@@ -68,6 +68,9 @@ def test_a_flat_floor_stops_when_its_flow_has_stopped_and_reports_its_heel(tmp_p
         left * summary["initial_mass_kg_m"], rel=1e-12)
     assert summary["flow_mode"] == "funnel"
     assert 0.0 < summary["heap_angle_deg"] <= cfg.material.friction_angle_deg
+    from fipy_hopper.cli import _print_summary
+    _print_summary(summary, tmp_path / "run")
+    assert f"its surface at {summary['heap_angle_deg']:.1f} deg" in capsys.readouterr().out
 
 
 def _labels(fig) -> list:
