@@ -72,9 +72,11 @@ class FlowModeRule:
     i.e. the wall's friction power ``sum mu N_e u_e`` over what it would be if the material
     slid along the wall at the axis speed.  Its **wall slip fraction** is the share of its
     loaded contact length (each contact standing for the wall between the midpoints to its
-    neighbours) with ``u_e >= slip_ratio U_e``.  Mass flow when every hopper stretch has
-    ``S >= slip_ratio``, funnel flow otherwise; ``slip_ratio`` is the rule's one threshold
-    (docs/physics_and_numerics.md, section 8).
+    neighbours) with ``u_e >= slip_ratio U_e``.  A stretch's S over a run is the median of its
+    samples' (:func:`stretch_calls`), its call mass where ``S >= slip_ratio``, funnel below,
+    unknown without a sample; the run's call is funnel when any counted stretch says funnel,
+    mass when at least one says mass, else unknown (:func:`overall_call`); ``slip_ratio`` is
+    the rule's one threshold (docs/physics_and_numerics.md, section 8).
 
     Reported beside it (not used for the call): the mass-flow index, the mean ratio of the
     downward speed of the cells 1 to 2.5 cells from the wall to the speed at the axis at the
