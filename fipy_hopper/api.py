@@ -61,60 +61,78 @@ def _resolve(config_or_path) -> tuple:
 def expected_quantities(cfg: HopperConfig) -> dict:
     """What theory and the numerics say about a configuration before it runs.
 
-    ``beverloo_rate_kg_s`` is Beverloo's flat-bottom rate (C = 0.58, k = 1.5, d the
-    material's grain diameter) times the Rose-Tanaka hopper factor of the cone;
-    ``outlet_grains`` the outlet's diameter (slot: width) in grain diameters; ``jenike_critical_half_angle_deg`` uses the internal
-    friction angle as the effective angle of internal friction; ``fill_mass_kg`` is the density
-    times the filled volume (3D).  For a wedge the masses and rates are per metre of length
-    (the keys keep their names here; :func:`per_metre` renames them for the files): Beverloo's
-    slot rate (C' = 1.03, no hopper factor: ``rose_tanaka_factor`` is 1) and Jenike's
-    plane-flow angle (the conical one plus 10 deg, :func:`theory.jenike_critical_half_angle_plane`).
+    Every silo: ``fill_mass_kg`` (the density times the filled volume, 3D),
+    ``p_wave_speed_m_s``, ``transition_height_m`` (of the wall's transition,
+    :meth:`~fipy_hopper.boundary.Boundary.transition_height`), ``beverloo_flat_rate_kg_s``
+    (Beverloo's rate through the outlet in a flat floor, C = 0.58, k = 1.5 with the
+    material's grain diameter d; for a plane silo the slot rate, C' = 1.03, per metre),
+    ``outlet_grains`` (the outlet's diameter, or a slot's width, in grain diameters), ``expected_discharge_time_s`` (the fill mass
+    at the rate below, else at that one: an order of magnitude), and ``jenike_flow_mode``,
+    the overall call of Jenike's calls per stretch of hopper wall
+    (:func:`~fipy_hopper.diagnostics.stretch_calls`, by the rule of
+    :func:`~fipy_hopper.diagnostics.overall_call`; ``"unknown"`` for a friction angle below
+    the range of Jenike's fit).  For a wedge the masses and rates are per metre of length
+    (the keys keep their names here; :func:`per_metre` renames them for the files).
+
+    Only for the silos the closed forms describe (:attr:`HopperGeometry.classic`: a cone, a
+    wedge or a flat floor under a bin, no insert in the material): ``cone_height_m``,
+    ``rose_tanaka_factor`` (1 for a wedge: no plane hopper factor from a readable source),
+    ``beverloo_rate_kg_s`` (Beverloo's rate times the Rose-Tanaka hopper factor), and
+    ``jenike_critical_half_angle_deg`` (conical, or the plane-flow angle: the conical one plus
+    10 deg, :func:`theory.jenike_critical_half_angle_plane`), with the internal friction
+    angle as the effective angle of internal friction.  Other silos have a rate and a
+    critical angle per stretch only where a stretch allows (the run's ``hopper_stretches``).
 
     With a cohesion ``c > 0`` also Jenike's design numbers (``docs/correlations.md`` section g):
     ``unconfined_yield_strength_Pa`` ``sigma_c = 2 c cos(phi)/(1 - sin(phi))``;
-    ``jenike_critical_outlet_m`` ``H(theta) sigma_c/(rho g)`` (NaN for a flat bottom, outside
-    the fit of H); ``critical_outlet_simplified_m`` ``2 sigma_c/(rho g)``; and
-    ``jenike_rathole_diameter_m`` ``G(phi) sigma_c/(rho g)`` (NaN for phi outside the
-    30-70 deg of the fit of G).  An outlet smaller than the critical outlet may arch.
+    ``critical_outlet_simplified_m`` ``2 sigma_c/(rho g)``; ``jenike_rathole_diameter_m``
+    ``G(phi) sigma_c/(rho g)`` (NaN for phi outside the 30-70 deg of the fit of G); and for a
+    classic silo ``jenike_critical_outlet_m`` ``H(theta) sigma_c/(rho g)`` (NaN for a flat
+    bottom, outside the fit of H).  An outlet smaller than the critical outlet may arch.
     """
     from . import theory
+    from .diagnostics import flow_call, stretch_calls
 
     geom, mat, wall = cfg.hopper, cfg.material, cfg.wall
+    bnd = cfg.boundary
+    classic = bnd.hopper_shape if geom.classic else None
     out = {"fill_mass_kg": mat.density * geom.fill_volume(),
            "p_wave_speed_m_s": mat.p_wave_speed,
-           "cone_height_m": geom.cone_height}
+           "transition_height_m": bnd.transition_height("wall")}
     grains = mat.grain_diameter
     out["outlet_grains"] = geom.outlet_diameter / grains if grains > 0 else math.inf
     if geom.axisymmetric:
         flat = float(theory.beverloo_rate(mat.density, geom.outlet_diameter, d=grains))
-        factor = float(theory.rose_tanaka_factor(geom.half_angle_deg))
         critical = theory.jenike_critical_half_angle
     else:     # per metre of slot; no plane hopper factor from a readable source
         flat = float(theory.beverloo_slot_rate(mat.density, geom.outlet_diameter, d=grains))
-        factor = 1.0
         critical = theory.jenike_critical_half_angle_plane
-    out.update(beverloo_flat_rate_kg_s=flat, rose_tanaka_factor=factor,
-               beverloo_rate_kg_s=flat * factor)
-    try:
-        out["jenike_critical_half_angle_deg"] = float(critical(
-            mat.friction_angle_deg, wall.friction_angle_deg))
-        out["jenike_flow_mode"] = str(theory.jenike_flow_mode(
-            geom.half_angle_deg, mat.friction_angle_deg, wall.friction_angle_deg,
-            geometry="conical" if geom.axisymmetric else "plane"))
-    except ValueError:   # friction angle below the range of Jenike's fit
-        out["jenike_critical_half_angle_deg"] = math.nan
-        out["jenike_flow_mode"] = "unknown"
-    out["expected_discharge_time_s"] = out["fill_mass_kg"] / out["beverloo_rate_kg_s"]
+    out["beverloo_flat_rate_kg_s"] = flat
+    rate = flat
+    if classic is not None:
+        factor = (float(theory.rose_tanaka_factor(classic.half_angle_deg))
+                  if geom.axisymmetric else 1.0)
+        rate = flat * factor
+        out.update(cone_height_m=classic.transition_height, rose_tanaka_factor=factor,
+                   beverloo_rate_kg_s=rate)
+        try:
+            out["jenike_critical_half_angle_deg"] = float(critical(
+                mat.friction_angle_deg, wall.friction_angle_deg))
+        except ValueError:   # friction angle below the range of Jenike's fit
+            out["jenike_critical_half_angle_deg"] = math.nan
+    out["jenike_flow_mode"] = flow_call(stretch_calls(cfg, []))["jenike_flow_mode"]
+    out["expected_discharge_time_s"] = out["fill_mass_kg"] / rate
     if mat.cohesion > 0:
         sigma_c = float(theory.unconfined_yield_strength(mat.cohesion, mat.friction_angle_deg))
         out["unconfined_yield_strength_Pa"] = sigma_c
         out["critical_outlet_simplified_m"] = float(theory.critical_outlet_simplified(
             sigma_c, mat.density))
-        for key, formula in (
-                ("jenike_critical_outlet_m", lambda: theory.jenike_critical_outlet(
-                    sigma_c, mat.density, geom.half_angle_deg)),
-                ("jenike_rathole_diameter_m", lambda: theory.jenike_rathole_diameter(
-                    sigma_c, mat.density, mat.friction_angle_deg))):
+        formulas = [("jenike_rathole_diameter_m", lambda: theory.jenike_rathole_diameter(
+            sigma_c, mat.density, mat.friction_angle_deg))]
+        if classic is not None:
+            formulas.append(("jenike_critical_outlet_m", lambda: theory.jenike_critical_outlet(
+                sigma_c, mat.density, classic.half_angle_deg)))
+        for key, formula in formulas:
             try:
                 out[key] = float(formula())
             except ValueError:   # outside the range of Jenike's fit
@@ -364,13 +382,11 @@ def _summary(sim, cfg, reason: str) -> dict:
                    "youngs_modulus_used": cfg.material.youngs_modulus}
     summary["stop_reason"] = reason
     expected = expected_quantities(cfg)
-    summary["beverloo_rate_kg_s"] = expected["beverloo_rate_kg_s"]
     summary["outlet_grains"] = expected["outlet_grains"]
-    summary["jenike_critical_half_angle_deg"] = expected["jenike_critical_half_angle_deg"]
-    summary["jenike_flow_mode"] = expected["jenike_flow_mode"]
-    for key in ("unconfined_yield_strength_Pa", "jenike_critical_outlet_m",
+    for key in ("beverloo_rate_kg_s", "jenike_critical_half_angle_deg", "jenike_flow_mode",
+                "unconfined_yield_strength_Pa", "jenike_critical_outlet_m",
                 "critical_outlet_simplified_m", "jenike_rathole_diameter_m"):
-        if key in expected:
+        if key in expected:          # the closed forms only for the silos they describe
             summary[key] = expected[key]
     return summary if cfg.hopper.axisymmetric else per_metre(summary)
 

@@ -18,8 +18,8 @@ half-section), outside every insert.  ``X(z)`` is the wall's ``x`` at height ``z
 below the outlet plane (the tube), the first segment's (from the lip) whose heights hold ``z``
 (at a horizontal segment its start: a floor or ledge belongs to the solid), and above the top
 the wall goes on straight up.  Each tube starts at ``z = -FAR`` and each wall's top is carried
-on to ``z = FAR``, as in :mod:`fipy_hopper.geometry`, whose cone and wedge a boundary
-reproduces bit for bit (the same arithmetic on the same vertices).
+on to ``z = FAR``.  The conical and wedge shorthands are boundaries of three points (the
+lip, the transition, the top): the one geometry of the code.
 
 Arc length ``s`` (m) runs along each chain from its lowest point: a wall's lip, the lowest
 vertex of a closed insert (counter-clockwise), the lower axis end of an insert on the axis.
@@ -45,6 +45,11 @@ SYMMETRIES = ("axisymmetric", "plane")
 SECTIONS = ("half", "full")
 #: Angles (deg) below which two consecutive segments count as one straight line.
 STRAIGHT_DEG = 1e-9
+#: A wall describes a cone (a wedge, a flat floor) under a bin (:func:`hopper_shape`) when,
+#: below its top vertical stretch, the segments within ``SAME_SLOPE_DEG`` of the longest one's
+#: slope make up at least ``SAME_SLOPE_SHARE`` of the length: a sliver of another slope (a
+#: 1 um segment at the lip) does not make another hopper, a second slope of any length does.
+SAME_SLOPE_DEG, SAME_SLOPE_SHARE = 0.5, 0.99
 
 
 @dataclass(frozen=True)
@@ -113,12 +118,21 @@ class Section:
 
 @dataclass(frozen=True)
 class Segment:
-    """A straight wall segment from ``a`` to ``b`` (m), ``s`` from ``s_start`` (m)."""
+    """A straight wall segment from ``a`` to ``b`` (m), the arc length ``s`` (m) running from
+    ``s_start`` at ``a``: segment ``index`` of the chain named ``chain``, with the solid on
+    its right (``side`` +1: a wall followed up from its lip) or left (-1: a left wall, an
+    insert followed counter-clockwise), its wall friction, and whether its areas are per
+    radian of an axisymmetric wall (``c = r``) or per metre of a plane one (``c = 1``).  The
+    wall loads' stretches are segments too (:func:`fipy_hopper.diagnostics.wall_stretches`)."""
 
     a: tuple
     b: tuple
     friction_deg: float = math.nan
     s_start: float = 0.0
+    chain: str = "wall"
+    index: int = 0
+    side: int = 1
+    axisymmetric: bool = True
 
     @property
     def length(self) -> float:
@@ -132,6 +146,36 @@ class Segment:
     def angle_deg(self) -> float:
         """Angle of the segment's line from the vertical, in ``[0, 90]`` deg."""
         return math.degrees(math.atan2(abs(self.b[0] - self.a[0]), abs(self.b[1] - self.a[1])))
+
+    @property
+    def tangent(self) -> np.ndarray:
+        """Unit tangent from ``a`` to ``b``."""
+        d = np.subtract(self.b, self.a, dtype=float)
+        return d / np.hypot(*d)
+
+    @property
+    def normal(self) -> np.ndarray:
+        """Unit normal into the solid: the tangent turned clockwise, or anticlockwise for
+        ``side = -1``."""
+        t = self.tangent
+        return self.side * np.array([t[1], -t[0]])
+
+    def point(self, s):
+        """``(x, z)`` of the point at arc length ``s`` (m)."""
+        u = np.asarray(s, float) - self.s_start
+        t = self.tangent
+        return self.a[0] + u * t[0], self.a[1] + u * t[1]
+
+    def weight(self, s):
+        """The area weight ``c(s)``: the radius ``r(s)`` (m) per radian, or 1 (plane)."""
+        s = np.asarray(s, float)
+        return self.point(s)[0] if self.axisymmetric else np.ones_like(s)
+
+    def area(self, s1, s2):
+        """Wall area ``int_s1^s2 c ds`` (m^2 per radian; m^2 per metre of a plane wall),
+        0 where ``s2 <= s1``."""
+        s1, s2 = np.asarray(s1, float), np.asarray(s2, float)
+        return np.where(s2 > s1, (s2 - s1) * self.weight(0.5 * (s1 + s2)), 0.0)
 
 
 @dataclass(frozen=True)
@@ -208,7 +252,8 @@ class Chain:
     def segments(self) -> tuple:
         a, b = self.ends()
         return tuple(Segment(tuple(a[k]), tuple(b[k]), self.friction_deg[k]
-                             if self.friction_deg else math.nan, float(self.s_vertices[k]))
+                             if self.friction_deg else math.nan, float(self.s_vertices[k]),
+                             self.name, k, self.side)
                      for k in range(self.n_segments))
 
     @property
@@ -287,6 +332,45 @@ def wall_x(z, rows: np.ndarray, x_below: float):
     for za, zb, xa, slope, lo, hi in rows[::-1]:
         x = np.where((z >= za) & (z <= zb), np.clip(xa + (z - za) * slope, lo, hi), x)
     return x
+
+
+@dataclass(frozen=True)
+class HopperShape:
+    """What a wall of one slope under a vertical bin wall is, in the shorthand's sizes (m,
+    deg): ``half_angle_deg`` the hopper's slope from the vertical (90: a flat floor),
+    ``outlet_x`` the lip's ``x``, ``bin_x`` the bin wall's, ``transition_height`` the height of
+    the junction (:meth:`Boundary.transition`)."""
+
+    half_angle_deg: float
+    outlet_x: float
+    bin_x: float
+    transition_height: float
+
+
+def hopper_shape(wall) -> Optional[HopperShape]:
+    """The :class:`HopperShape` of a wall ``[(x, z), ...]`` from its lip up, or None when it
+    describes no cone (wedge, flat floor) under a bin: a top segment that is not vertical, or
+    below the top vertical stretch more than one slope by length (``SAME_SLOPE_DEG``,
+    ``SAME_SLOPE_SHARE``; the segments of that slope rising outwards).  The half-angle is the
+    length-weighted mean slope of the segments of that slope (the longest one's to round-off
+    when there is one), to 1e-9 deg."""
+    p = [tuple(map(float, q)) for q in wall]
+    k = len(p) - 1
+    while k > 0 and p[k - 1][0] == p[k][0]:
+        k -= 1
+    if k in (0, len(p) - 1):
+        return None
+    dx = np.array([b[0] - a[0] for a, b in zip(p[:k], p[1:k + 1])])
+    dz = np.array([b[1] - a[1] for a, b in zip(p[:k], p[1:k + 1])])
+    length = np.hypot(dx, dz)
+    angle = np.degrees(np.arctan2(np.abs(dx), dz))
+    longest = int(np.argmax(length))
+    same = np.abs(angle - angle[longest]) <= SAME_SLOPE_DEG
+    if length[same].sum() < SAME_SLOPE_SHARE * length.sum() or np.any(dx[same] <= 0.0):
+        return None
+    theta = angle[longest] + float(np.sum(length[same] * (angle[same] - angle[longest]))
+                                   / np.sum(length[same]))
+    return HopperShape(round(float(theta), 9), p[0][0], p[k][0], p[k][1])
 
 
 def nearest_on_segments(x, z, a, b) -> tuple:
@@ -455,6 +539,71 @@ class Boundary:
         """Height of the highest wall point (m)."""
         return max(p[1] for c in self.walls for p in c.points)
 
+    # ------------------------------------------------------------------ sizes of the section
+    @property
+    def x_extent(self) -> tuple:
+        """``(x_min, x_max)`` (m) of the section: the axis (a half-section) or the left wall's
+        leftmost point, and the (right) wall's rightmost point."""
+        right = max(p[0] for p in self.chain("wall").points)
+        if self.section.half:
+            return 0.0, right
+        return min(p[0] for p in self.chain("left_wall").points), right
+
+    @property
+    def width(self) -> float:
+        """The silo's widest span (m): twice the wall's largest ``x`` of a half-section (the
+        diameter, or the width of a plane silo), or from wall to wall of a full section."""
+        x_min, x_max = self.x_extent
+        return 2.0 * x_max if self.section.half else x_max - x_min
+
+    def wall_x(self, z, chain="wall"):
+        """A wall's ``x`` (m) at heights ``z`` (:func:`wall_x`: the lip's below the outlet
+        plane, a floor's start, straight up above the top)."""
+        rows, below, _ = self._profiles[[c.name for c in self.walls].index(
+            self.chain(chain).name)]
+        return wall_x(z, rows, below)
+
+    def span_at(self, z: float) -> float:
+        """The silo's width (m) at height ``z``: from wall to wall (twice the wall's ``x`` in a
+        half-section: the diameter, or the plane silo's width)."""
+        right = float(self.wall_x(z))
+        if self.section.half:
+            return 2.0 * right
+        return right - float(self.wall_x(z, "left_wall"))
+
+    @cached_property
+    def hopper_shape(self) -> Optional[HopperShape]:
+        """The wall's :class:`HopperShape` in a half-section (:func:`hopper_shape`): a cone, a
+        wedge or a flat floor under a bin, with its sizes; None for any other wall and for a
+        full section."""
+        return hopper_shape(self.chain("wall").points) if self.section.half else None
+
+    def transition(self, chain="wall") -> Optional[Corner]:
+        """The corner of a wall where its top vertical stretch begins (a hopper's or a flat
+        floor's junction with the bin wall above it), or None when the wall's top segment is
+        not vertical (no bin wall stands on the rest)."""
+        c = self.chain(chain)
+        p = c.points
+        k = len(p) - 1
+        while k > 0 and p[k - 1][0] == p[k][0]:
+            k -= 1
+        if k in (0, len(p) - 1):
+            return None
+        return next((q for q in c.corners if q.segment == k), None)
+
+    def transition_height(self, chain="wall") -> float:
+        """The height (m) of a wall's :meth:`transition`: below it the wall hangs from it, above
+        it the bin wall stands on it; the wall's top when it has none (all of it hangs)."""
+        corner = self.transition(chain)
+        return float(corner.point[1]) if corner is not None else \
+            float(self.chain(chain).points[-1][1])
+
+    def transition_s(self, chain="wall") -> float:
+        """The arc length (m) of a wall's :meth:`transition` along it (the wall's length when
+        it has none)."""
+        corner = self.transition(chain)
+        return float(corner.s) if corner is not None else self.chain(chain).length
+
     def with_friction(self, wall_deg: float, segment_deg: Sequence[float] = None) -> "Boundary":
         """A copy whose walls have friction ``segment_deg`` (one per segment of ``wall``) or
         ``wall_deg``, and inserts without an angle of their own ``wall_deg`` (deg)."""
@@ -621,8 +770,7 @@ class Boundary:
         it, or further behind it inside the solid it bounds (a wall's: anywhere behind it; an
         insert's: inside the insert).  Near a concave corner a point is in
         contact with both segments; near a convex corner (a lip) a point projecting beyond
-        both belongs to none (:meth:`wall_normal` gives its normal).  The rule of
-        ``geometry.segment_contacts``, segment by segment.
+        both belongs to none (:meth:`wall_normal` gives its normal).
 
         "Behind" stops where the insert does: behind a wall's segment everything is its
         solid, but behind an insert's face lies, past the insert, the material again (the

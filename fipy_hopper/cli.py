@@ -50,10 +50,11 @@ class _Parser(argparse.ArgumentParser):
 
 def _parser() -> argparse.ArgumentParser:
     p = _Parser(prog=PROG, description=(
-        "Eulerian Mohr-Coulomb simulation of granular flow in silos and hoppers (conical, "
-        "axisymmetric, or wedge-shaped, in plane strain; on FiPy): filling, discharge rate, "
-        "flow mode and wall loads, compared with Beverloo, Jenike, Janssen, Walker and "
-        "EN 1991-4."),
+        "Eulerian Mohr-Coulomb simulation of the filling and discharge of silos and hoppers "
+        "on FiPy: a conical or wedge-shaped hopper under a bin, or any wall drawn as straight "
+        "segments with inserts, in an axisymmetric or a plane section; the discharge rate, "
+        "the flow mode per stretch of hopper wall and the wall loads, compared with "
+        "Beverloo, Jenike, Janssen, Walker and EN 1991-4 where they describe the silo."),
         epilog="Exit codes: 0 success, 1 the run failed (or a fill-only run's fill did not "
         "come to rest), 2 bad input, 130 interrupted.")
     p.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
@@ -148,7 +149,7 @@ def _validate(args) -> int:
     geom, run = cfg.hopper, cfg.run
     nr, nz = cfg.grid_shape()
     h = cfg.numerics.cell_size
-    theta_c = e["jenike_critical_half_angle_deg"]
+    theta_c = e.get("jenike_critical_half_angle_deg", math.nan)
     if e["jenike_flow_mode"] == "unknown":
         theta_c_text = "n/a (friction angle below the 19.5 deg range of the fit)"
     elif theta_c != theta_c:
@@ -164,7 +165,8 @@ def _validate(args) -> int:
         f"{'radius' if geom.axisymmetric else 'half-width'}), {memory}",
         f"  P-wave speed c_p   {e['p_wave_speed_m_s']:.4g} m/s",
         f"  time step          {cfg.time_step:.4g} s (at most {cfg.step_estimate():.3g} steps)",
-        f"  {hopper + ' height':<18} {geom.cone_height:.4g} m (transition to the bin)",
+        f"  transition height  {e['transition_height_m']:.4g} m (the bin wall's foot"
+        + ("" if cfg.boundary.transition("wall") else "; none: the wall's top") + ")",
         f"  fill mass          {e['fill_mass_kg']:.4g} kg{per}",
         _grain_line(cfg.material, e),
         (f"  Beverloo rate      {e['beverloo_rate_kg_s']:.4g} kg/s = "
@@ -173,16 +175,24 @@ def _validate(args) -> int:
          if geom.axisymmetric else
          f"  Beverloo rate      {e['beverloo_rate_kg_s']:.4g} kg/s per m of slot "
          f"(plane flow, W' = C' rho sqrt(g) (B - k d)^1.5, C' = 1.03, k = 1.5, no hopper "
-         f"factor)"),
-        f"  discharge time     about {e['expected_discharge_time_s']:.3g} s at that rate",
-        f"  Jenike theta_c     {theta_c_text} (phi = {cfg.material.friction_angle_deg:g} deg, "
-        f"phi_w = {cfg.wall.friction_angle_deg:g} deg"
-        + ("" if geom.axisymmetric else "; plane flow: the conical angle + 10 deg") + ")",
+         f"factor)")
+        if "beverloo_rate_kg_s" in e else
+        (f"  Beverloo rate      n/a: no closed form for this silo (the outlet's flat-bottom "
+         f"rate is {e['beverloo_flat_rate_kg_s']:.4g} kg/s{per})"),
+        f"  discharge time     about {e['expected_discharge_time_s']:.3g} s at "
+        + ("that rate" if "beverloo_rate_kg_s" in e else "the flat-bottom rate"),
+        (f"  Jenike theta_c     {theta_c_text} (phi = {cfg.material.friction_angle_deg:g} deg, "
+         f"phi_w = {cfg.wall.friction_angle_deg:g} deg"
+         + ("" if geom.axisymmetric else "; plane flow: the conical angle + 10 deg") + ")")
+        if "jenike_critical_half_angle_deg" in e else
+        "  Jenike theta_c     per stretch of hopper wall (below)",
         (f"  expected flow      {e['jenike_flow_mode']} flow ({geom.half_angle_deg:g} deg "
          f"{hopper})" if geom.classic else
-         "  expected flow      by Jenike, per stretch of hopper wall: " + "; ".join(
+         f"  expected flow      {e['jenike_flow_mode']} flow by Jenike over the stretches of "
+         "hopper wall: " + "; ".join(
              f"{st['wall']} segment {st['segment']}, {st['half_angle_deg']:.1f} deg: "
-             f"{st['jenike_call']}" for st in stretch_calls(cfg, []))),
+             f"{st['jenike_call']}" + ("" if st["counted"] else " (not counted)")
+             for st in stretch_calls(cfg, []))),
         f"  run                until {end}, samples every {run.output_interval:g} s, "
         f"fields every {run.field_interval:g} s",
     ]
@@ -353,8 +363,10 @@ def _cohesion_lines(cfg, e: dict) -> list:
     def length(value, why):
         return f"{value:.4g} m" if value == value else f"n/a ({why})"
 
-    jenike, simple = e["jenike_critical_outlet_m"], e["critical_outlet_simplified_m"]
+    jenike, simple = e.get("jenike_critical_outlet_m", math.nan), e["critical_outlet_simplified_m"]
     critical = jenike if jenike == jenike else simple
+    why = ("flat bottom, outside the fit of H" if "jenike_critical_outlet_m" in e
+           else "no one hopper angle: not a cone under a bin")
 
     def verdict(value):
         if value != critical:
@@ -366,7 +378,7 @@ def _cohesion_lines(cfg, e: dict) -> list:
         f"  cohesion           c = {mat.cohesion:g} Pa: unconfined yield strength "
         f"sigma_c = {e['unconfined_yield_strength_Pa']:.4g} Pa",
         f"  critical outlet    Jenike H(theta) sigma_c/(rho g) = "
-        f"{length(jenike, 'flat bottom, outside the fit of H')}{verdict(jenike)}",
+        f"{length(jenike, why)}{verdict(jenike)}",
         f"                     simplified 2 sigma_c/(rho g) = {simple:.4g} m{verdict(simple)}",
         f"  critical rathole   Jenike G(phi) sigma_c/(rho g) = "
         f"{length(e['jenike_rathole_diameter_m'], 'phi outside the 30-70 deg of the fit')}",
@@ -384,6 +396,22 @@ def _print_summary(s: dict, out) -> None:
 
     per = "/m" if wedge else ""
     theory = "Beverloo, slot" if wedge else "Beverloo x Rose-Tanaka"
+    if s.get("stop_reason") in ("filled", "fill_not_at_rest"):      # the loads at rest
+        print(f"{PROG}: {s.get('stop_reason')} after {num('fill_time_s', '.3g')} s of filling "
+              f"({num('steps', 'd')} steps, {num('wall_time_s', '.0f')} s wall time)\n"
+              f"  weight at rest         {num('fill_weight_N', '.4g')} N{per}: the walls carry "
+              f"{num('fill_wall_vertical_N', '.4g')} N{per}, the outlet plate "
+              f"{num('fill_outlet_N', '.4g')} N{per} (residual "
+              f"{num('fill_equilibrium_residual', '.1e')})\n"
+              f"  bin wall               K = p_n / sigma_v {num('wall_k_bin', '.3f')}, axial "
+              f"compression at the transition {num('bin_wall_axial_compression_N_m', '.4g')} "
+              f"N/m (Janssen {num('janssen_wall_axial_compression_N_m', '.4g')} N/m)\n"
+              f"  hopper                 tension at the transition "
+              f"{num('hopper_meridional_tension_N_m', '.4g')} N/m, ring compression "
+              f"{num('transition_ring_compression_N', '.4g')} N\n"
+              f"  mass                   {num('initial_mass_kg', '.4g')} kg{per} filled\n"
+              f"  results in             {out}/ (wall_pressure.csv: the loads along the wall)")
+        return
     print(f"{PROG}: {s.get('stop_reason')} after {num('discharge_time_s', '.3g')} s of discharge "
           f"({num('steps', 'd')} steps, {num('wall_time_s', '.0f')} s wall time)\n"
           f"  steady discharge rate  {num('steady_discharge_rate_kg_s', '.4g')} kg/s{per} "
@@ -404,7 +432,10 @@ def _print_summary(s: dict, out) -> None:
         print(f"  outcome                {s.get('flow_mode')}: the flow stopped {stopped:.3g} s "
               f"after the opening with {100 * left:.2f} % of the mass left"
               + (f", a rathole {channel:.3g} m wide"
-                 if channel is not None and channel == channel else ""))
+                 if channel is not None and channel == channel else "")
+              + (f", its surface at {s['heap_angle_deg']:.1f} deg from the horizontal (against "
+                 f"the angle of repose)" if s.get("heap_angle_deg") is not None
+                 and s["heap_angle_deg"] == s["heap_angle_deg"] else ""))
 
 
 def main(argv=None) -> int:

@@ -217,14 +217,16 @@ class HopperGeometry:
     position); ``fill_level`` (m above the outlet plane).  ``inserts`` (any shape): closed
     polygons (:class:`InsertConfig`), inside the walls, above the outlet plane.
 
-    A profile's shorthand sizes, which the rest of the code reads, are derived:
-    ``bin_diameter`` is twice the wall's widest ``x`` (a full section: the rightmost ``x``
-    of ``wall`` less the leftmost of ``left_wall``), ``outlet_diameter`` twice the lip's ``x``
-    (a full section: the outlet's width), ``half_angle_deg`` the angle from the vertical of
-    the lowest sloping segment of ``wall`` (to 1e-9 deg), :attr:`cone_height` the bottom of
-    the top vertical stretch of ``wall`` (its top if the top segment slopes), ``bin_height``
-    and ``fill_height`` are above it (the latter negative for a fill below it), :attr:`top`
-    is the lower of the walls' tops.  The boundary itself is :attr:`boundary`.
+    The silo itself is :attr:`boundary` (:class:`fipy_hopper.boundary.Boundary`), which every
+    part of the code reads.  A profile's shorthand sizes exist only where they describe it:
+    when its wall is a cone (a wedge, a flat floor) under a bin in a half-section
+    (:attr:`fipy_hopper.boundary.Boundary.hopper_shape`, one slope by length),
+    ``bin_diameter`` is twice the bin wall's ``x``, ``half_angle_deg`` that slope,
+    :attr:`cone_height` the height of the transition, ``bin_height`` and ``fill_height`` above
+    it (the latter negative for a fill below it); for any other wall they are None.
+    ``outlet_diameter`` (twice the lip's ``x``, or a full section's outlet width),
+    :attr:`width` (the widest span) and :attr:`top` (the lower of the walls' tops) describe
+    every silo.
     """
 
     bin_diameter: float = 0.3
@@ -356,22 +358,30 @@ class HopperGeometry:
         """The silo the classic theories cover: a half-section without inserts in the material
         (an insert wholly above the fill level does not count) whose wall is a cone, a
         wedge's plate or a flat floor under one vertical bin wall (the shorthands, and a
-        profile drawn as one).  Janssen, Walker and EN 1991-4's hopper loads apply to
-        it as a whole; other silos get them where a stretch allows (Janssen on a top vertical
+        profile drawn as one: :attr:`fipy_hopper.boundary.Boundary.hopper_shape`).
+        Beverloo's rate with the Rose-Tanaka factor, Jenike's critical half-angle, Janssen,
+        Walker and EN 1991-4's hopper loads apply to it as a whole; other silos get them
+        where a stretch allows (Jenike per stretch of hopper wall, Janssen on a top vertical
         stretch)."""
-        wall = self.wall_points
         buried = [i for i in self.inserts
                   if min(z for _, z in i.outline) < (self.fill_level or self.top)]
-        return (not self.full_section and not buried and len(wall) == 3
-                and wall[1][0] == wall[2][0] and wall[1][0] != wall[0][0])
+        return not buried and self.boundary.hopper_shape is not None
 
     @property
     def x_extent(self) -> tuple:
         """``(x_min, x_max)`` (m) of the section: the axis to the widest point, or the two
         walls' extremes in a full section (the width the grid must span)."""
+        right = max(x for x, _ in self.wall_points)
         if not self.full_section:
-            return 0.0, self.bin_radius
-        return (min(x for x, _ in self.left_wall), max(x for x, _ in self.wall))
+            return 0.0, right
+        return min(x for x, _ in self.left_wall), right
+
+    @property
+    def width(self) -> float:
+        """The silo's widest span (m): the bin's diameter (width) of a shorthand, twice a
+        half-section's widest ``x``, or wall to wall of a full section."""
+        x_min, x_max = self.x_extent
+        return 2.0 * x_max if not self.full_section else x_max - x_min
 
     @cached_property
     def boundary(self):
@@ -383,25 +393,28 @@ class HopperGeometry:
                      fill_level=self.fill_level)
 
     @property
-    def bin_radius(self) -> float:
-        """The bin's radius, or half its width for a wedge (m)."""
-        return 0.5 * self.bin_diameter
+    def bin_radius(self) -> Optional[float]:
+        """The bin's radius, or half its width for a wedge (m); None where there is no one
+        bin (:attr:`bin_diameter`)."""
+        return None if self.bin_diameter is None else 0.5 * self.bin_diameter
 
     @property
     def outlet_radius(self) -> float:
         return 0.5 * self.outlet_diameter
 
     @property
-    def half_angle(self) -> float:
-        """Cone half-angle in radians."""
-        return math.radians(self.half_angle_deg)
+    def half_angle(self) -> Optional[float]:
+        """Cone half-angle in radians (None where there is no one hopper angle)."""
+        return None if self.half_angle_deg is None else math.radians(self.half_angle_deg)
 
     @property
-    def cone_height(self) -> float:
+    def cone_height(self) -> Optional[float]:
         """Height of the cone-cylinder transition above the outlet, ``(R - R0) / tan(theta)``
-        (zero for a flat-bottomed bin); a profile's: the bottom of its top vertical stretch."""
+        (zero for a flat-bottomed bin); a profile's: the height of its transition where it
+        describes a cone under a bin, else None (every silo's is
+        :meth:`fipy_hopper.boundary.Boundary.transition_height`)."""
         if self.shape == "profile":
-            return _bin_bottom(self.wall)
+            return None if self.half_angle_deg is None else _bin_bottom(self.wall)
         if self.half_angle_deg >= 90.0:
             return 0.0
         return (self.bin_radius - self.outlet_radius) / math.tan(self.half_angle)
@@ -549,15 +562,19 @@ def _check_profile(geom: "HopperGeometry") -> None:
     slope = next(p for p, q in zip(wall, wall[1:]) if p[0] != q[0])
     nxt = wall[wall.index(slope) + 1]
     cone = _bin_bottom(wall)
-    angle = round(math.degrees(math.atan2(abs(nxt[0] - slope[0]), nxt[1] - slope[1])), 9)
-    if angle <= 0.0:
+    if round(math.degrees(math.atan2(abs(nxt[0] - slope[0]), nxt[1] - slope[1])), 9) <= 0.0:
         raise ConfigError(f"hopper.wall: the wall rises vertically from the lip at "
                           f"{_point(wall[0])} (its first slope, {_point(slope)} to "
                           f"{_point(nxt)}, is vertical to round-off): give the hopper or the "
                           f"floor a slope")
-    for key, value in (("bin_diameter", width), ("outlet_diameter", outlet),
-                       ("half_angle_deg", angle),
-                       ("bin_height", top - cone), ("fill_height", level - cone),
+    from .boundary import hopper_shape
+    shape = None if geom.full_section else hopper_shape(wall)
+    sizes = {"bin_diameter": None, "half_angle_deg": None, "bin_height": None,
+             "fill_height": None}
+    if shape is not None:
+        sizes = {"bin_diameter": 2.0 * shape.bin_x, "half_angle_deg": shape.half_angle_deg,
+                 "bin_height": top - cone, "fill_height": level - cone}
+    for key, value in (("outlet_diameter", outlet), *sizes.items(),
                        ("bin_width", None), ("outlet_width", None)):
         object.__setattr__(geom, key, value)
 
@@ -605,14 +622,17 @@ def _check_inserts(geom: "HopperGeometry") -> None:
             friction = _check_range(f"{key}.friction_angle_deg", friction, 0, 90,
                                     high_open=True, unit=" deg")
         outline = f"{key}.outline"
-        if polygon_integrals(pts)[0] == 0.0:
+        (x0, z0), (x1, z1) = pts[0], pts[1]
+        if all((x1 - x0) * (z - z0) == (z1 - z0) * (x - x0) for x, z in pts[2:]):
             raise ConfigError(f"{outline} encloses no area (its points are on one line): "
                               f"expected a closed polygon")
         crossing = self_crossing(pts, closed=True)
-        if crossing:
+        if crossing:              # a bow-tie too: its signed area may be zero
             i, j = crossing
             raise ConfigError(f"{outline} crosses itself: its edge from {_point_text(pts[i])} "
                               f"meets the edge from {_point_text(pts[j])}")
+        if polygon_integrals(pts)[0] == 0.0:       # (not reached: kept as the last guard)
+            raise ConfigError(f"{outline} encloses no area: expected a closed polygon")
         for i, (x, z) in enumerate(pts):
             where = f"{outline}[{i}] = {_point_text((x, z))}"
             if z < 0.0:
@@ -908,7 +928,8 @@ class RunConfig:
     ``wall_bin_width`` (m): the resolution of the wall-load profiles along the wall: the
     traction recovered from the wall's reaction is a spline on knots this far apart and is
     reported as its mean over bins of this width (:mod:`fipy_hopper.wall_traction`).
-    ``"auto"`` (the default) is a twentieth of the bin's diameter (width), but at least three
+    ``"auto"`` (the default) is a twentieth of the silo's widest span (the bin's diameter or
+    width), but at least three
     cells (:meth:`HopperConfig.wall_bin_width_m`); a width in metres stays the same under
     refinement, so profiles of different cell sizes compare bin by bin.
 
@@ -1116,7 +1137,8 @@ class HopperConfig:
     @property
     def wall_bin_width_m(self) -> float:
         """The wall-load bins' width (m): ``run.wall_bin_width``, or for ``"auto"`` a twentieth
-        of the bin's diameter (a wedge's width), at least three cells.  Three cells is what
+        of the silo's widest span (:attr:`HopperGeometry.width`: the bin's diameter, a wedge's
+        width), at least three cells.  Three cells is what
         averages the cut cells' pattern of the wall's reaction to a smooth profile (the
         traction's spline spans four bins); a twentieth of the silo resolves its loads
         (15 mm in the reference hopper) independently of the cell size."""
@@ -1126,7 +1148,7 @@ class HopperConfig:
         """:attr:`wall_bin_width_m` on a grid of ``cell_size`` m."""
         if self.run.wall_bin_width != "auto":
             return float(self.run.wall_bin_width)
-        return max(3.0 * cell_size, self.hopper.bin_diameter / 20.0)
+        return max(3.0 * cell_size, self.hopper.width / 20.0)
 
     def memory_estimate(self) -> float:
         """Peak resident memory of a run (bytes): the grid, its markers and its wall loads
@@ -1173,7 +1195,7 @@ class HopperConfig:
             return
         # the smallest cell size whose grid fits: the count never grows with the cell size,
         # so bisect on the exact count, then round up to 3 digits
-        lo, hi = h, max(h, 2 * (self.hopper.top + self.hopper.bin_diameter))
+        lo, hi = h, max(h, 2 * (self.hopper.top + self.hopper.width))
         for _ in range(100):
             mid = 0.5 * (lo + hi)
             lo, hi = (mid, hi) if math.prod(self.grid_shape(mid)) > MAX_CELLS else (lo, mid)

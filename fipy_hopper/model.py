@@ -81,6 +81,14 @@ def runaway_speed(geom) -> float:
     return 50.0 * math.sqrt(GRAVITY * max(geom.top, 0.1))
 
 
+def ramped_gravity(state, ramp: float) -> float:
+    """Gravity (m/s^2, downward) of a model's state: rising linearly over ``ramp`` s during
+    filling, then :data:`GRAVITY` (every model's; the compiled steps carry its twin)."""
+    if state.stage == "filling" and ramp > 0:
+        return GRAVITY * min(1.0, state.t / ramp)
+    return GRAVITY
+
+
 class InstabilityError(RuntimeError):
     """The explicit solution went unstable (NaN or runaway velocity)."""
 
@@ -118,15 +126,6 @@ class State:
     # 1.0 where the cell's last return was plastic, else 0.0 (nz, nr): the cells in which the
     # law's rate-dependent overstress acts in the next step's forces (not transported)
     flowing: np.ndarray = None
-
-    def __post_init__(self):
-        # states from before these fields existed (older checkpoints): dense, no pending motion
-        if self.loose is None:
-            self.loose = np.zeros_like(self.alpha)
-        if self.flowing is None:
-            self.flowing = np.zeros_like(self.alpha)
-        if self.markers is not None and self.displacement is None:
-            self.displacement = np.zeros_like(self.v)
 
     def copy(self) -> "State":
         return State(**{k: (v.copy() if isinstance(v, np.ndarray) else v)
@@ -375,11 +374,8 @@ class HopperModel:
                                                                + state.v[1] ** 2)))
 
     def gravity(self, state: State) -> float:
-        """Gravity (m/s^2, downward) at this time: ramped linearly during filling."""
-        ramp = self.ramp_time
-        if state.stage == "filling" and ramp > 0:
-            return GRAVITY * min(1.0, state.t / ramp)
-        return GRAVITY
+        """Gravity (m/s^2, downward) at this time (:func:`ramped_gravity`)."""
+        return ramped_gravity(state, self.ramp_time)
 
     def open_outlet(self, state: State) -> None:
         """Open the outlet: discharge starts.  The plate goes at once, or over
@@ -519,12 +515,16 @@ class HopperModel:
         """``(slip, axis_speed)`` (m/s) of every entry of ``contact_list``: the slip speed
         down the wall of the entry's node (its velocity in ``state.v``, after the step's
         contact) and the downward speed of the node of the same row on the centreline (the
-        axis)."""
+        axis; beside an insert on it, the material's nearest node column:
+        :func:`~fipy_hopper.diagnostics.axis_columns`)."""
         from . import diagnostics
         j, i, normals, _ = self.contact_list
         side = self.boundary.table.side[self.contact_owner]
+        if not hasattr(self, "_axis_columns"):
+            self._axis_columns = diagnostics.axis_columns(self.grid, self.boundary,
+                                                          self.centre_column)
         return (diagnostics.entry_slip(state.v[:, j, i].T, normals, side),
-                -state.v[1, j, self.centre_column])
+                -state.v[1, j, self._axis_columns[j]])
 
     def flow_mode_measures(self, state: State, rule) -> tuple:
         from . import diagnostics
@@ -560,9 +560,6 @@ class HopperModel:
         """
         if max_steps < 1:
             return 0
-        if state.wall_impulse is None:     # a state from before the load measurements
-            for key, value in self._measurements().items():
-                setattr(state, key, value)
         if self.backend == "numpy":
             for n in range(max_steps):
                 due = self._step_numpy(state)
@@ -654,10 +651,9 @@ class HopperModel:
         return self._transport_due(state, u_n)
 
     def _material_update(self, sigma: np.ndarray, d_eps: np.ndarray):
-        """The law's stress update of the backend: ``(sigma_new, d_eps_p, status)``."""
-        law = self.material
-        update = law.update if self.backend == "numba" else law.update_reference
-        return update(sigma, d_eps, return_status=True)
+        """The law's reference stress update (the numpy path's; the compiled steps update
+        the stress themselves): ``(sigma_new, d_eps_p, status)``."""
+        return self.material.update_reference(sigma, d_eps, return_status=True)
 
     def _nodal_update_numpy(self, state: State, m: np.ndarray, damping: float) -> np.ndarray:
         """Reference (numpy) nodal update: forces, velocity, damping, contact, axis."""

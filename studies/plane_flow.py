@@ -303,6 +303,7 @@ def write_outputs(out, rows, options, map_options, setting, argv=None) -> dict:
     findings.append(
         f"Plane-flow map: {map_numbers['agreeing']} of {map_numbers['classified']} classified "
         f"wedges agree with Jenike's plane-flow boundary ({map_numbers['agreement_fraction']:.2f}"
+        f", in-sample: the slip-ratio threshold 0.2 was placed in the gap these cases leave"
         f"; away from it, |theta - theta_c| > 5 deg: "
         f"{map_numbers['agreement_fraction_clear']:.2f} of {map_numbers['clear_cases']}); "
         f"simulated {map_numbers['mass_cases']} mass, {map_numbers['funnel_cases']} funnel; "

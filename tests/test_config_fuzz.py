@@ -199,9 +199,12 @@ def check(data):
         again = HopperConfig.from_dict(tomllib.loads(cfg.to_toml()))
     assert again == cfg
     e = expected_quantities(cfg)
-    for key in ("fill_mass_kg", "p_wave_speed_m_s", "beverloo_rate_kg_s",
-                "expected_discharge_time_s", "rose_tanaka_factor", "cone_height_m"):
+    classic = ("beverloo_rate_kg_s", "rose_tanaka_factor", "cone_height_m")
+    for key in ("fill_mass_kg", "p_wave_speed_m_s", "beverloo_flat_rate_kg_s",
+                "expected_discharge_time_s", "transition_height_m") + (
+                    classic if cfg.hopper.classic else ()):
         assert math.isfinite(e[key]) and e[key] >= 0, (key, e[key])
+    assert cfg.hopper.classic or not any(key in e for key in classic)
     assert e["jenike_flow_mode"] in ("mass", "funnel", "unknown")
     assert 0 < cfg.n_cells <= fconfig.MAX_CELLS
     assert 0 < cfg.step_estimate() <= fconfig.MAX_STEPS

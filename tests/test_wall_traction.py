@@ -14,10 +14,11 @@ from fipy_hopper.config import HopperConfig
 from fipy_hopper.diagnostics import bin_scatter, smooth_fit_rms
 from fipy_hopper.model import HopperModel
 from fipy_hopper.simulation import Simulation
-from fipy_hopper.wall_traction import StretchRecovery, WallStretch
+from fipy_hopper.boundary import Segment
+from fipy_hopper.wall_traction import StretchRecovery
 
-CONE = WallStretch((0.03, 0.0), (0.15, 0.33), 0.0, True, segment=1)
-PLATE = WallStretch((0.03, 0.0), (0.15, 0.33), 0.0, False, segment=1)
+CONE = Segment((0.03, 0.0), (0.15, 0.33), s_start=0.0, index=1, axisymmetric=True)
+PLATE = Segment((0.03, 0.0), (0.15, 0.33), s_start=0.0, index=1, axisymmetric=False)
 
 
 def scattered_forces(stretch, n=400, seed=1):
