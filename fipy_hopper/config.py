@@ -816,10 +816,11 @@ class NumericsConfig:
       0.41 Pa s``, the order of the rate dependence of a 1 mm sand (``mu(I)``).  Eulerian
       formulation only.
     - ``viscosity_length`` ``l`` (m, 0: the cell size, the default): the length in ``eta``,
-      ``eta = b rho sqrt(g l) l``: a viscosity of fixed size, a material's rate dependence,
-      the same on every grid (it gives a shear band, such as the edge of a funnel's flow
-      channel, a width that does not shrink with the cells; ``docs/physics_and_numerics.md``
-      section 4).
+      ``eta = b rho sqrt(g l) l``: a viscosity of fixed size, the same on every grid.  A
+      numerical knob only: the material's own length, which gives a shear band such as the
+      edge of a funnel's flow channel a width that does not shrink with the cells, is the
+      grain size of the law's rate dependence (``material.grain_diameter``,
+      ``docs/physics_and_numerics.md`` section 2).
     - ``bulk_viscosity`` ``b_1`` (dimensionless, 0: off; ``"auto"``, the default, is
       :data:`DEFAULT_BULK_VISCOSITY` with the Eulerian formulation and 0 with the Lagrangian
       one, see :attr:`HopperConfig.bulk_viscosity`): a viscous pressure ``eta_b tr(D)``

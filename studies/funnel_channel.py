@@ -116,7 +116,7 @@ def channel_of(run_dir, options):
     """``(rows of channel.csv, edge angle (deg), core_open_s)`` from a run's snapshots."""
     from fipy_hopper import plotting
 
-    rows, angle, core_open = [], math.nan, math.nan
+    rows, angle, core_open, widths = [], math.nan, math.nan, []
     entries = [e for e in plotting.snapshots(run_dir) if e["stage"] == "discharge"]
     best = min(entries, key=lambda e: abs(e["discharge_time_s"] - options["edge_time"]),
                default=None)
@@ -135,12 +135,16 @@ def channel_of(run_dir, options):
             band &= z <= z[filled[-1]]
         if math.isnan(core_open) and band.any() and np.all(snap["alpha"][band, 0] <= 0.5):
             core_open = float(t)
+        if options["early"][0] <= t <= options["late_from"]:
+            sel = (z > 0) & (z <= options["edge_top"]) & np.isfinite(tenth) & np.isfinite(half)
+            widths += list(tenth[sel] - half[sel])
         if e is best:
             sel = (z > 0) & (z <= options["edge_top"]) & np.isfinite(tenth)
             if sel.sum() >= 3:
                 slope = np.polyfit(z[sel], tenth[sel], 1)[0]
                 angle = math.degrees(math.atan(slope))
-    return rows, angle, core_open
+    width = float(np.median(widths)) if widths else math.nan
+    return rows, angle, core_open, width
 
 
 def mean_rate(t, discharged, start, end):
@@ -152,11 +156,17 @@ def mean_rate(t, discharged, start, end):
     return float((np.interp(end, t, m) - np.interp(start, t, m)) / (end - start))
 
 
+def _grain_diameter(run_dir) -> float:
+    """The grain diameter (m) of a run's configuration."""
+    from fipy_hopper.config import HopperConfig
+    return HopperConfig.from_toml(Path(run_dir) / "config.toml").material.grain_diameter
+
+
 def groups(rows):
     """``{(hopper, variant): rows from the coarsest to the finest cells}``."""
     out = {}
     for r in rows:
-        out.setdefault((r.get("hopper", "funnel"), r.get("variant", "plain")), []).append(r)
+        out.setdefault((r.get("hopper", "funnel"), r.get("variant", "default")), []).append(r)
     return {k: sorted(v, key=lambda r: -r["cell_size_mm"]) for k, v in out.items()}
 
 
@@ -179,7 +189,10 @@ def analyse(rows, options):
         r["discharged_in_run_kg"] = float(out[-1])
         r["early_rate_kg_s"] = mean_rate(t, out, *options["early"])
         r["late_rate_kg_s"] = mean_rate(t, out, options["late_from"], options["end_time"])
-        edges, r["edge_angle_deg"], r["core_open_s"] = channel_of(r["run_dir"], options)
+        edges, r["edge_angle_deg"], r["core_open_s"], r["edge_width_m"] = channel_of(
+            r["run_dir"], options)
+        grain = _grain_diameter(r["run_dir"])
+        r["edge_width_grains"] = r["edge_width_m"] / grain if grain > 0 else math.nan
         channel += [{"case": r["case"], "cell_size_mm": r["cell_size_mm"], **e} for e in edges]
     numbers = {}
     for (hopper, variant), members in groups(rows).items():
@@ -191,6 +204,8 @@ def analyse(rows, options):
                 _r(abs(b[key] - a[key]) / abs(b[key]), 4) if _sweep.finite(a.get(key))
                 and _sweep.finite(b.get(key)) else None for a, b in zip(done, done[1:])]
         entry["edge_angle_deg"] = [_r(r["edge_angle_deg"], 1) for r in done]
+        entry["edge_width_mm"] = [_r(1000 * r["edge_width_m"], 1) for r in done]
+        entry["edge_width_grains"] = [_r(r["edge_width_grains"], 1) for r in done]
         entry["core_open_s"] = [_r(r["core_open_s"], 2) for r in done]
         numbers[f"{hopper}_{variant}"] = entry
     return numbers, channel
@@ -233,11 +248,12 @@ def write_outputs(out, rows, numbers, channel, options, setting, argv=None):
     _sweep.write_rows_csv(out / "results.csv", rows, first=(
         "case", "hopper", "variant", "cell_size_mm", "steady_discharge_rate_kg_s",
         "discharged_in_run_kg", "early_rate_kg_s", "late_rate_kg_s", "edge_angle_deg",
-        "core_open_s", "error"))
+        "edge_width_m", "edge_width_grains", "core_open_s", "error"))
     _sweep.write_rows_csv(out / "channel.csv", channel)
     _sweep.save(plot(rows, channel, options), out / "funnel_channel.png")
     figures = [{"file": "funnel_channel.png",
-                "caption": "The funnel hopper, plain and with the viscosity of fixed size: "
+                "caption": "The funnel hopper with the default law (mu(I), d = 1 mm) and the "
+                           "rate-independent one: "
                            "W(t) at each cell size (left) and the flow channel's edge, where "
                            "the speed falls to a tenth (solid) and half (dashed) of the axis's, "
                            f"at the snapshot nearest {options['edge_time']:g} s (right)."}]
@@ -259,6 +275,11 @@ def write_outputs(out, rows, numbers, channel, options, setting, argv=None):
                 f"{options['late_from']:g} s {listed('late_rate_kg_s')} kg/s (changes "
                 f"{listed('late_rate_kg_s_changes', 100, '.1f')} %)")
         if name.startswith("funnel"):
+            text += (f"; the channel's edge (from half to a tenth of the axis speed, median "
+                     f"over the rows to {options['edge_top']:g} m and the snapshots "
+                     f"{options['early'][0]:g}-{options['late_from']:g} s) is "
+                     f"{listed('edge_width_mm', 1, '.1f')} mm wide = "
+                     f"{listed('edge_width_grains', 1, '.1f')} grains of its d")
             text += (f"; the channel's edge (a tenth of the axis speed) leans "
                      f"{listed('edge_angle_deg', 1, '.1f')} deg from the vertical at "
                      f"{options['edge_time']:g} s, and the axis column has emptied from the "
@@ -267,12 +288,14 @@ def write_outputs(out, rows, numbers, channel, options, setting, argv=None):
         findings.append(text + ".")
     table = {"title": "Runs", "columns": ["hopper", "variant", "cell (mm)", "steady W (kg/s)",
                                          "out (kg)", "early W (kg/s)", "late W (kg/s)",
-                                         "edge angle (deg)", "core open (s)"],
+                                         "edge angle (deg)", "edge width (mm)",
+                                         "core open (s)"],
              "rows": [[r.get("hopper"), r.get("variant"), r["cell_size_mm"],
                        _r(r.get("steady_discharge_rate_kg_s"), 4),
                        _r(r.get("discharged_in_run_kg"), 3), _r(r.get("early_rate_kg_s"), 4),
                        _r(r.get("late_rate_kg_s"), 4), _r(r.get("edge_angle_deg"), 1),
-                       _r(r.get("core_open_s"), 2)] for r in rows]}
+                       _r(1000 * r["edge_width_m"], 1) if _sweep.finite(r.get("edge_width_m"))
+                       else None, _r(r.get("core_open_s"), 2)] for r in rows]}
     settings = {k: (list(v) if isinstance(v, tuple) else v) for k, v in options.items()}
     sizes = " to ".join(f"{1000 * h:g}" for h in sorted(options["cell_sizes"], reverse=True))
     headline = f"Steady-rate changes from {sizes} mm: " + "; ".join(
