@@ -7,11 +7,6 @@ wall, ``nz`` rows from ``z_bottom = -free_fall_depth`` (aligned so that the outl
 z-normal first (``i + nr j`` for the row of faces at ``z_j``), then r-normal
 (``n_zfaces + i + (nr + 1) j``).  Nodes are ``(nz + 1, nr + 1)`` arrays.
 
-The empty annulus (with the grain-size law, ``material.rate_dependence = "mu_I"``): the centres
-of grains of diameter ``d`` pass no closer than ``d / 2`` to an outlet's lip, so the part of the
-outlet plane within ``d / 2`` of a lip is closed to the flow (:func:`outlet_annulus_aperture`;
-Beverloo's empty annulus, the geometric part of his ``k d``).
-
 Cut cells: the open fraction ``kappa`` of each cell (volume fraction outside the wall, r-weighted
 as the axisymmetric volume) and the aperture of each face (open fraction of its area) are
 computed by sub-sampling each cell and face with ``n_sub`` points per direction (error below
@@ -106,26 +101,6 @@ def _open_fraction_faces(boundary, r_nodes, z_nodes, n_sub):
     return a_z, a_r
 
 
-def outlet_annulus_aperture(boundary, r_nodes, exclusion: float) -> np.ndarray:
-    """Aperture (nr,) of the outlet plane's z-faces outside the empty annulus: the fraction of
-    each face (r-weighted in an axisymmetric section) inside ``[x_left + e, x_right - e]``
-    with ``e`` = ``exclusion`` (m, half a grain) at each lip (at the right one only in a
-    half-section, whose ``x_left`` is the axis).  1 where no lip is within reach."""
-    x0, x1 = boundary.outlet
-    lo = x0 + (0.0 if boundary.section.half else exclusion)
-    hi = x1 - exclusion
-    a, b = r_nodes[:-1], r_nodes[1:]
-    c, e = np.clip(a, lo, hi), np.clip(b, lo, hi)
-    if boundary.section.axisymmetric:
-        inside, whole = e * e - c * c, b * b - a * a
-    else:
-        inside, whole = e - c, b - a
-    frac = np.where(whole > 0.0, inside / np.where(whole > 0.0, whole, 1.0), 0.0)
-    # faces beyond the lips (under the wall) keep what the cut cells give them
-    span = (b > x0) & (a < x1)
-    return np.where(span, frac, 1.0)
-
-
 def build_grid(cfg: HopperConfig, n_sub: int = 16) -> HopperGrid:
     """Build the FiPy grid covering the hopper, its wall's cut cells and the free-fall zone."""
     geom, num = cfg.hopper, cfg.numerics
@@ -153,10 +128,6 @@ def build_grid(cfg: HopperConfig, n_sub: int = 16) -> HopperGrid:
     a_r[:, 1:-1] = np.where(closed[:, 1:] | closed[:, :-1], 0.0, a_r[:, 1:-1])
     a_z[0] = np.where(closed[0], 0.0, a_z[0])
     a_z[-1] = np.where(closed[-1], 0.0, a_z[-1])
-    if cfg.material.rate_dependence != "none" and cfg.material.grain_diameter > 0.0:
-        # the empty annulus: no grain centre within d / 2 of a lip
-        a_z[n_below] = np.minimum(a_z[n_below], outlet_annulus_aperture(
-            geom.boundary, r_nodes, 0.5 * cfg.material.grain_diameter))
     a_r[:, 0] = 0.0            # axis: zero area anyway
     a_r[:, -1] = 0.0           # outer boundary is inside the wall
     face_aperture = np.concatenate([a_z.ravel(), a_r.ravel()])

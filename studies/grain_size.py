@@ -3,12 +3,11 @@
 Beverloo's correlation ``W = C rho_b sqrt(g) (D0 - k d)^(5/2)`` (a slot: ``(W0 - k d)^(3/2)``
 per metre) says an outlet a few tens of grains wide passes less than the continuum's
 ``D0^(5/2)``: as if an annulus ``k d / 2`` wide at the outlet's edge were empty (``k`` about
-1.3-1.6 for spheres).  The law of fipy_hopper carries the grain size ``d`` twice: in the
-rate dependence above the Mohr–Coulomb limit (``material.rate_dependence = "mu_I"``: the
-friction of flowing material rises with ``I = gamma_dot d / sqrt(p / rho_s)``, most near the
-outlet, where the shear rate is high and the pressure low) and in the outlet plane, where no
-grain centre passes within ``d / 2`` of a lip (the geometric part of the annulus,
-:func:`fipy_hopper.mesh.outlet_annulus_aperture`).  This study measures what they give.
+1.3-1.6 for spheres).  The law of fipy_hopper carries the grain size ``d`` in its rate
+dependence above the Mohr–Coulomb limit (``material.rate_dependence = "mu_I"``: the friction
+of flowing material rises with ``I = gamma_dot d / sqrt(p / rho_s)``, most near the outlet,
+where the shear rate is high and the pressure low).  This study measures the ``k`` that emerges
+from it at the lip.
 
 The reference cone (20 deg, mass flow, phi = 30 deg, phi_w = 15 deg) with a shorter bin,
 short discharges at ``cell_size`` (default 5 mm; 0.8 s):
@@ -18,10 +17,8 @@ short discharges at ``cell_size`` (default 5 mm; 0.8 s):
 * fits over the ``mu_I`` cases: ``W = A (D0 - k d)^n`` by least squares in log space (``k``,
   ``n`` and ``A`` free; the grid's own offset is in ``n``), and ``k`` with ``n`` held at the
   plain law's exponent over the same outlets (the grid's offset then cancels); the rate
-  deficit per outlet against the plain law as ``k_D0 = (D0 / d)(1 - (W / W_plain)^(1/n))``;
-* the grain size's two parts apart: ``d = 1`` and 3 mm at D0 = 60 mm with the annulus alone
-  (the overstress switched off by a vanishing rise, ``friction_rise`` = 1e-9); the
-  overstress's part is the rest of the deficit.
+  deficit per case against the plain law at its outlet as ``k = (D0 / d)(1 - (W /
+  W_plain)^(1/n))``.
 
 Written to ``--out`` (default ``studies/output/grain_size``): ``results.csv``, ``fits.csv``,
 ``rate_vs_grain.png``, ``study.json``.
@@ -55,13 +52,11 @@ TITLE = "The rate against the grain size: Beverloo's empty annulus, fitted"
 DEFAULTS = {
     "outlets": (0.04, 0.06, 0.08),               # D0 (m)
     "grains": (0.0005, 0.001, 0.002, 0.003),     # d (m)
-    "parts_outlet": 0.06,                        # D0 (m) of the runs that take the parts apart
-    "parts_grains": (0.001, 0.003),              # d (m) of those runs
     "half_angle": 20.0, "bin_diameter": 0.3, "bin_height": 0.2, "fill_height": 0.18,
     "cell_size": 0.005, "end_time": 0.8,
     "case_plots": False,
 }
-QUICK = {"outlets": (0.06, 0.08), "grains": (0.001, 0.004), "parts_grains": (0.004,),
+QUICK = {"outlets": (0.06, 0.08), "grains": (0.001, 0.004),
          "bin_diameter": 0.2, "bin_height": 0.1, "fill_height": 0.08, "cell_size": 0.01,
          "end_time": 0.4}
 
@@ -91,12 +86,6 @@ def setup(quick: bool = False, **options) -> dict:
             add(_sweep.case_name(("D0mm", round(1000 * d0, 3)), ("dmm", round(1000 * d, 3))),
                 {"outlet_diameter_m": float(d0), "grain_mm": 1000.0 * d, "law": "mu_I"},
                 {"grain_diameter": float(d)})
-    d0 = float(opts["parts_outlet"])
-    for d in opts["parts_grains"]:
-        add(_sweep.case_name(("D0mm", round(1000 * d0, 3)), ("dmm", round(1000 * d, 3)),
-                             ("annulus_only", "")),
-            {"outlet_diameter_m": d0, "grain_mm": 1000.0 * d, "law": "annulus only"},
-            {"grain_diameter": float(d), "friction_rise": 1e-9})
     return {"options": opts, "cases": cases, "setting": _sweep.setting_label(quick, options)}
 
 
@@ -166,14 +155,6 @@ def analyse(rows, options):
               and math.isfinite(r["k_from_deficit"])]
         if ks:
             numbers[f"k_deficit_D0_{1000 * d0:g}mm"] = [_r(x, 3) for x in ks]
-    parts = [r for r in ok if r["law"] == "annulus only"]
-    for r in parts:
-        both = [m for m in mu if m["outlet_diameter_m"] == r["outlet_diameter_m"]
-                and m["grain_mm"] == r["grain_mm"]]
-        r["k_of_the_law"] = (both[0]["k_from_deficit"] - r["k_from_deficit"]) if both \
-            else math.nan
-        numbers[f"k_annulus_only_d{r['grain_mm']:g}mm"] = r["k_from_deficit"]
-        numbers[f"k_overstress_d{r['grain_mm']:g}mm"] = r["k_of_the_law"]
     numbers["failed"] = [r["case"] for r in rows if r.get("error")]
     return fits, numbers
 
@@ -236,13 +217,6 @@ def write_outputs(out, rows, fits, numbers, options, setting, argv=None):
                             f"{key[len('k_deficit_D0_'):]}, d = "
                             f"{', '.join(f'{g * 1000:g}' for g in options['grains'])} mm: "
                             f"{', '.join('n/a' if v is None else f'{v:.2f}' for v in value)}.")
-    for d in options["parts_grains"]:
-        a = numbers.get(f"k_annulus_only_d{1000 * d:g}mm")
-        b = numbers.get(f"k_overstress_d{1000 * d:g}mm")
-        if a is not None:
-            findings.append(f"d = {1000 * d:g} mm at D0 = {1000 * options['parts_outlet']:g} "
-                            f"mm: k of the annulus alone {a:.2f}, of the overstress (the rest) "
-                            f"{b:.2f}.")
     if numbers["failed"]:
         findings.append("Failed runs: " + ", ".join(numbers["failed"]) + ".")
     table = {"title": "Cases", "columns": ["law", "D0 (mm)", "d (mm)", "D0/d", "W (kg/s)",

@@ -392,7 +392,7 @@ def test_grain_size_study_writes_its_outputs(root):
     data = study_json(out)
     rows = rows_of(out / "results.csv")
     laws = {r["law"] for r in rows}
-    assert laws == {"plain", "mu_I", "annulus only"}
+    assert laws == {"plain", "mu_I"}
     assert all(not r["error"] for r in rows)
     # the grain size slows the flow: every mu(I) case below the plain law at its outlet
     assert all(float(r["ratio_to_plain"]) < 1.0 for r in rows if r["law"] == "mu_I")
