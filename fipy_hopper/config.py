@@ -982,10 +982,10 @@ class RunConfig:
         if isinstance(self.wall_bin_width, str):
             if self.wall_bin_width != "auto":
                 raise ConfigError(f"run.wall_bin_width = {_show(self.wall_bin_width)}: expected "
-                                  f'a length in metres in (0, {LENGTH_RANGE[1]:g}] or "auto"')
-        else:
-            _check_range("run.wall_bin_width", self.wall_bin_width, 0, LENGTH_RANGE[1],
-                         low_open=True, unit=" m")
+                                  f"a length in metres in [{LENGTH_RANGE[0]:g}, "
+                                  f'{LENGTH_RANGE[1]:g}] or "auto"')
+        else:       # bins finer than a millimetre resolve nothing a continuum of grains has
+            _check_range("run.wall_bin_width", self.wall_bin_width, *LENGTH_RANGE, unit=" m")
         if self.end_time != "empty" and self.end_time > self.max_time:
             raise ConfigError(
                 f"run.end_time = {self.end_time:g} s is beyond run.max_time = "

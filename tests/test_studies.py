@@ -606,7 +606,8 @@ def test_report_is_generated_from_the_outputs(root, flow_map, discharge, wall, c
     assert set(result["missing"]) == {"plane_flow", "discharge_rate", "wall_pressure",
                                       "convergence",
                                       "discharge_dynamics", "stiffness_spread",
-                                      "robustness", "funnel_channel", "element_tests",
+                                      "robustness", "funnel_channel", "grain_size",
+                                      "element_tests",
                                       "lagrangian_vs_eulerian", "arching", "geometries"}
     assert "python studies/robustness.py" in (tmp_path / "partial.md").read_text()
 

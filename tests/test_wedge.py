@@ -143,7 +143,7 @@ def test_wedge_results_are_per_metre_and_say_so(tmp_path, capsys):
         '[hopper]\nshape = "wedge"\nbin_width = 0.4\noutlet_width = 0.08\n')
     assert main(["validate", str(tmp_path / "w.toml")]) == 0
     out = capsys.readouterr().out
-    slot = float(theory.beverloo_slot_rate(RHO, 0.08))
+    slot = float(theory.beverloo_slot_rate(RHO, 0.08, d=HopperConfig().material.grain_diameter))
     plane = float(theory.jenike_critical_half_angle_plane(30.0, 15.0))
     assert f"{slot:.4g} kg/s per m of slot" in out
     assert f"{plane:.1f} deg" in out and "plane flow" in out
