@@ -233,10 +233,10 @@ def run(config_or_path, out, force: bool = False, resume: bool = False, quiet: b
             rundir.remove_profile()
             fields.resume(sim.state.step)
             manifest.begin_session(command, sim.state.step, sim.state.t)
-        else:
-            fio.atomic_write_text(rundir / rundir.CONFIG, cfg.to_toml())
+        else:        # the manifest first: a directory with a run's files is a run's (--force)
             manifest = fio.Manifest.new(rundir / rundir.MANIFEST, source, command)
             manifest.begin_session(command)
+            fio.atomic_write_text(rundir / rundir.CONFIG, cfg.to_toml())
     except BaseException:
         rundir.close()
         raise
