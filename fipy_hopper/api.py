@@ -202,42 +202,52 @@ def run(config_or_path, out, force: bool = False, resume: bool = False, quiet: b
     if governor is not None:
         model.threads = governor.update()
         sim.add_wall_time_callback(governor, governor.interval)
-    rundir = fio.RunDirectory(out, force=force, resume=resume)
+    # Ctrl-C while the directory is opened and the run is set up takes effect once that is
+    # done (never half-way through removing an earlier run's files), with the manifest
+    # saying "interrupted"
+    with _interrupts_deferred() as early:
+        rundir = fio.RunDirectory(out, force=force, resume=resume)
+    manifest = None
     try:
-        strength = (cfg.material.cohesion, cfg.material.friction_angle_deg)
-        fields = (fio.FieldWriter(rundir.fields, model.grid, *strength) if not lagrangian
-                  else fio.MeshFieldWriter(rundir.fields, model, *strength))
-        manifest = None
+        with _interrupts_deferred() as setting_up:
+            strength = (cfg.material.cohesion, cfg.material.friction_angle_deg)
+            fields = (fio.FieldWriter(rundir.fields, model.grid, *strength) if not lagrangian
+                      else fio.MeshFieldWriter(rundir.fields, model, *strength))
 
-        def snapshot(sim_, state):
-            with timed("snapshots and checkpoints"):
-                fields(sim_, state)
-                _write_tables(rundir, sim_.record, cfg.hopper.axisymmetric)
-
-        interval = cfg.run.field_interval
-        sim.add_callback(snapshot, interval, stages=("filling",))
-        sim.add_callback(snapshot, interval, stages=("discharge",))
-        if checkpoint_interval and checkpoint_interval > 0:
-            def checkpoint(sim_, state):
+            def snapshot(sim_, state):
                 with timed("snapshots and checkpoints"):
-                    sim_.checkpoint(rundir.checkpoint)
-                    manifest.checkpoint_written(state.t, state.step)
-            sim.add_wall_time_callback(checkpoint, checkpoint_interval)
-        if setup is not None:
-            setup(sim)
-        if resume:       # the checkpoint is checked before anything in the directory changes
-            sim.restore(rundir.checkpoint)
-            manifest = (fio.Manifest.load(rundir / rundir.MANIFEST)
-                        if (rundir / rundir.MANIFEST).is_file()
-                        else fio.Manifest.new(rundir / rundir.MANIFEST, source, command))
-            rundir.remove_profile()
-            fields.resume(sim.state.step)
-            manifest.begin_session(command, sim.state.step, sim.state.t)
-        else:        # the manifest first: a directory with a run's files is a run's (--force)
-            manifest = fio.Manifest.new(rundir / rundir.MANIFEST, source, command)
-            manifest.begin_session(command)
-            fio.atomic_write_text(rundir / rundir.CONFIG, cfg.to_toml())
-    except BaseException:
+                    fields(sim_, state)
+                    _write_tables(rundir, sim_.record, cfg.hopper.axisymmetric)
+
+            interval = cfg.run.field_interval
+            sim.add_callback(snapshot, interval, stages=("filling",))
+            sim.add_callback(snapshot, interval, stages=("discharge",))
+            if checkpoint_interval and checkpoint_interval > 0:
+                def checkpoint(sim_, state):
+                    with timed("snapshots and checkpoints"):
+                        sim_.checkpoint(rundir.checkpoint)
+                        manifest.checkpoint_written(state.t, state.step)
+                sim.add_wall_time_callback(checkpoint, checkpoint_interval)
+            if setup is not None:
+                setup(sim)
+            if resume:   # the checkpoint is checked before anything in the directory changes
+                sim.restore(rundir.checkpoint)
+                manifest = (fio.Manifest.load(rundir / rundir.MANIFEST)
+                            if (rundir / rundir.MANIFEST).is_file()
+                            else fio.Manifest.new(rundir / rundir.MANIFEST, source, command))
+                rundir.remove_profile()
+                fields.resume(sim.state.step)
+                manifest.begin_session(command, sim.state.step, sim.state.t)
+            else:    # the manifest first: a directory with a run's files is a run's (--force)
+                manifest = fio.Manifest.new(rundir / rundir.MANIFEST, source, command)
+                manifest.begin_session(command)
+                fio.atomic_write_text(rundir / rundir.CONFIG, cfg.to_toml())
+        if early.caught or setting_up.caught:
+            raise KeyboardInterrupt
+    except BaseException as exc:
+        if manifest is not None and isinstance(exc, KeyboardInterrupt):
+            with _interrupts_deferred():
+                manifest.end_session("interrupted", "interrupted", 0.0)
         rundir.close()
         raise
 
@@ -254,43 +264,121 @@ def run(config_or_path, out, force: bool = False, resume: bool = False, quiet: b
         status, reason, error = "failed", f"unstable: {exc}", exc
     except KeyboardInterrupt as exc:
         status, reason, error = "interrupted", "interrupted", exc
-    except Exception as exc:  # keep what was measured, then report
-        status, reason, error = "failed", f"failed: {type(exc).__name__}: {exc}", exc
-        fio.atomic_write_text(rundir / rundir.ERROR_LOG, traceback.format_exc())
+    except Exception as exc:
+        interrupt = _interrupt_behind(exc)
+        if interrupt is not None:   # Ctrl-C inside a writer whose clean-up then failed
+            status, reason, error = "interrupted", "interrupted", interrupt
+        else:                       # keep what was measured, then report
+            status, reason, error = "failed", f"failed: {type(exc).__name__}: {exc}", exc
+            fio.atomic_write_text(rundir / rundir.ERROR_LOG, traceback.format_exc())
     wall = time.perf_counter() - started
 
-    # everything measured so far; after an interrupt the state may be half a step old, so no
-    # snapshot of it is taken (the resumed run continues from the last checkpoint)
-    if status != "interrupted" and fields.last_step != sim.state.step:
-        try:
-            fields.write(sim.state, sim.t_open)
-        except Exception:  # pragma: no cover - never hide the run's own error
-            pass
-    _write_tables(rundir, sim.record, cfg.hopper.axisymmetric)
-    summary = _summary(sim, cfg, reason)
-    manifest.end_session(status, reason, wall)
-    summary["wall_time_s"] = manifest.total_wall_time()
-    fio.write_json(rundir / rundir.SUMMARY, summary)
-    if status == "finished":
-        rundir.checkpoint.unlink(missing_ok=True)
-    pictures_interrupted = False
-    if plots and status != "interrupted":
-        try:
-            from . import plotting
-            with timed("pictures"):
-                plotting.plot_run(rundir.path)
-        except KeyboardInterrupt:            # the results are complete: only pictures lack
-            pictures_interrupted = True
-        except Exception as exc:  # pictures are a convenience; the data are written
-            warnings.warn(f"the pictures could not be drawn: {exc}", RuntimeWarning)
-    if phases is not None:
-        fio.write_json(rundir / rundir.PROFILE, phases.report())
-    rundir.close()                           # release the run directory's lock
+    # Ctrl-C from here on is taken once the results and the manifest are written: they are
+    # always whole, and the manifest always ends in a finished state
+    try:
+        with _interrupts_deferred() as finishing:
+            status, reason, error, summary = _finish(rundir, sim, cfg, fields, manifest,
+                                                     status, reason, error, wall)
+        pictures_interrupted = finishing.caught and status != "interrupted"
+        if plots and status != "interrupted" and not pictures_interrupted:
+            try:
+                from . import plotting
+                with timed("pictures"):
+                    plotting.plot_run(rundir.path)
+            except KeyboardInterrupt:        # the results are complete: only pictures lack
+                pictures_interrupted = True
+            except Exception as exc:  # pictures are a convenience; the data are written
+                warnings.warn(f"the pictures could not be drawn: {exc}", RuntimeWarning)
+        with _interrupts_deferred() as closing:
+            if phases is not None:
+                fio.write_json(rundir / rundir.PROFILE, phases.report())
+        pictures_interrupted |= closing.caught and status != "interrupted"
+    finally:
+        rundir.close()                       # release the run directory's lock
     if error is not None:
         raise error
     if pictures_interrupted:
         raise PicturesInterrupted(rundir.path)
     return fio._jsonable(summary)
+
+
+def _finish(rundir, sim, cfg, fields, manifest, status, reason, error, wall) -> tuple:
+    """Write what a run measured (the last snapshot, the tables, ``summary.json``) and end the
+    manifest's session: ``(status, reason, error, summary)``.  An error in the tables or the
+    summary of a run that had not failed fails it (``stop_reason`` ``"failed: ..."``, the
+    traceback in ``error.log``, :class:`ResultsError` raised by :func:`run`): a summary is
+    whole or the run says it failed."""
+    # after an interrupt the state may be half a step old, so no snapshot of it is taken
+    # (the resumed run continues from the last checkpoint)
+    if status != "interrupted" and fields.last_step != sim.state.step:
+        try:
+            fields.write(sim.state, sim.t_open)
+        except Exception:  # pragma: no cover - never hide the run's own error
+            pass
+    try:
+        _write_tables(rundir, sim.record, cfg.hopper.axisymmetric)
+        summary = _summary(sim, cfg, reason, whole=status in ("finished", "stopped"))
+    except Exception as exc:
+        if error is None:
+            what = f"{type(exc).__name__}: {exc}"
+            status, reason = "failed", f"failed: the results could not be computed: {what}"
+            error = ResultsError(f"the results could not be computed: {what}")
+            error.__cause__ = exc
+            fio.atomic_write_text(rundir / rundir.ERROR_LOG, traceback.format_exc())
+        summary = _partial_summary(sim, cfg, reason)
+    manifest.end_session(status, reason, wall)
+    summary["wall_time_s"] = manifest.total_wall_time()
+    fio.write_json(rundir / rundir.SUMMARY, summary)
+    if status == "finished":
+        rundir.checkpoint.unlink(missing_ok=True)
+    return status, reason, error, summary
+
+
+class ResultsError(RuntimeError):
+    """The run's tables or its summary could not be computed (the run is marked failed and
+    the traceback is in ``error.log``): never a summary with parts silently missing."""
+
+
+def _interrupt_behind(exc: BaseException):
+    """The ``KeyboardInterrupt`` an exception was raised while handling (a writer whose
+    clean-up failed after Ctrl-C), or None."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, KeyboardInterrupt):
+            return exc
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return None
+
+
+class _interrupts_deferred:
+    """Hold Ctrl-C (SIGINT) and SIGTERM while a block writes what must be whole: a signal
+    that comes is noted (``caught``) and acted on by the caller after the block.  In the main
+    thread only (elsewhere signals are not delivered to Python); the handlers are restored."""
+
+    SIGNALS = ("SIGINT", "SIGTERM")
+
+    def __enter__(self):
+        import signal
+        import threading
+
+        self.caught, self.previous = False, {}
+        if threading.current_thread() is threading.main_thread():
+            for name in self.SIGNALS:
+                number = getattr(signal, name, None)
+                if number is not None:
+                    self.previous[number] = signal.signal(number, self._note)
+        return self
+
+    def _note(self, signum, frame):
+        self.caught = True
+
+    def __exit__(self, *exc):
+        import signal
+
+        for number, handler in self.previous.items():
+            signal.signal(number, handler)
+        return False
 
 
 class PicturesInterrupted(KeyboardInterrupt):
@@ -346,19 +434,17 @@ def _write_tables(rundir, record, axisymmetric: bool = True) -> None:
     fio.write_wall_slip(rundir / rundir.WALL_SLIP, record, FlowModeRule().slip_ratio)
 
 
-def _summary(sim, cfg, reason: str) -> dict:
+def _summary(sim, cfg, reason: str, whole: bool = True) -> dict:
+    """The run's ``summary.json``: :meth:`Simulation.summary` with the theory's numbers.  An
+    error in it is raised when the run ended as it should (``whole``); a run that failed or
+    was interrupted, which may not have measured what the summary needs, gets
+    :func:`_partial_summary` (its stop reason says it did not finish)."""
     try:
         summary = dict(sim.summary())
-    except Exception:  # a run that failed before it measured anything
-        rec = sim.record
-        summary = {"steady_discharge_rate_kg_s": math.nan, "flow_mode": "unknown",
-                   "mass_flow_index": math.nan, "wall_slip_ratio": math.nan,
-                   "wall_slip_fraction": math.nan, "initial_mass_kg": rec.initial_mass,
-                   "remaining_mass_kg": math.nan, "mass_balance_error": math.nan,
-                   "discharge_time_s": rec.t[-1] if rec.t else 0.0,
-                   "cells": sim.model.n_cells, "steps": sim.state.step,
-                   "wall_time_s": math.nan,
-                   "youngs_modulus_used": cfg.material.youngs_modulus}
+    except Exception:
+        if whole:
+            raise
+        return _partial_summary(sim, cfg, reason)
     summary["stop_reason"] = reason
     expected = expected_quantities(cfg)
     summary["beverloo_rate_kg_s"] = expected["beverloo_rate_kg_s"]
@@ -368,6 +454,22 @@ def _summary(sim, cfg, reason: str) -> dict:
                 "critical_outlet_simplified_m", "jenike_rathole_diameter_m"):
         if key in expected:
             summary[key] = expected[key]
+    return summary if cfg.hopper.axisymmetric else per_metre(summary)
+
+
+def _partial_summary(sim, cfg, reason: str) -> dict:
+    """The summary of a run that did not finish (failed or interrupted) and whose full
+    summary could not be computed: what is known without measurements, the rest NaN
+    (``null``), ``flow_mode`` ``"unknown"``; its ``stop_reason`` says why."""
+    rec = sim.record
+    summary = {"steady_discharge_rate_kg_s": math.nan, "flow_mode": "unknown",
+               "mass_flow_index": math.nan, "wall_slip_ratio": math.nan,
+               "wall_slip_fraction": math.nan, "initial_mass_kg": rec.initial_mass,
+               "remaining_mass_kg": math.nan, "mass_balance_error": math.nan,
+               "discharge_time_s": rec.t[-1] if rec.t else 0.0,
+               "cells": sim.model.n_cells, "steps": sim.state.step,
+               "wall_time_s": math.nan, "stop_reason": reason,
+               "youngs_modulus_used": cfg.material.youngs_modulus}
     return summary if cfg.hopper.axisymmetric else per_metre(summary)
 
 

@@ -261,8 +261,8 @@ def _run(args, config, source=None) -> int:
     except (ConfigError, RunDirectoryError) as exc:
         return _error(exc, EXIT_BAD_INPUT)
     except api.PicturesInterrupted:
-        return _error(f"interrupted while drawing the pictures; the results of the run are "
-                      f"complete in {args.out}; draw its pictures with: {PROG} plot "
+        return _error(f"interrupted after the run finished; its results are complete in "
+                      f"{args.out}; draw its pictures with: {PROG} plot "
                       f"{shlex.quote(args.out)}", EXIT_INTERRUPTED)
     except KeyboardInterrupt:
         return _error(_interrupted_message(args.out, start, again), EXIT_INTERRUPTED)

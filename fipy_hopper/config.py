@@ -161,6 +161,10 @@ MEMORY_BASE = 0.2e9                # bytes: Python, FiPy, numba and the compiled
 #: bytes a cell that the model and its state keep once the grid is built (measured,
 #: tracemalloc: 2.25 kB a cell at 18,414 and 72,346 cells, without markers and wall loads)
 MEMORY_KEPT_PER_CELL = 2.3e3
+#: The fill's surface lies at least this many cells above the outlet plane (a thinner fill
+#: has no cell of material at the wall: measured, a fill a tenth of a cell deep fails its
+#: run, one half a cell deep runs; two cells is the least the grid resolves).
+FILL_CELLS = 2
 #: Most explicit time steps a run may need.  Even at the cost of a step on a tiny grid
 #: (measured: 2,937 steps of a 624-cell hopper in 0.43 s, 0.15 ms a step) 1e9 steps take
 #: about two days; on the reference grid (0.5 ms a step) a week.  More cannot finish.
@@ -973,6 +977,7 @@ class HopperConfig:
                 f"{cells_across_outlet:.2f} cells across the outlet {across} "
                 f"({self.hopper.outlet_radius:g} m); at least 3 are needed "
                 f"(cell_size <= {self.hopper.outlet_radius / 3:.4g} m)")
+        self._check_fill_depth()
         if self.numerics.formulation == "lagrangian" and not self.hopper.axisymmetric:
             raise ConfigError('numerics.formulation = "lagrangian" models conical hoppers only; '
                               'a wedge (hopper.shape = "wedge") runs with "eulerian"')
@@ -982,6 +987,11 @@ class HopperConfig:
                               f'material; this {self.hopper.n_wall_segments}-segment wall'
                               f'{" with inserts" if self.hopper.inserts else ""} runs with '
                               '"eulerian"')
+        if self.numerics.formulation == "lagrangian" and self.hopper.fill_height <= 0.0:
+            raise ConfigError(f'numerics.formulation = "lagrangian" meshes a fill that reaches '
+                              f'the bin; hopper.fill_level = {self.hopper.fill_level:g} m is '
+                              f'at or below the transition, z = {self.hopper.cone_height:g} m '
+                              '(allowed range is above it); this fill runs with "eulerian"')
         if self.numerics.formulation == "lagrangian" and self.wall.segment_friction_deg \
                 and len(set(self.wall.segment_friction_deg)) > 1:
             raise ConfigError('numerics.formulation = "lagrangian" takes one wall friction '
@@ -1029,6 +1039,24 @@ class HopperConfig:
             warnings.warn(f"only {cells_across_outlet:.1f} cells across the outlet {across}; "
                           "6 or more are recommended for a discharge rate", ResolutionWarning,
                           stacklevel=3)
+
+    def _check_fill_depth(self) -> None:
+        """The fill's surface at least :data:`FILL_CELLS` cells above the outlet plane: a
+        thinner fill is not resolved by the grid (it has no cell of material at the wall to
+        measure, and its run fails)."""
+        geom, h = self.hopper, self.numerics.cell_size
+        least = FILL_CELLS * h
+        if geom.fill_level >= least:
+            return
+        if geom.shape == "profile":
+            key, value, low = "hopper.fill_level", geom.fill_level, least
+        else:
+            key, value, low = "hopper.fill_height", geom.fill_height, least - geom.cone_height
+        high = geom.top - (0.0 if geom.shape == "profile" else geom.cone_height)
+        raise ConfigError(
+            f"{key} = {value:g} m puts the fill's surface {geom.fill_level:g} m above the "
+            f"outlet plane, less than {FILL_CELLS} cells (numerics.cell_size = {h:g} m): the "
+            f"grid cannot resolve it; allowed range is [{_ceil_digits(low):.3g}, {high:g}] m")
 
     @cached_property
     def boundary(self):

@@ -486,7 +486,8 @@ class WallSampler:
         nb = len(self.centres)
         bins = self.bins.index(s)
         wsum = np.bincount(bins, w, nb)
-        mean = np.stack([np.bincount(bins, w * sig[:, k], nb) for k in range(4)], axis=1)
+        mean = np.stack([np.bincount(bins, w * sig[:, k], nb) for k in range(4)],
+                        axis=1).astype(float)       # (integers when no cell has material)
         ok = wsum > 0
         mean[ok] /= wsum[ok, None]
         mean[~ok] = np.nan
@@ -895,8 +896,8 @@ def load_summary(sim) -> dict:
         if zone.any():
             k = np.flatnonzero(zone)[np.argmax(envelope[zone])]
             out["switch_peak_Pa"], out["switch_peak_s_m"] = float(envelope[k]), float(s[k])
-        if geom.cone_height > 0 and geom.classic:
-            if mu > 0:
+        if geom.cone_height > 0 and geom.classic and geom.fill_height > 0:
+            if mu > 0:      # (a fill below the transition has no switch there: none)
                 janssen = (theory.janssen_vertical_stress if geom.axisymmetric
                            else theory.janssen_plane_vertical_stress)
                 sigma_vt = float(janssen(geom.fill_height, mat.density, geom.bin_diameter, K,
@@ -907,8 +908,8 @@ def load_summary(sim) -> dict:
     if mu > 0 and geom.classic:
         axial = (theory.janssen_wall_axial_force if geom.axisymmetric
                  else theory.janssen_plane_wall_axial_force)
-        out["janssen_wall_axial_compression_N_m"] = float(axial(
-            geom.fill_height, mat.density, geom.bin_diameter, K, mu))
+        out["janssen_wall_axial_compression_N_m"] = float(axial(   # none below the bin
+            max(geom.fill_height, 0.0), mat.density, geom.bin_diameter, K, mu))
     out.update(_insert_and_corner_loads(rec, m.cfg))
     return out
 
