@@ -7,7 +7,7 @@
     fipy-hopper demo [--out DIR] [--force] [--resume] [--quiet] [--checkpoint-interval S]
                      [--threads N] [--profile]
     fipy-hopper plot DIR
-    fipy-hopper validate CONFIG.toml [--out DIR]
+    fipy-hopper validate CONFIG.toml [--picture PATH.png]
 
 Exit codes: 0 success; 2 bad input (a configuration error, a missing or non-TOML file, an
 output directory that would be overwritten or that another run is using, a path the system
@@ -103,11 +103,11 @@ def _parser() -> argparse.ArgumentParser:
     q = sub.add_parser("validate", help="check a configuration and print derived quantities",
                        description="Check CONFIG.toml and print the grid, the time step, the "
                        "wave speed, the fill mass, Beverloo's rate, Jenike's critical angle "
-                       "and the boundary (walls, corners, outlet, fill), drawn to "
-                       "geometry.png beside CONFIG.toml or in --out DIR.")
+                       "and the boundary (walls, corners, outlet, fill); it writes nothing, "
+                       "unless --picture names a PNG file to draw the boundary to.")
     q.add_argument("config", metavar="CONFIG.toml", help="configuration file (TOML)")
-    q.add_argument("--out", metavar="DIR", default=None,
-                   help="directory for geometry.png (default: the configuration's)")
+    q.add_argument("--picture", metavar="PATH.png", default=None,
+                   help="draw the boundary to this PNG file (default: no file is written)")
     return p
 
 
@@ -188,14 +188,21 @@ def _validate(args) -> int:
         lines[-1:-1] = _cohesion_lines(cfg, e)
     if cfg.numerics.formulation == "lagrangian":
         lines[1], lines[3] = _lagrangian_lines(cfg)
-    picture = Path(args.out if args.out is not None else Path(args.config).parent)
-    try:
-        picture.mkdir(parents=True, exist_ok=True)
-        picture = picture / "geometry.png"
-        cfg.boundary.draw(picture)
-    except OSError as exc:
-        return _error(f"cannot write {_short(picture)}: {exc.strerror or exc}", EXIT_BAD_INPUT)
-    lines.append(f"  boundary           drawn to {_short(picture)}")
+    if args.picture is not None:      # nothing is written unless asked
+        from .io import atomic_path
+        picture = Path(args.picture)
+        if picture.suffix.lower() != ".png":
+            return _error(f"--picture = {_short(args.picture)}: expected the name of a PNG "
+                          "file (ending in .png)", EXIT_BAD_INPUT)
+        try:
+            with atomic_path(picture) as tmp:
+                cfg.boundary.draw(tmp)
+        except OSError as exc:
+            return _error(f"cannot write {_short(picture)}: {exc.strerror or exc}",
+                          EXIT_BAD_INPUT)
+        lines.append(f"  boundary           drawn to {_short(picture)}")
+    else:
+        lines.append("  boundary")
     lines += ["    " + line for line in cfg.boundary.describe(cfg.material.density).split("\n")]
     print("\n".join(lines))
     return EXIT_OK
@@ -403,8 +410,9 @@ def main(argv=None) -> int:
         return exc.code if isinstance(exc.code, int) else EXIT_BAD_INPUT
     args.argv = argv
     if args.command is None:
-        parser.print_help()
-        return EXIT_BAD_INPUT
+        parser.print_usage(sys.stderr)
+        return _error("no command given; choose one of run, demo, plot, validate "
+                      f"({PROG} --help, or {PROG} COMMAND --help)", EXIT_BAD_INPUT)
     with warnings.catch_warnings():
         warnings.showwarning = _show_warning
         warnings.filterwarnings("default", category=ResolutionWarning)

@@ -461,12 +461,42 @@ def _check_wall(key: str, wall: tuple, half: bool) -> None:
             raise ConfigError(f"{key}[{i}] = {_point_text(p)}: z = {p[1]:g} m is below the "
                               f"previous point's {wall[i - 1][1]:g} m; the wall must not "
                               f"descend from the lip to the top")
+    _check_wall_segments(key, wall)
     crossing = self_crossing(wall, closed=False)
     if crossing:
         i, j = crossing
         raise ConfigError(f"{key} crosses itself: its segment {i} {_point_text(wall[i])}-"
                           f"{_point_text(wall[i + 1])} meets segment {j} "
                           f"{_point_text(wall[j])}-{_point_text(wall[j + 1])}")
+
+
+def _check_wall_segments(key: str, wall: tuple) -> None:
+    """No segment of a wall along the outlet plane over the outlet (the lip is the wall's
+    point on ``z = 0`` nearest the outlet, or the outlet's width would be misread), and none
+    shorter than the least length of :data:`LENGTH_RANGE` (a sliver that no grid resolves,
+    which at the lip would be taken for the hopper's slope)."""
+    pts = np.asarray(wall, dtype=float)
+    left = key.endswith("left_wall")
+    lip = pts[0, 0]
+    over = np.flatnonzero((pts[1:, 1] == 0.0) & ((pts[1:, 0] > lip) if left
+                                                  else (pts[1:, 0] < lip))) + 1
+    if len(over):
+        i = int(over[0])
+        raise ConfigError(
+            f"{key}[{i}] = {_point_text(wall[i])}: the wall runs along the outlet plane, "
+            f"z = 0, over the outlet from its lip {key}[0] = {_point_text(wall[0])}; the lip is "
+            f"the wall's point on z = 0 nearest the outlet: start {key} there (allowed on "
+            f"z = 0: x {'<=' if left else '>='} {lip:g} m)")
+    lo, hi = LENGTH_RANGE
+    lengths = np.hypot(*np.diff(pts, axis=0).T)
+    short = np.flatnonzero(lengths < lo)
+    if len(short):
+        i = int(short[0])
+        raise ConfigError(
+            f"{key}: segment {i}, {_point_text(wall[i])} to {_point_text(wall[i + 1])}, is "
+            f"{lengths[i]:.3g} m long; allowed range is [{lo:g}, {hi:g}] m (a sliver no grid "
+            f"resolves, which at the lip would be taken for the hopper's slope): draw it as "
+            f"part of its neighbours")
 
 
 def _wall_x_at(wall: tuple, z: float) -> float:
@@ -477,7 +507,7 @@ def _wall_x_at(wall: tuple, z: float) -> float:
 
 def _check_profile(geom: "HopperGeometry") -> None:
     """Check a profile's walls and fill level; set its points and derived sizes."""
-    from .boundary import segments_meet
+    from .boundary import first_meeting, profile_rows, wall_x
 
     if geom.wall is None:
         raise ConfigError('hopper.wall is required for shape = "profile" ([[x, z], ...] in m, '
@@ -496,23 +526,26 @@ def _check_profile(geom: "HopperGeometry") -> None:
                               f"{_point_text(wall[0])}: the outlet has no width")
         for key, points, other, sign in (("hopper.left_wall", left, wall, 1.0),
                                          ("hopper.wall", wall, left, -1.0)):
-            for i, (x, z) in enumerate(points):
-                x_other = _wall_x_at(other, z)
-                if sign * (x_other - x) <= 0.0:
-                    raise ConfigError(
-                        f"{key}[{i}] = {_point_text((x, z))}: "
-                        f"{'right' if sign > 0 else 'left'} of (or on) the "
-                        f"{'right' if sign > 0 else 'left'} wall, at x = {x_other:g} m at "
-                        f"z = {z:g} m; the left wall must stay left of the right wall")
+            xz = np.asarray(points, dtype=float)
+            x_others = wall_x(xz[:, 1], profile_rows(other), other[0][0])   # all at once
+            bad = np.flatnonzero(sign * (x_others - xz[:, 0]) <= 0.0)
+            if len(bad):
+                i = int(bad[0])
+                (x, z), x_other = points[i], float(x_others[i])
+                raise ConfigError(
+                    f"{key}[{i}] = {_point_text((x, z))}: "
+                    f"{'right' if sign > 0 else 'left'} of (or on) the "
+                    f"{'right' if sign > 0 else 'left'} wall, at x = {x_other:g} m at "
+                    f"z = {z:g} m; the left wall must stay left of the right wall")
         top = max(wall[-1][1], left[-1][1])
         tall = [p + ((p[-1][0], top),) for p in (left, wall)]
-        for i in range(len(tall[0]) - 1):
-            for j in range(len(tall[1]) - 1):
-                if segments_meet(*tall[0][i:i + 2], *tall[1][j:j + 2]):
-                    raise ConfigError(
-                        f"hopper.left_wall crosses hopper.wall: its segment from "
-                        f"{_point_text(tall[0][i])} meets the right wall's from "
-                        f"{_point_text(tall[1][j])}; the left wall must stay left of it")
+        meet = first_meeting(tall[0][:-1], tall[0][1:], tall[1][:-1], tall[1][1:])
+        if meet is not None:
+            i, j = meet
+            raise ConfigError(
+                f"hopper.left_wall crosses hopper.wall: its segment from "
+                f"{_point_text(tall[0][i])} meets the right wall's from "
+                f"{_point_text(tall[1][j])}; the left wall must stay left of it")
         width = max(x for x, _ in wall) - min(x for x, _ in left)
         outlet = wall[0][0] - left[0][0]
     elif geom.left_wall is not None:    # (refused by _check_section)
@@ -532,13 +565,17 @@ def _check_profile(geom: "HopperGeometry") -> None:
                           f"{_interval(LENGTH_RANGE[0], top, unit=' m')}")
     _check_range("hopper.fill_level", level, LENGTH_RANGE[0], top, unit=" m")
     object.__setattr__(geom, "fill_level", level)
-    slope = next(p for p, q in zip(wall, wall[1:]) if p[0] != q[0])
-    nxt = wall[wall.index(slope) + 1]
+    # the hopper's slope: the lowest sloping segment of the wall (in a full section whose
+    # right wall rises straight up from its lip, of the left wall)
+    key, sloped = "hopper.wall", wall
+    if geom.full_section and all(p[0] == q[0] for p, q in zip(wall, wall[1:])):
+        key, sloped = "hopper.left_wall", geom.left_wall
+    slope, nxt = next((p, q) for p, q in zip(sloped, sloped[1:]) if p[0] != q[0])
     cone = _bin_bottom(wall)
     angle = round(math.degrees(math.atan2(abs(nxt[0] - slope[0]), nxt[1] - slope[1])), 9)
     if angle <= 0.0:
-        raise ConfigError(f"hopper.wall: the wall rises vertically from the lip at "
-                          f"{_point(wall[0])} (its first slope, {_point(slope)} to "
+        raise ConfigError(f"{key}: the wall rises vertically from the lip at "
+                          f"{_point(sloped[0])} (its first slope, {_point(slope)} to "
                           f"{_point(nxt)}, is vertical to round-off): give the hopper or the "
                           f"floor a slope")
     for key, value in (("bin_diameter", width), ("outlet_diameter", outlet),
@@ -556,7 +593,7 @@ def _point(p) -> str:
 def _check_inserts(geom: "HopperGeometry") -> None:
     """Each insert: a table of ``outline`` (a closed polygon inside the walls, above the
     outlet plane, apart from the other inserts) and ``friction_angle_deg``."""
-    from .boundary import polygon_integrals, segments_meet, self_crossing
+    from .boundary import first_meeting, polygon_integrals, profile_rows, self_crossing, wall_x
 
     value = geom.inserts
     if isinstance(value, (str, bytes, dict)) or not isinstance(value, (list, tuple)):
@@ -566,6 +603,7 @@ def _check_inserts(geom: "HopperGeometry") -> None:
     walls = [("hopper.wall", geom.wall_points)] + (
         [] if half else [("hopper.left_wall", geom.left_wall)])
     top, done = geom.top, []
+    rows = {wkey: profile_rows(wall) for wkey, wall in walls}
     allowed = [f.name for f in fields(InsertConfig)]
     for m, item in enumerate(value):
         key = f"hopper.inserts[{m}]"
@@ -599,6 +637,8 @@ def _check_inserts(geom: "HopperGeometry") -> None:
             i, j = crossing
             raise ConfigError(f"{outline} crosses itself: its edge from {_point_text(pts[i])} "
                               f"meets the edge from {_point_text(pts[j])}")
+        heights = np.asarray(pts, dtype=float)[:, 1]
+        x_walls = {wkey: wall_x(heights, rows[wkey], wall[0][0]) for wkey, wall in walls}
         for i, (x, z) in enumerate(pts):
             where = f"{outline}[{i}] = {_point_text((x, z))}"
             if z < 0.0:
@@ -611,7 +651,7 @@ def _check_inserts(geom: "HopperGeometry") -> None:
                                   f"an insert lies at x >= 0 (a body of revolution, or a bar "
                                   f"on the mid-plane)")
             for wkey, wall in walls:
-                x_wall = _wall_x_at(wall, z)
+                x_wall = float(x_walls[wkey][i])
                 if (x - x_wall) * (1.0 if wkey == "hopper.wall" else -1.0) >= 0.0:
                     raise ConfigError(f"{where}: in or on the wall ({wkey} is at x = "
                                       f"{x_wall:g} m at z = {z:g} m); an insert lies inside "
@@ -620,17 +660,17 @@ def _check_inserts(geom: "HopperGeometry") -> None:
         if half and sum(p[0] == 0.0 and q[0] == 0.0 for p, q in edges) > 1:
             raise ConfigError(f"{outline} lies along the axis with more than one edge; at "
                               f"most one")
+        ends = [p for p, _ in edges], [q for _, q in edges]
         for wkey, wall in walls:
-            for p, q in edges:
-                for k in range(len(wall) - 1):
-                    if segments_meet(p, q, wall[k], wall[k + 1]):
-                        raise ConfigError(f"{outline} cuts {wkey}: its edge from "
-                                          f"{_point_text(p)} to {_point_text(q)} meets the "
-                                          f"wall's segment {k}")
+            meet = first_meeting(*ends, wall[:-1], wall[1:])
+            if meet is not None:
+                (p, q), k = edges[meet[0]], meet[1]
+                raise ConfigError(f"{outline} cuts {wkey}: its edge from "
+                                  f"{_point_text(p)} to {_point_text(q)} meets the "
+                                  f"wall's segment {k}")
         from .boundary import inside_polygon
         for n, other in done:
-            if (any(segments_meet(p, q, r, s) for p, q in edges
-                    for r, s in zip(other, other[1:] + other[:1]))
+            if (first_meeting(*ends, other, other[1:] + other[:1]) is not None
                     or inside_polygon(pts[0][0], pts[0][1], np.asarray(other))
                     or inside_polygon(other[0][0], other[0][1], np.asarray(pts))):
                 raise ConfigError(f"{outline} overlaps hopper.inserts[{n}]; inserts must lie "
@@ -1211,8 +1251,8 @@ class HopperConfig:
     def from_toml(cls, path: Union[str, Path]) -> "HopperConfig":
         """Read and validate a TOML file."""
         path = Path(path)
-        try:
-            text = path.read_text(encoding="utf-8")
+        try:       # UTF-8, with or without the byte-order mark some editors write first
+            text = path.read_text(encoding="utf-8-sig")
         except OSError as exc:
             raise ConfigError(f"cannot read configuration {path}: {exc.strerror}") from None
         except UnicodeDecodeError as exc:
