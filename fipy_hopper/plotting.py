@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -536,6 +537,28 @@ def _stacked_walker(cfg: HopperConfig, sigma_vt: float, slices: int, hopper_name
     return curves
 
 
+def _few_curves(curves: dict, most: int = 8) -> dict:
+    """Walker's stretch-by-stretch curves (:func:`_stacked_walker`) as one curve per mode
+    (stretches apart by a NaN) when there are more than ``most`` stretches: a wall drawn as
+    thousands of points would otherwise make thousands of lines and legend entries, which
+    take minutes to draw."""
+    stretch = re.compile(r"(Walker, .+) stretch \d+, (\w+)")
+    groups = {}
+    for name in curves:
+        match = stretch.fullmatch(name)
+        if match:
+            groups.setdefault(f"{match[1]} stretches, {match[2]}", []).append(name)
+    out = dict(curves)
+    for merged, names in groups.items():
+        if len(names) > most:
+            parts = sorted((curves[n] for n in names), key=lambda c: float(np.min(c[0])))
+            out[merged] = tuple(np.concatenate([np.append(np.asarray(c[k], float), np.nan)
+                                                for c in parts]) for k in (0, 1))
+            for name in names:
+                del out[name]
+    return out
+
+
 def wall_pressure(run):
     """The wall loads of a run against Janssen (bin), Walker (cone) and EN 1991-4.
 
@@ -600,7 +623,7 @@ def wall_pressure(run):
                 ax.plot(o_s[sel], o_p[sel] / 1e3, style, color=f"C{5 + k % 4}", lw=1.2,
                         label=f"{name}, {'at rest' if stage == 'filling' else 'envelope'} "
                               f"(s along it)")
-    curves = theory_wall_pressure(cfg)
+    curves = _few_curves(theory_wall_pressure(cfg))
     for name, (s, p) in curves.items():
         colour, ls = next((v for k, v in styles.items() if name.startswith(k)),
                           (("C0", "-") if name.endswith("filling") else ("C3", "--"))

@@ -105,6 +105,7 @@ def curved_wall(n: int, height=20.0, r0=0.3, r=3.0, top=25.0) -> list:
     wall: segments of 2-27 mm."""
     z = np.linspace(0.0, height, n - 1)
     x = r0 + (r - r0) * np.sqrt(z / height)
+    x[-1] = r                                         # the bin wall rises straight from it
     return [[float(a), float(b)] for a, b in zip(x, z)] + [[r, top]]
 
 
@@ -208,3 +209,25 @@ def test_wall_x_gives_the_row_by_row_answer():
                             np.clip(xa + (heights - za) * slope, lo, hi), slow)
         assert np.array_equal(wall_x(heights, rows, x[0]), slow)          # bit for bit
         assert float(wall_x(heights[0], rows, x[0])) == slow[0]           # a scalar too
+
+
+def test_the_wall_pressure_picture_draws_a_curved_wall_as_few_curves():
+    """Walker's stretch-by-stretch curves of a wall of thousands of points are drawn as one
+    curve a mode (they were thousands of lines and legend entries: minutes to draw); a wall
+    of a few stretches keeps its curve per stretch."""
+    from fipy_hopper.plotting import _few_curves, theory_wall_pressure
+
+    wall = curved_wall(2_000, height=4.0, r0=0.06, r=0.6, top=5.0)
+    cfg = load({"shape": "profile", "wall": wall, "fill_level": 4.5},
+               numerics={"cell_size": 0.015, "gravity_ramp_time": 0.2, "max_fill_time": 0.5})
+    curves = theory_wall_pressure(cfg)
+    stretches = [name for name in curves if " stretch " in name]
+    assert len(stretches) > 1000
+    few = _few_curves(curves)
+    assert sorted(n for n in few if n.startswith("Walker")) == [
+        "Walker, cone stretches, discharge", "Walker, cone stretches, filling"]
+    s, p = few["Walker, cone stretches, filling"]
+    points = sum(len(curves[n][0]) for n in stretches if n.endswith("filling"))
+    assert np.isfinite(s).sum() == points and np.all(np.diff(s[np.isfinite(s)]) >= 0)
+    two = {f"Walker, cone stretch {k}, filling": (np.arange(3.0), np.ones(3)) for k in range(2)}
+    assert _few_curves(two) == two
