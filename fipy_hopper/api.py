@@ -309,7 +309,9 @@ def _finish(rundir, sim, cfg, fields, manifest, status, reason, error, wall) -> 
     traceback in ``error.log``, :class:`ResultsError` raised by :func:`run`): a summary is
     whole or the run says it failed."""
     # after an interrupt the state may be half a step old, so no snapshot of it is taken
-    # (the resumed run continues from the last checkpoint)
+    # (the resumed run continues from the last checkpoint), and a sample may be half taken
+    if status == "interrupted":
+        _drop_half_sample(sim.record)
     if status != "interrupted" and fields.last_step != sim.state.step:
         try:
             fields.write(sim.state, sim.t_open)
@@ -332,6 +334,21 @@ def _finish(rundir, sim, cfg, fields, manifest, status, reason, error, wall) -> 
     if status == "finished":
         rundir.checkpoint.unlink(missing_ok=True)
     return status, reason, error, summary
+
+
+#: the time series of :class:`~fipy_hopper.simulation.RunRecord`, one value a sample
+SAMPLE_SERIES = ("t", "mass_in_hopper", "discharged", "rate", "mass_flow_index",
+                 "stagnant_fraction", "wall_slip_ratio", "wall_slip_stretches",
+                 "wall_slip_fraction", "bin_lateral_stress_ratio")
+
+
+def _drop_half_sample(record) -> None:
+    """A sample that Ctrl-C cut short (some of its series appended, not all) is dropped: the
+    time series keep the samples they all have."""
+    series = [getattr(record, name) for name in SAMPLE_SERIES if hasattr(record, name)]
+    common = min((len(values) for values in series), default=0)
+    for values in series:
+        del values[common:]
 
 
 class ResultsError(RuntimeError):

@@ -280,6 +280,21 @@ def _run(args, config, source=None) -> int:
         where = f"; the traceback is in {log}" if log.is_file() else ""
         return _error(f"{kind}: {exc} (everything measured so far is in {args.out}{where})",
                       EXIT_FAILED)
+    try:
+        return _after_the_run(args, config, summary, again)
+    except KeyboardInterrupt:       # while printing: the run and its files are complete
+        if summary.get("stop_reason") == "wall_time_limit":
+            return _error(f"interrupted; the run had stopped at run.wall_time_limit with its "
+                          f"outputs in {args.out}; continue with: {again}", EXIT_INTERRUPTED)
+        return _error(f"interrupted after the run finished; its results are complete in "
+                      f"{args.out} (summary.json); draw its pictures again with: {PROG} plot "
+                      f"{shlex.quote(args.out)}", EXIT_INTERRUPTED)
+
+
+def _after_the_run(args, config, summary: dict, again: str) -> int:
+    """What ``run`` prints once a run has returned, and its exit code."""
+    from .io import RunDirectory
+
     if args.profile and not args.quiet:
         from .profiling import format_report
         report = json.loads((Path(args.out) / RunDirectory.PROFILE).read_text())
