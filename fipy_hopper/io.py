@@ -54,6 +54,7 @@ except ImportError:       # pragma: no cover
 __all__ = [
     "RunDirectory", "RunDirectoryError", "CheckpointError", "RunFileError", "read_checkpoint",
     "validate_checkpoint", "checkpoint_template", "checkpoint_size_limit", "check_run_files",
+    "check_checkpoint_times",
     "Manifest", "FieldWriter", "atomic_path",
     "atomic_write_text", "write_json", "write_timeseries", "write_wall_pressure", "read_csv",
     "environment_versions", "code_commit", "grid_points_and_quads", "cell_fields", "marker_file",
@@ -1190,11 +1191,54 @@ def read_checkpoint(path: PathLike, state, cfg, dt: Optional[float] = None) -> t
     ``meta["state"]`` must be fields of ``state`` of the types of its values.
     """
     shapes, optional = checkpoint_template(state)
-    t_max, step_max = checkpoint_time_limit(cfg, cfg.time_step if dt is None else dt)
+    dt = cfg.time_step if dt is None else dt
+    t_max, step_max = checkpoint_time_limit(cfg, dt)
     scalars = {k: v for k, v in vars(state).items() if not isinstance(v, np.ndarray)}
-    return validate_checkpoint(path, shapes, checkpoint_size_limit(state, cfg),
-                               optional=optional, state_keys=list(vars(state)),
-                               state_types=scalars, t_max=t_max, step_max=step_max)
+    arrays, meta = validate_checkpoint(path, shapes, checkpoint_size_limit(state, cfg),
+                                       optional=optional, state_keys=list(vars(state)),
+                                       state_types=scalars, t_max=t_max, step_max=step_max)
+    check_checkpoint_times(meta, cfg, dt, f"checkpoint {_short(path)}")
+    return arrays, meta
+
+
+def check_checkpoint_times(meta: dict, cfg, dt: float, where: str = "checkpoint") -> None:
+    """The times and the masses of a checkpoint's metadata within this run's, so that the
+    resumed run stops as the uninterrupted one would (a NaN opening time never would).
+
+    ``t`` is the state's time and ``tol`` two steps (``dt``).  Filling: the next row of
+    ``loads.csv`` in ``[0, t + output_interval + tol]`` (the rest is set at the opening).
+    Discharge: the opening ``t_open`` in ``[0, t]``; the next sample and the next row in
+    ``[t_open, t + output_interval + tol]``; the end of the envelope window in
+    ``[t_open, t + load_window + tol]``; the initial mass finite and positive.  Either stage:
+    the mass books, when given, finite and positive.  :class:`CheckpointError` in one line
+    naming the file, the value and its allowed range."""
+    t, stage = meta["state"]["t"], meta["state"]["stage"]
+    run, tol = cfg.run, 2.0 * dt + 1e-9
+
+    def within(key, value, low, high, what="a time of this run"):
+        if not (is_number(value) and math.isfinite(value) and low <= value <= high):
+            raise CheckpointError(f"{where}: its {key} = {_short(value, 40)} is not {what} "
+                                  f"(allowed range [{low:.6g}, {high:.6g}], the "
+                                  f"checkpoint's {stage} at t = {t:.6g} s)")
+
+    def positive(key, value):
+        if not (is_number(value) and math.isfinite(value) and value > 0.0):
+            raise CheckpointError(f"{where}: its {key} = {_short(value, 40)} is not a mass of "
+                                  "this run (allowed range (0, inf) kg)")
+
+    if stage == "filling":
+        within("next_load_sample", meta.get("next_load_sample"), 0.0,
+               t + run.output_interval + tol)
+    else:
+        t_open = meta.get("t_open")
+        within("t_open", t_open, 0.0, t, "the opening time of this run's discharge")
+        for key, step in (("next_sample", run.output_interval),
+                          ("next_load_sample", run.output_interval),
+                          ("next_envelope", run.load_window_s)):
+            within(key, meta.get(key), t_open, t + step + tol)
+        positive("record's initial_mass", meta["record"].get("initial_mass"))
+    if meta.get("mass_books") is not None:
+        positive("mass_books", meta["mass_books"])
 
 
 def is_number(value) -> bool:
