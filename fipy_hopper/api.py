@@ -33,7 +33,7 @@ from . import io as fio
 from . import resources
 
 __all__ = ["load_config", "run", "read_results", "Results", "expected_quantities",
-           "make_model"]
+           "make_model", "UnfinishedRunWarning", "ResultsError"]
 
 
 def load_config(path: Union[str, os.PathLike]) -> HopperConfig:
@@ -163,6 +163,8 @@ def run(config_or_path, out, force: bool = False, resume: bool = False, quiet: b
     ``stop_reason`` ``"fill_not_at_rest"``; a discharge started from it warns
     (:class:`~fipy_hopper.simulation.NotAtRestWarning`).
     """
+    _check_arguments(out, force=force, resume=resume, quiet=quiet, plots=plots,
+                     profile=profile, checkpoint_interval=checkpoint_interval, setup=setup)
     cfg, source = _resolve(config_or_path)
     source = config_source or source
     command = command or "fipy_hopper.run (Python API)"
@@ -398,6 +400,28 @@ class _interrupts_deferred:
         return False
 
 
+def _check_arguments(out, checkpoint_interval, setup, **flags) -> None:
+    """:func:`run`'s arguments, before anything is made: :class:`ConfigError` naming the
+    argument, its value and what it may be."""
+    if isinstance(out, bool) or not isinstance(out, (str, os.PathLike)):
+        raise ConfigError(f"out = {_show(out)}: expected a directory name (a str or a path)")
+    for name, value in flags.items():
+        if not isinstance(value, (bool, np.bool_)):
+            raise ConfigError(f"{name} = {_show(value)}: expected True or False")
+    if isinstance(checkpoint_interval, (bool, np.bool_)) or \
+            not isinstance(checkpoint_interval, (int, float, np.integer, np.floating)) or \
+            not (math.isfinite(checkpoint_interval) and checkpoint_interval >= 0):
+        raise ConfigError(f"checkpoint_interval = {_show(checkpoint_interval)}: expected a "
+                          "finite number of seconds >= 0 (0: no checkpoints)")
+    if setup is not None and not callable(setup):
+        raise ConfigError(f"setup = {_show(setup)}: expected None or a function setup(sim)")
+
+
+def _show(value) -> str:
+    text = repr(value)
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
 class PicturesInterrupted(KeyboardInterrupt):
     """Ctrl-C (or SIGTERM) while the pictures of a run were drawn: the run's results are
     complete in the directory ``args[0]``; ``fipy-hopper plot DIR`` draws the pictures."""
@@ -517,14 +541,31 @@ class Results:
         """The ``meshio.Mesh`` of snapshot ``index`` (cell data ``alpha``, ``layer``, ...)."""
         return fio.read_vtu(self.path / fio.RunDirectory.FIELDS / self.snapshots[index]["file"])
 
+    @property
+    def finished(self) -> bool:
+        """True when the run finished (its manifest says so)."""
+        return self.manifest.get("status") == "finished"
+
     def wall_stage(self, stage: str) -> dict:
         """The wall pressure rows of one stage (``filling``, ``early_discharge``, ...)."""
         sel = self.wall_pressure["stage"] == stage
         return {k: v[sel] for k, v in self.wall_pressure.items()}
 
 
+class UnfinishedRunWarning(RuntimeWarning):
+    """:func:`read_results` of a run that did not finish (running, interrupted, stopped or
+    failed, by its manifest, or one without a manifest): its files hold what was measured so
+    far, which is no run's final result."""
+
+
 def read_results(out) -> Results:
-    """Read a run directory written by :func:`run` or ``fipy-hopper run``."""
+    """Read a run directory written by :func:`run` or ``fipy-hopper run``.
+
+    A run that did not finish (``manifest.json``'s status ``"running"``, ``"interrupted"``,
+    ``"stopped"`` or ``"failed"``, or no manifest) is read all the same, with an
+    :class:`UnfinishedRunWarning` saying so: its files are whole (every file is written
+    atomically) and what it measured is what one looks at to see why it stopped, but its
+    summary is not a finished run's (``Results.finished`` is False)."""
     import json
 
     path = Path(out)
@@ -549,6 +590,28 @@ def read_results(out) -> Results:
     snapshots = []
     if (path / names.FIELDS / fio.FieldWriter.INDEX).is_file():
         snapshots = fio.read_snapshot_index(path / names.FIELDS)
+    _warn_unfinished(path, manifest, summary)
     return Results(path=path, summary=summary, manifest=manifest, config=cfg,
                    timeseries=fio.read_csv(path / names.TIMESERIES), wall_pressure=wall,
                    snapshots=snapshots)
+
+
+def _warn_unfinished(path: Path, manifest: dict, summary: dict) -> None:
+    """:class:`UnfinishedRunWarning` for a run directory whose run did not finish."""
+    status = manifest.get("status")
+    reason = manifest.get("stop_reason") or summary.get("stop_reason") or ""
+    why = f" ({reason})" if reason and reason != status else ""
+    if not manifest:
+        what = "has no manifest.json, so whether its run finished is unknown"
+    elif status == "finished":
+        return
+    elif status == "running":
+        what = ("holds a run that has not finished (manifest status 'running': a run is "
+                "writing it now, or it was killed)")
+    elif status in ("interrupted", "stopped"):
+        what = (f"holds a run that was {status}{why}; continue it with --resume "
+                "(resume=True)")
+    else:
+        what = f"holds a run that did not finish: {status}{why}"
+    warnings.warn(f"{path} {what}: its files hold what was measured until then, not a "
+                  "finished run's results", UnfinishedRunWarning, stacklevel=3)

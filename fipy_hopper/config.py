@@ -1320,10 +1320,27 @@ class HopperConfig:
                                                        prefix=f"{name}."))
             if name == "hopper" and change:
                 _check_shape_keys({"shape": current.shape, **change})
+                if change.get("shape", current.shape) != current.shape:
+                    new[name] = _reshaped(current, change)
+                    continue
             new[name] = dataclasses.replace(current, **change) if change else current
         if sections:
             raise ConfigError(_unknown_message("section", next(iter(sections)), list(_SECTIONS)))
         return HopperConfig(**new)
+
+
+def _reshaped(current: HopperGeometry, change: dict) -> HopperGeometry:
+    """:meth:`HopperConfig.replace` to another ``hopper.shape``: the geometry of ``change``
+    with what the two shapes share carried over (between a cone and a wedge their half-angle
+    and heights; always the inserts; to a profile, the symmetry), never what belongs to the
+    old shape (a cone's symmetry into a wedge, a profile's points into a cone)."""
+    shared = ("half_angle_deg", "bin_height", "fill_height")
+    carried = {"inserts": current.inserts}
+    if change["shape"] == "profile":
+        carried["symmetry"] = current.symmetry
+    elif current.shape != "profile":
+        carried.update({key: getattr(current, key) for key in shared})
+    return HopperGeometry(**{**carried, **change})
 
 
 def _ceil_digits(x: float, digits: int = 3) -> float:

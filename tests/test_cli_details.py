@@ -91,3 +91,93 @@ def test_no_command_is_one_clear_line(capsys):
     for command in ("run", "demo", "plot", "validate", "--help"):
         assert command in lines[0]
     assert err.startswith("usage: fipy-hopper")
+
+
+# ---------------------------------------------------------------- replace across shapes
+def test_replace_switches_a_cone_to_a_wedge_and_back():
+    cone = HopperConfig().replace(hopper={"half_angle_deg": 25.0, "fill_height": 0.2})
+    wedge = cone.replace(hopper={"shape": "wedge", "bin_width": 0.3, "outlet_width": 0.06})
+    geom = wedge.hopper
+    assert geom.shape == "wedge" and geom.symmetry == "plane" and not geom.axisymmetric
+    assert (geom.half_angle_deg, geom.fill_height) == (25.0, 0.2)     # carried over
+    back = wedge.replace(hopper={"shape": "conical", "bin_diameter": 0.3,
+                                 "outlet_diameter": 0.06})
+    assert back == cone
+    with pytest.raises(ConfigError, match="hopper.bin_width is required"):
+        cone.replace(hopper={"shape": "wedge"})       # a wedge's sizes are its own
+
+
+def test_replace_switches_to_a_profile_and_back():
+    wedge = HopperConfig().replace(hopper={"shape": "wedge", "bin_width": 0.3,
+                                           "outlet_width": 0.06})
+    wall = [[0.03, 0.0], [0.15, 0.33], [0.15, 0.68]]
+    profile = wedge.replace(hopper={"shape": "profile", "wall": wall, "fill_level": 0.6})
+    assert profile.hopper.symmetry == "plane" and profile.hopper.shape == "profile"
+    cone = profile.replace(hopper={"shape": "conical"})       # the shorthand's defaults
+    assert cone.hopper == HopperConfig().hopper
+
+
+# ---------------------------------------------------------------- run's arguments
+@pytest.mark.parametrize("kwargs, words", [
+    ({"checkpoint_interval": "60"}, ["checkpoint_interval = '60'", "finite number of seconds"]),
+    ({"checkpoint_interval": float("nan")}, ["checkpoint_interval = nan"]),
+    ({"checkpoint_interval": -1}, ["checkpoint_interval = -1"]),
+    ({"checkpoint_interval": True}, ["checkpoint_interval = True"]),
+    ({"force": "yes"}, ["force = 'yes'", "True or False"]),
+    ({"quiet": 0}, ["quiet = 0", "True or False"]),
+    ({"setup": "print"}, ["setup = 'print'", "a function"]),
+])
+def test_run_checks_its_arguments_before_it_makes_anything(tmp_path, kwargs, words):
+    out = tmp_path / "run"
+    with pytest.raises(ConfigError) as err:
+        api.run(HopperConfig(), out, **kwargs)
+    for word in words:
+        assert word in str(err.value), (word, str(err.value))
+    assert not out.exists()
+    with pytest.raises(ConfigError, match="out = 3"):
+        api.run(HopperConfig(), 3)
+
+
+# ---------------------------------------------------------------- unfinished runs
+@pytest.fixture(scope="module")
+def finished(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("unfinished")
+    config = folder / "coarse.toml"
+    config.write_text(COARSE)
+    out = folder / "run"
+    assert main(["run", str(config), "--out", str(out), "--quiet"]) == 0
+    return out
+
+
+@pytest.mark.parametrize("status, reason, words", [
+    ("running", "", ["has not finished", "'running'"]),
+    ("interrupted", "interrupted", ["was interrupted", "--resume"]),
+    ("stopped", "wall_time_limit", ["was stopped (wall_time_limit)", "--resume"]),
+    ("failed", "unstable: runaway velocity", ["did not finish: failed (unstable: runaway"]),
+    (None, "", ["has no manifest.json"]),
+])
+def test_reading_an_unfinished_run_warns(finished, tmp_path, status, reason, words):
+    import shutil
+
+    out = tmp_path / "run"
+    shutil.copytree(finished, out)
+    manifest = json.loads((out / "manifest.json").read_text())
+    if status is None:
+        (out / "manifest.json").unlink()
+    else:
+        manifest.update(status=status, stop_reason=reason)
+        (out / "manifest.json").write_text(json.dumps(manifest))
+    with pytest.warns(api.UnfinishedRunWarning) as caught:
+        res = fh.read_results(out)
+    message = str(caught[0].message)
+    assert str(out) in message and "not a finished run's results" in message
+    for word in words:
+        assert word in message, (word, message)
+    assert not res.finished and len(res.timeseries["t_s"]) > 0     # read all the same
+
+
+def test_reading_a_finished_run_is_silent(finished):
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        res = fh.read_results(finished)
+    assert res.finished
