@@ -16,8 +16,12 @@ failed (unstable, or an internal error), with the reason, after writing everythi
 far, and a fill-only run (``end_time = 0``) whose fill did not come to rest by
 ``numerics.max_fill_time`` (``stop_reason`` ``"fill_not_at_rest"``: its outputs are written,
 but its loads are those of a moving fill; a discharge started from such a fill is a warning);
-130 a run interrupted with Ctrl-C or SIGTERM (continue it with ``--resume`` once a checkpoint
-has been written).
+130 a run interrupted with Ctrl-C or SIGTERM, at any moment: its outputs written whole, its
+manifest ``"interrupted"`` (``"finished"`` when only the pictures or the printing were cut
+short), and one line of advice (continue it with ``--resume`` once a checkpoint has been
+written).  ``validate`` writes nothing unless ``--picture`` asks for a drawing; ``--force``
+replaces only an earlier run's files in a directory it wrote (its ``manifest.json``), never
+through a symbolic link (:class:`fipy_hopper.io.RunDirectory`).
 """
 
 from __future__ import annotations
@@ -64,7 +68,8 @@ def _parser() -> argparse.ArgumentParser:
                        default=None if out_required else "hopper_run",
                        help="run directory" + ("" if out_required else " (default: hopper_run)"))
         q.add_argument("--force", action="store_true",
-                       help="overwrite the outputs of a previous run in DIR")
+                       help="replace the files of an earlier run in DIR (a run directory of "
+                       "fipy-hopper only; files of your own there are kept)")
         q.add_argument("--resume", action="store_true",
                        help="continue the interrupted run in DIR from its checkpoint")
         q.add_argument("--quiet", action="store_true",
