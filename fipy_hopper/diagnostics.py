@@ -893,7 +893,7 @@ def load_summary(sim) -> dict:
         if np.isfinite(ratio[in_cone]).any():
             out["overpressure_factor_cone_max"] = float(np.nanmax(ratio[in_cone]))
         zone = np.abs(s - s_t) <= near
-        if zone.any():
+        if zone.any() and geom.fill_height > 0:     # no switch where the fill is below it
             k = np.flatnonzero(zone)[np.argmax(envelope[zone])]
             out["switch_peak_Pa"], out["switch_peak_s_m"] = float(envelope[k]), float(s[k])
         if geom.cone_height > 0 and geom.classic and geom.fill_height > 0:

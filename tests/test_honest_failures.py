@@ -58,6 +58,7 @@ def test_a_profile_filled_below_its_bin_gets_a_whole_summary(tmp_path, capsys):
                 "hopper_meridional_tension_N_m"):
         assert summary[key] is not None, key
     assert summary["walker_switch_pressure_Pa"] is None       # no switch: no fill there
+    assert summary["switch_peak_Pa"] is None and summary["switch_peak_s_m"] is None
     assert summary["janssen_wall_axial_compression_N_m"] == 0.0   # nothing in the bin
     assert summary["bin_wall_axial_compression_N_m"] == 0.0
     manifest = json.loads((out / "manifest.json").read_text())
