@@ -453,15 +453,19 @@ class RunDirectory:
                                         "a run writes there: move it (or choose another "
                                         "directory)")
 
-    def _refuse_not_a_run(self) -> None:
-        """``--force`` replaces an earlier run only: refuse a directory without a manifest of
-        fipy-hopper (a folder of other files, which no run wrote)."""
+    def _is_run(self) -> bool:
+        """True when the directory holds a ``manifest.json`` of fipy-hopper (a run wrote it)."""
         manifest = self.path / self.MANIFEST
         try:
             data = Manifest.load(manifest).data if manifest.is_file() else None
         except (RunFileError, OSError):
             data = None
-        if not (isinstance(data, dict) and data.get("package") == "fipy_hopper"):
+        return isinstance(data, dict) and data.get("package") == "fipy_hopper"
+
+    def _refuse_not_a_run(self) -> None:
+        """``--force`` replaces an earlier run only: refuse a directory without a manifest of
+        fipy-hopper (a folder of other files, which no run wrote)."""
+        if not self._is_run():
             raise RunDirectoryError(
                 f"{_short(self.path)} is not empty and is not a run directory of fipy-hopper "
                 f"(no {self.MANIFEST} of a run); --force replaces only an earlier run's "
@@ -492,6 +496,9 @@ class RunDirectory:
             and not any(item.iterdir()))]
 
     def _refuse_not_empty(self):
+        if not self._is_run():
+            raise RunDirectoryError(f"{_short(self.path)} exists, is not empty and is not a run "
+                                    "directory of fipy-hopper: choose a new or empty directory")
         raise RunDirectoryError(
             f"{_short(self.path)} exists and is not empty; choose another directory, add "
             "--force to overwrite it, or --resume to continue an interrupted run")

@@ -142,6 +142,9 @@ def test_force_refuses_a_directory_that_no_run_wrote(tmp_path, capsys, files):
     assert main(["run", str(config), "--out", str(out), "--force", "--quiet"]) == 2
     err = [line for line in capsys.readouterr().err.splitlines() if "warning" not in line]
     assert len(err) == 1 and "not a run directory" in err[0] and "new or empty" in err[0]
+    assert main(["run", str(config), "--out", str(out), "--quiet"]) == 2    # no --force
+    err = [line for line in capsys.readouterr().err.splitlines() if "warning" not in line]
+    assert len(err) == 1 and "not a run directory" in err[0] and "--force" not in err[0]
     assert tree(out) == before
 
 
