@@ -678,10 +678,13 @@ def _open_lock(path: Path, flags: int) -> int:
                                     "there itself and never through a link: remove the "
                                     "link") from None
         raise
-    if not stat.S_ISREG(os.fstat(fd).st_mode):
+    st = os.fstat(fd)
+    if not stat.S_ISREG(st.st_mode) or st.st_nlink != 1:
         os.close(fd)
-        raise RunDirectoryError(f"{_short(path)} is not a regular file, as a run's lock is: "
-                                "remove it")
+        what = "not a regular file" if not stat.S_ISREG(st.st_mode) else \
+            f"a hard link (the file has {st.st_nlink} names)"
+        raise RunDirectoryError(f"{_short(path)} is {what}, which a run's lock never is; a run "
+                                "writes its lock there itself: remove it")
     return fd
 
 

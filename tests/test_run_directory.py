@@ -116,6 +116,17 @@ def test_a_lock_link_is_never_written_through(tmp_path, force):
     assert target.read_text() == "precious\n" and tree(out) == before
 
 
+def test_a_lock_that_is_a_hard_link_is_never_written_through(tmp_path):
+    out = tmp_path / "run"
+    out.mkdir()
+    target = tmp_path / "precious.txt"
+    target.write_text("precious\n")
+    os.link(target, out / ".lock")
+    with pytest.raises(RunDirectoryError, match=r"\.lock is a hard link"):
+        RunDirectory(out)
+    assert target.read_text() == "precious\n"
+
+
 def test_a_lock_that_is_not_a_file_is_refused(tmp_path):
     out = tmp_path / "run"
     (out / ".lock").mkdir(parents=True)
