@@ -33,7 +33,7 @@ from . import io as fio
 from . import resources
 
 __all__ = ["load_config", "run", "read_results", "Results", "expected_quantities",
-           "make_model"]
+           "make_model", "UnfinishedRunWarning", "ResultsError"]
 
 
 def load_config(path: Union[str, os.PathLike]) -> HopperConfig:
@@ -184,6 +184,8 @@ def run(config_or_path, out, force: bool = False, resume: bool = False, quiet: b
     ``stop_reason`` ``"fill_not_at_rest"``; a discharge started from it warns
     (:class:`~fipy_hopper.simulation.NotAtRestWarning`).
     """
+    _check_arguments(out, force=force, resume=resume, quiet=quiet, plots=plots,
+                     profile=profile, checkpoint_interval=checkpoint_interval, setup=setup)
     cfg, source = _resolve(config_or_path)
     source = config_source or source
     command = command or "fipy_hopper.run (Python API)"
@@ -223,42 +225,52 @@ def run(config_or_path, out, force: bool = False, resume: bool = False, quiet: b
     if governor is not None:
         model.threads = governor.update()
         sim.add_wall_time_callback(governor, governor.interval)
-    rundir = fio.RunDirectory(out, force=force, resume=resume)
+    # Ctrl-C while the directory is opened and the run is set up takes effect once that is
+    # done (never half-way through removing an earlier run's files), with the manifest
+    # saying "interrupted"
+    with _interrupts_deferred() as early:
+        rundir = fio.RunDirectory(out, force=force, resume=resume)
+    manifest = None
     try:
-        strength = (cfg.material.cohesion, cfg.material.friction_angle_deg)
-        fields = (fio.FieldWriter(rundir.fields, model.grid, *strength) if not lagrangian
-                  else fio.MeshFieldWriter(rundir.fields, model, *strength))
-        manifest = None
+        with _interrupts_deferred() as setting_up:
+            strength = (cfg.material.cohesion, cfg.material.friction_angle_deg)
+            fields = (fio.FieldWriter(rundir.fields, model.grid, *strength) if not lagrangian
+                      else fio.MeshFieldWriter(rundir.fields, model, *strength))
 
-        def snapshot(sim_, state):
-            with timed("snapshots and checkpoints"):
-                fields(sim_, state)
-                _write_tables(rundir, sim_.record, cfg.hopper.axisymmetric)
-
-        interval = cfg.run.field_interval
-        sim.add_callback(snapshot, interval, stages=("filling",))
-        sim.add_callback(snapshot, interval, stages=("discharge",))
-        if checkpoint_interval and checkpoint_interval > 0:
-            def checkpoint(sim_, state):
+            def snapshot(sim_, state):
                 with timed("snapshots and checkpoints"):
-                    sim_.checkpoint(rundir.checkpoint)
-                    manifest.checkpoint_written(state.t, state.step)
-            sim.add_wall_time_callback(checkpoint, checkpoint_interval)
-        if setup is not None:
-            setup(sim)
-        if resume:       # the checkpoint is checked before anything in the directory changes
-            sim.restore(rundir.checkpoint)
-            manifest = (fio.Manifest.load(rundir / rundir.MANIFEST)
-                        if (rundir / rundir.MANIFEST).is_file()
-                        else fio.Manifest.new(rundir / rundir.MANIFEST, source, command))
-            rundir.remove_profile()
-            fields.resume(sim.state.step)
-            manifest.begin_session(command, sim.state.step, sim.state.t)
-        else:
-            fio.atomic_write_text(rundir / rundir.CONFIG, cfg.to_toml())
-            manifest = fio.Manifest.new(rundir / rundir.MANIFEST, source, command)
-            manifest.begin_session(command)
-    except BaseException:
+                    fields(sim_, state)
+                    _write_tables(rundir, sim_.record, cfg.hopper.axisymmetric)
+
+            interval = cfg.run.field_interval
+            sim.add_callback(snapshot, interval, stages=("filling",))
+            sim.add_callback(snapshot, interval, stages=("discharge",))
+            if checkpoint_interval and checkpoint_interval > 0:
+                def checkpoint(sim_, state):
+                    with timed("snapshots and checkpoints"):
+                        sim_.checkpoint(rundir.checkpoint)
+                        manifest.checkpoint_written(state.t, state.step)
+                sim.add_wall_time_callback(checkpoint, checkpoint_interval)
+            if setup is not None:
+                setup(sim)
+            if resume:   # the checkpoint is checked before anything in the directory changes
+                sim.restore(rundir.checkpoint)
+                manifest = (fio.Manifest.load(rundir / rundir.MANIFEST)
+                            if (rundir / rundir.MANIFEST).is_file()
+                            else fio.Manifest.new(rundir / rundir.MANIFEST, source, command))
+                rundir.remove_profile()
+                fields.resume(sim.state.step)
+                manifest.begin_session(command, sim.state.step, sim.state.t)
+            else:    # the manifest first: a directory with a run's files is a run's (--force)
+                manifest = fio.Manifest.new(rundir / rundir.MANIFEST, source, command)
+                manifest.begin_session(command)
+                fio.atomic_write_text(rundir / rundir.CONFIG, cfg.to_toml())
+        if early.caught or setting_up.caught:
+            raise KeyboardInterrupt
+    except BaseException as exc:
+        if manifest is not None and isinstance(exc, KeyboardInterrupt):
+            with _interrupts_deferred():
+                manifest.end_session("interrupted", "interrupted", 0.0)
         rundir.close()
         raise
 
@@ -275,43 +287,160 @@ def run(config_or_path, out, force: bool = False, resume: bool = False, quiet: b
         status, reason, error = "failed", f"unstable: {exc}", exc
     except KeyboardInterrupt as exc:
         status, reason, error = "interrupted", "interrupted", exc
-    except Exception as exc:  # keep what was measured, then report
-        status, reason, error = "failed", f"failed: {type(exc).__name__}: {exc}", exc
-        fio.atomic_write_text(rundir / rundir.ERROR_LOG, traceback.format_exc())
+    except Exception as exc:
+        interrupt = _interrupt_behind(exc)
+        if interrupt is not None:   # Ctrl-C inside a writer whose clean-up then failed
+            status, reason, error = "interrupted", "interrupted", interrupt
+        else:                       # keep what was measured, then report
+            status, reason, error = "failed", f"failed: {type(exc).__name__}: {exc}", exc
+            fio.atomic_write_text(rundir / rundir.ERROR_LOG, traceback.format_exc())
     wall = time.perf_counter() - started
 
-    # everything measured so far; after an interrupt the state may be half a step old, so no
-    # snapshot of it is taken (the resumed run continues from the last checkpoint)
-    if status != "interrupted" and fields.last_step != sim.state.step:
-        try:
-            fields.write(sim.state, sim.t_open)
-        except Exception:  # pragma: no cover - never hide the run's own error
-            pass
-    _write_tables(rundir, sim.record, cfg.hopper.axisymmetric)
-    summary = _summary(sim, cfg, reason)
-    manifest.end_session(status, reason, wall)
-    summary["wall_time_s"] = manifest.total_wall_time()
-    fio.write_json(rundir / rundir.SUMMARY, summary)
-    if status == "finished":
-        rundir.checkpoint.unlink(missing_ok=True)
-    pictures_interrupted = False
-    if plots and status != "interrupted":
-        try:
-            from . import plotting
-            with timed("pictures"):
-                plotting.plot_run(rundir.path)
-        except KeyboardInterrupt:            # the results are complete: only pictures lack
-            pictures_interrupted = True
-        except Exception as exc:  # pictures are a convenience; the data are written
-            warnings.warn(f"the pictures could not be drawn: {exc}", RuntimeWarning)
-    if phases is not None:
-        fio.write_json(rundir / rundir.PROFILE, phases.report())
-    rundir.close()                           # release the run directory's lock
+    # Ctrl-C from here on is taken once the results and the manifest are written: they are
+    # always whole, and the manifest always ends in a finished state
+    try:
+        with _interrupts_deferred() as finishing:
+            status, reason, error, summary = _finish(rundir, sim, cfg, fields, manifest,
+                                                     status, reason, error, wall)
+        pictures_interrupted = finishing.caught and status != "interrupted"
+        if plots and status != "interrupted" and not pictures_interrupted:
+            try:
+                from . import plotting
+                with timed("pictures"):
+                    plotting.plot_run(rundir.path)
+            except KeyboardInterrupt:        # the results are complete: only pictures lack
+                pictures_interrupted = True
+            except Exception as exc:  # pictures are a convenience; the data are written
+                warnings.warn(f"the pictures could not be drawn: {exc}", RuntimeWarning)
+        with _interrupts_deferred() as closing:
+            if phases is not None:
+                fio.write_json(rundir / rundir.PROFILE, phases.report())
+        pictures_interrupted |= closing.caught and status != "interrupted"
+    finally:
+        rundir.close()                       # release the run directory's lock
     if error is not None:
         raise error
     if pictures_interrupted:
         raise PicturesInterrupted(rundir.path)
     return fio._jsonable(summary)
+
+
+def _finish(rundir, sim, cfg, fields, manifest, status, reason, error, wall) -> tuple:
+    """Write what a run measured (the last snapshot, the tables, ``summary.json``) and end the
+    manifest's session: ``(status, reason, error, summary)``.  An error in the tables or the
+    summary of a run that had not failed fails it (``stop_reason`` ``"failed: ..."``, the
+    traceback in ``error.log``, :class:`ResultsError` raised by :func:`run`): a summary is
+    whole or the run says it failed."""
+    # after an interrupt the state may be half a step old, so no snapshot of it is taken
+    # (the resumed run continues from the last checkpoint), and a sample may be half taken
+    if status == "interrupted":
+        _drop_half_sample(sim.record)
+    if status != "interrupted" and fields.last_step != sim.state.step:
+        try:
+            fields.write(sim.state, sim.t_open)
+        except Exception:  # pragma: no cover - never hide the run's own error
+            pass
+    try:
+        _write_tables(rundir, sim.record, cfg.hopper.axisymmetric)
+        summary = _summary(sim, cfg, reason, whole=status in ("finished", "stopped"))
+    except Exception as exc:
+        if error is None:
+            what = f"{type(exc).__name__}: {exc}"
+            status, reason = "failed", f"failed: the results could not be computed: {what}"
+            error = ResultsError(f"the results could not be computed: {what}")
+            error.__cause__ = exc
+            fio.atomic_write_text(rundir / rundir.ERROR_LOG, traceback.format_exc())
+        summary = _partial_summary(sim, cfg, reason)
+    manifest.end_session(status, reason, wall)
+    summary["wall_time_s"] = manifest.total_wall_time()
+    fio.write_json(rundir / rundir.SUMMARY, summary)
+    if status == "finished":
+        rundir.checkpoint.unlink(missing_ok=True)
+    return status, reason, error, summary
+
+
+#: the time series of :class:`~fipy_hopper.simulation.RunRecord`, one value a sample
+SAMPLE_SERIES = ("t", "mass_in_hopper", "discharged", "rate", "mass_flow_index",
+                 "stagnant_fraction", "wall_slip_ratio", "wall_slip_stretches",
+                 "wall_slip_fraction", "bin_lateral_stress_ratio")
+
+
+def _drop_half_sample(record) -> None:
+    """A sample that Ctrl-C cut short (some of its series appended, not all) is dropped: the
+    time series keep the samples they all have."""
+    series = [getattr(record, name) for name in SAMPLE_SERIES if hasattr(record, name)]
+    common = min((len(values) for values in series), default=0)
+    for values in series:
+        del values[common:]
+
+
+class ResultsError(RuntimeError):
+    """The run's tables or its summary could not be computed (the run is marked failed and
+    the traceback is in ``error.log``): never a summary with parts silently missing."""
+
+
+def _interrupt_behind(exc: BaseException):
+    """The ``KeyboardInterrupt`` an exception was raised while handling (a writer whose
+    clean-up failed after Ctrl-C), or None."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, KeyboardInterrupt):
+            return exc
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return None
+
+
+class _interrupts_deferred:
+    """Hold Ctrl-C (SIGINT) and SIGTERM while a block writes what must be whole: a signal
+    that comes is noted (``caught``) and acted on by the caller after the block.  In the main
+    thread only (elsewhere signals are not delivered to Python); the handlers are restored."""
+
+    SIGNALS = ("SIGINT", "SIGTERM")
+
+    def __enter__(self):
+        import signal
+        import threading
+
+        self.caught, self.previous = False, {}
+        if threading.current_thread() is threading.main_thread():
+            for name in self.SIGNALS:
+                number = getattr(signal, name, None)
+                if number is not None:
+                    self.previous[number] = signal.signal(number, self._note)
+        return self
+
+    def _note(self, signum, frame):
+        self.caught = True
+
+    def __exit__(self, *exc):
+        import signal
+
+        for number, handler in self.previous.items():
+            signal.signal(number, handler)
+        return False
+
+
+def _check_arguments(out, checkpoint_interval, setup, **flags) -> None:
+    """:func:`run`'s arguments, before anything is made: :class:`ConfigError` naming the
+    argument, its value and what it may be."""
+    if isinstance(out, bool) or not isinstance(out, (str, os.PathLike)):
+        raise ConfigError(f"out = {_show(out)}: expected a directory name (a str or a path)")
+    for name, value in flags.items():
+        if not isinstance(value, (bool, np.bool_)):
+            raise ConfigError(f"{name} = {_show(value)}: expected True or False")
+    if isinstance(checkpoint_interval, (bool, np.bool_)) or \
+            not isinstance(checkpoint_interval, (int, float, np.integer, np.floating)) or \
+            not (math.isfinite(checkpoint_interval) and checkpoint_interval >= 0):
+        raise ConfigError(f"checkpoint_interval = {_show(checkpoint_interval)}: expected a "
+                          "finite number of seconds >= 0 (0: no checkpoints)")
+    if setup is not None and not callable(setup):
+        raise ConfigError(f"setup = {_show(setup)}: expected None or a function setup(sim)")
+
+
+def _show(value) -> str:
+    text = repr(value)
+    return text if len(text) <= 40 else text[:37] + "..."
 
 
 class PicturesInterrupted(KeyboardInterrupt):
@@ -367,19 +496,17 @@ def _write_tables(rundir, record, axisymmetric: bool = True) -> None:
     fio.write_wall_slip(rundir / rundir.WALL_SLIP, record, FlowModeRule().slip_ratio)
 
 
-def _summary(sim, cfg, reason: str) -> dict:
+def _summary(sim, cfg, reason: str, whole: bool = True) -> dict:
+    """The run's ``summary.json``: :meth:`Simulation.summary` with the theory's numbers.  An
+    error in it is raised when the run ended as it should (``whole``); a run that failed or
+    was interrupted, which may not have measured what the summary needs, gets
+    :func:`_partial_summary` (its stop reason says it did not finish)."""
     try:
         summary = dict(sim.summary())
-    except Exception:  # a run that failed before it measured anything
-        rec = sim.record
-        summary = {"steady_discharge_rate_kg_s": math.nan, "flow_mode": "unknown",
-                   "mass_flow_index": math.nan, "wall_slip_ratio": math.nan,
-                   "wall_slip_fraction": math.nan, "initial_mass_kg": rec.initial_mass,
-                   "remaining_mass_kg": math.nan, "mass_balance_error": math.nan,
-                   "discharge_time_s": rec.t[-1] if rec.t else 0.0,
-                   "cells": sim.model.n_cells, "steps": sim.state.step,
-                   "wall_time_s": math.nan,
-                   "youngs_modulus_used": cfg.material.youngs_modulus}
+    except Exception:
+        if whole:
+            raise
+        return _partial_summary(sim, cfg, reason)
     summary["stop_reason"] = reason
     expected = expected_quantities(cfg)
     summary["outlet_grains"] = expected["outlet_grains"]
@@ -388,6 +515,22 @@ def _summary(sim, cfg, reason: str) -> dict:
                 "critical_outlet_simplified_m", "jenike_rathole_diameter_m"):
         if key in expected:          # the closed forms only for the silos they describe
             summary[key] = expected[key]
+    return summary if cfg.hopper.axisymmetric else per_metre(summary)
+
+
+def _partial_summary(sim, cfg, reason: str) -> dict:
+    """The summary of a run that did not finish (failed or interrupted) and whose full
+    summary could not be computed: what is known without measurements, the rest NaN
+    (``null``), ``flow_mode`` ``"unknown"``; its ``stop_reason`` says why."""
+    rec = sim.record
+    summary = {"steady_discharge_rate_kg_s": math.nan, "flow_mode": "unknown",
+               "mass_flow_index": math.nan, "wall_slip_ratio": math.nan,
+               "wall_slip_fraction": math.nan, "initial_mass_kg": rec.initial_mass,
+               "remaining_mass_kg": math.nan, "mass_balance_error": math.nan,
+               "discharge_time_s": rec.t[-1] if rec.t else 0.0,
+               "cells": sim.model.n_cells, "steps": sim.state.step,
+               "wall_time_s": math.nan, "stop_reason": reason,
+               "youngs_modulus_used": cfg.material.youngs_modulus}
     return summary if cfg.hopper.axisymmetric else per_metre(summary)
 
 
@@ -418,14 +561,31 @@ class Results:
         """The ``meshio.Mesh`` of snapshot ``index`` (cell data ``alpha``, ``layer``, ...)."""
         return fio.read_vtu(self.path / fio.RunDirectory.FIELDS / self.snapshots[index]["file"])
 
+    @property
+    def finished(self) -> bool:
+        """True when the run finished (its manifest says so)."""
+        return self.manifest.get("status") == "finished"
+
     def wall_stage(self, stage: str) -> dict:
         """The wall pressure rows of one stage (``filling``, ``early_discharge``, ...)."""
         sel = self.wall_pressure["stage"] == stage
         return {k: v[sel] for k, v in self.wall_pressure.items()}
 
 
+class UnfinishedRunWarning(RuntimeWarning):
+    """:func:`read_results` of a run that did not finish (running, interrupted, stopped or
+    failed, by its manifest, or one without a manifest): its files hold what was measured so
+    far, which is no run's final result."""
+
+
 def read_results(out) -> Results:
-    """Read a run directory written by :func:`run` or ``fipy-hopper run``."""
+    """Read a run directory written by :func:`run` or ``fipy-hopper run``.
+
+    A run that did not finish (``manifest.json``'s status ``"running"``, ``"interrupted"``,
+    ``"stopped"`` or ``"failed"``, or no manifest) is read all the same, with an
+    :class:`UnfinishedRunWarning` saying so: its files are whole (every file is written
+    atomically) and what it measured is what one looks at to see why it stopped, but its
+    summary is not a finished run's (``Results.finished`` is False)."""
     import json
 
     path = Path(out)
@@ -450,6 +610,28 @@ def read_results(out) -> Results:
     snapshots = []
     if (path / names.FIELDS / fio.FieldWriter.INDEX).is_file():
         snapshots = fio.read_snapshot_index(path / names.FIELDS)
+    _warn_unfinished(path, manifest, summary)
     return Results(path=path, summary=summary, manifest=manifest, config=cfg,
                    timeseries=fio.read_csv(path / names.TIMESERIES), wall_pressure=wall,
                    snapshots=snapshots)
+
+
+def _warn_unfinished(path: Path, manifest: dict, summary: dict) -> None:
+    """:class:`UnfinishedRunWarning` for a run directory whose run did not finish."""
+    status = manifest.get("status")
+    reason = manifest.get("stop_reason") or summary.get("stop_reason") or ""
+    why = f" ({reason})" if reason and reason != status else ""
+    if not manifest:
+        what = "has no manifest.json, so whether its run finished is unknown"
+    elif status == "finished":
+        return
+    elif status == "running":
+        what = ("holds a run that has not finished (manifest status 'running': a run is "
+                "writing it now, or it was killed)")
+    elif status in ("interrupted", "stopped"):
+        what = (f"holds a run that was {status}{why}; continue it with --resume "
+                "(resume=True)")
+    else:
+        what = f"holds a run that did not finish: {status}{why}"
+    warnings.warn(f"{path} {what}: its files hold what was measured until then, not a "
+                  "finished run's results", UnfinishedRunWarning, stacklevel=3)

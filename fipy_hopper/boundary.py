@@ -30,6 +30,7 @@ The compiled marker and Lagrangian code take :meth:`Boundary.kernel_arrays` and
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass, replace
 from functools import cached_property
@@ -328,6 +329,16 @@ def wall_x(z, rows: np.ndarray, x_below: float):
     """The wall's ``x`` (m) at heights ``z`` (array): ``x_lo <= xa + (z - za) slope <= x_hi``
     of the first row with ``za <= z <= zb``, ``x_below`` below the lip."""
     z = np.asarray(z, dtype=float)
+    rows = np.asarray(rows, dtype=float)
+    if len(rows) and np.all(rows[1:, 0] == rows[:-1, 1]) and np.all(rows[1:, 1] >= rows[:-1, 1]):
+        # a wall from its lip up (each row starts where the last ends, the heights never
+        # fall): the first row holding z is the first whose top reaches it (a binary search,
+        # the same arithmetic on the same row)
+        k = np.searchsorted(rows[:, 1], z, side="left")
+        r = rows[np.minimum(k, len(rows) - 1)]
+        za, zb, xa, slope, lo, hi = (r[..., c] for c in range(6))
+        inside = (k < len(rows)) & (z >= za) & (z <= zb)
+        return np.where(inside, np.clip(xa + (z - za) * slope, lo, hi), x_below)
     x = np.full(z.shape, x_below)
     for za, zb, xa, slope, lo, hi in rows[::-1]:
         x = np.where((z >= za) & (z <= zb), np.clip(xa + (z - za) * slope, lo, hi), x)
@@ -457,25 +468,111 @@ def segments_meet(p1, p2, q1, q2) -> bool:
             or (o3 == 0 and within(q1, q2, p1)) or (o4 == 0 and within(q1, q2, p2)))
 
 
+def _orient_many(a, b, c) -> np.ndarray:
+    """The sign of the turn ``a -> b -> c`` (points ``(k, 2)``): the arithmetic of
+    :func:`segments_meet`'s, element by element."""
+    v = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
+    return np.sign(v)
+
+
+def _within_many(a, b, c) -> np.ndarray:
+    return ((np.minimum(a[:, 0], b[:, 0]) <= c[:, 0]) & (c[:, 0] <= np.maximum(a[:, 0], b[:, 0]))
+            & (np.minimum(a[:, 1], b[:, 1]) <= c[:, 1])
+            & (c[:, 1] <= np.maximum(a[:, 1], b[:, 1])))
+
+
+def segments_meet_many(p1, p2, q1, q2) -> np.ndarray:
+    """:func:`segments_meet` of the segments ``p1[k] p2[k]`` and ``q1[k] q2[k]`` (arrays
+    ``(n, 2)``), vectorised: the same decisions from the same arithmetic."""
+    o1, o2 = _orient_many(p1, p2, q1), _orient_many(p1, p2, q2)
+    o3, o4 = _orient_many(q1, q2, p1), _orient_many(q1, q2, p2)
+    cross = (o1 != o2) & (o3 != o4) & (o1 * o2 <= 0) & (o3 * o4 <= 0)
+    return cross | ((o1 == 0) & _within_many(p1, p2, q1)) | \
+        ((o2 == 0) & _within_many(p1, p2, q2)) | ((o3 == 0) & _within_many(q1, q2, p1)) | \
+        ((o4 == 0) & _within_many(q1, q2, p2))
+
+
+#: pairs of segments tested at once by :func:`first_meeting` (bounds its memory)
+_PAIRS_AT_ONCE = 2_000_000
+
+
+def first_meeting(a1, b1, a2, b2, same: bool = False, closed: bool = False) -> Optional[tuple]:
+    """The first pair ``(i, j)`` (by ``i``, then ``j``) of a segment ``a1[i] b1[i]`` and a
+    segment ``a2[j] b2[j]`` that share a point (:func:`segments_meet`), or None; with
+    ``same`` (both sets one chain's segments) only the pairs ``j > i + 1`` that are not the
+    first and last of a ``closed`` chain.
+
+    Near-linear for the shapes of silos: only segments whose heights overlap are compared
+    (a binary search among the others sorted by their lower end, the few segments much
+    taller than the rest compared with every one), then their boxes, then exactly."""
+    a1, b1, a2, b2 = (np.asarray(v, dtype=float).reshape(-1, 2) for v in (a1, b1, a2, b2))
+    n1, n2 = len(a1), len(a2)
+    if not n1 or not n2:
+        return None
+    lo1, hi1 = np.minimum(a1[:, 1], b1[:, 1]), np.maximum(a1[:, 1], b1[:, 1])
+    lo2, hi2 = np.minimum(a2[:, 1], b2[:, 1]), np.maximum(a2[:, 1], b2[:, 1])
+    span = hi2 - lo2
+    tall = span > 8.0 * max(float(np.median(span)), float(span.mean()))
+    short, tall = np.flatnonzero(~tall), np.flatnonzero(tall)
+    order = short[np.argsort(lo2[short], kind="stable")]
+    reach = float(span[order].max()) if len(order) else 0.0
+    start = np.searchsorted(lo2[order], lo1 - reach, side="left")
+    count = np.maximum(np.searchsorted(lo2[order], hi1, side="right") - start, 0) + len(tall)
+    xlo1, xhi1 = np.minimum(a1[:, 0], b1[:, 0]), np.maximum(a1[:, 0], b1[:, 0])
+    xlo2, xhi2 = np.minimum(a2[:, 0], b2[:, 0]), np.maximum(a2[:, 0], b2[:, 0])
+    first = 0
+    while first < n1:            # chunks of the first set, in order: stop at the first hit
+        last = first + max(1, int(np.searchsorted(np.cumsum(count[first:]), _PAIRS_AT_ONCE)))
+        rows = np.arange(first, min(last, n1))
+        k = np.maximum(count[rows] - len(tall), 0)
+        i = np.repeat(rows, k)
+        j = order[np.repeat(start[rows], k) + np.arange(k.sum()) - np.repeat(np.cumsum(k) - k, k)]
+        if len(tall):
+            i = np.concatenate([i, np.repeat(rows, len(tall))])
+            j = np.concatenate([j, np.tile(tall, len(rows))])
+        keep = (lo2[j] <= hi1[i]) & (hi2[j] >= lo1[i]) & (xlo2[j] <= xhi1[i]) & \
+            (xhi2[j] >= xlo1[i])
+        if same:
+            keep &= (j > i + 1) & ~(closed & (i == 0) & (j == n1 - 1))
+        i, j = i[keep], j[keep]
+        hit = segments_meet_many(a1[i], b1[i], a2[j], b2[j])
+        if hit.any():
+            i, j = i[hit], j[hit]
+            best = np.lexsort((j, i))[0]
+            return int(i[best]), int(j[best])
+        first = int(rows[-1]) + 1
+    return None
+
+
 def self_crossing(points, closed: bool) -> Optional[tuple]:
     """The first pair ``(i, j)`` of segments of a polyline (a polygon when ``closed``) that
-    cross, touch or fold back on each other, or None."""
-    p = [tuple(map(float, q)) for q in points]
+    cross, touch or fold back on each other, or None (vectorised: :func:`first_meeting` for
+    the segments apart, the joints of neighbours element by element)."""
+    p = np.asarray(points, dtype=float).reshape(-1, 2)
     n = len(p) if closed else len(p) - 1
-    seg = [(p[k], p[(k + 1) % len(p)]) for k in range(n)]
-    for i in range(n):
-        for j in range(i + 1, n):
-            adjacent = j == i + 1 or (closed and i == 0 and j == n - 1)
-            if adjacent:
-                (a, b), (c, d) = (seg[i], seg[j]) if j == i + 1 else (seg[j], seg[i])
-                d1, d2 = (b[0] - a[0], b[1] - a[1]), (d[0] - c[0], d[1] - c[1])
-                if d1[0] * d2[1] - d1[1] * d2[0] == 0 and d1[0] * d2[0] + d1[1] * d2[1] < 0:
-                    return i, j                               # folds back on itself
-                if n > 2 and (segments_meet(a, a, c, d) or segments_meet(a, b, d, d)):
-                    return i, j
-            elif segments_meet(*seg[i], *seg[j]):
-                return i, j
-    return None
+    if n < 2:
+        return None
+    a, b = p[:n], np.roll(p, -1, axis=0)[:n]
+    found = []
+    # neighbours (i, i + 1), and a closed chain's (0, n - 1) with its last segment first
+    i = np.arange(n - 1)
+    pairs = [(i, i + 1, i, i + 1)]
+    if closed and n > 2:
+        pairs.append((np.array([0]), np.array([n - 1]), np.array([n - 1]), np.array([0])))
+    for i, j, first, second in pairs:
+        pa, pb, pc, pd = a[first], b[first], a[second], b[second]
+        d1, d2 = pb - pa, pd - pc
+        folds = (d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0] == 0) & \
+            (d1[:, 0] * d2[:, 0] + d1[:, 1] * d2[:, 1] < 0)
+        touch = (segments_meet_many(pa, pa, pc, pd) | segments_meet_many(pa, pb, pd, pd)) \
+            if n > 2 else np.zeros(len(i), dtype=bool)
+        bad = np.flatnonzero(folds | touch)
+        if len(bad):
+            found.append((int(i[bad[0]]), int(j[bad[0]])))
+    apart = first_meeting(a, b, a, b, same=True, closed=closed)
+    if apart is not None:
+        found.append(apart)
+    return min(found) if found else None
 
 
 def insert_chain_points(outline, half: bool) -> tuple:
@@ -934,7 +1031,7 @@ class Boundary:
         ax.fill(fill[:, 0], fill[:, 1], color="#e8d9a8", zorder=0,
                 label=f"fill to z = {self.fill_level:g} m")
         depth = 0.15 * max(self.top, self.outlet[1] - self.outlet[0])
-        colours = iter(["C0", "C1", "C2", "C3", "C4", "C5", "C6", "C8", "C9"])
+        colours = itertools.cycle(["C0", "C1", "C2", "C3", "C4", "C5", "C6", "C8", "C9"])
         for c in self.chains:
             p = np.asarray(c.points, dtype=float)
             if c.kind == "tube":
@@ -949,8 +1046,11 @@ class Boundary:
             ax.plot(q[:, 0], q[:, 1], "-", color=colour, lw=2.5, label=c.name)
             if sec.mirror:
                 ax.plot(-q[:, 0], q[:, 1], "-", color="0.75", lw=1.5)
-            for k in c.corners:
-                ax.plot(*k.point, "o", ms=7, mec="k", mfc="k" if k.concave else "w", zorder=5)
+            for concave in (True, False):        # one call each: a wall may have 10,000
+                points = np.array([k.point for k in c.corners if k.concave == concave])
+                if len(points):
+                    ax.plot(points[:, 0], points[:, 1], "o", ms=7, mec="k",
+                            mfc="k" if concave else "w", zorder=5)
         x0, x1 = self.outlet
         ax.plot([x0, x1], [0.0, 0.0], "-", color="r", lw=4, solid_capstyle="butt",
                 label=f"outlet, x in [{x0:g}, {x1:g}] m")

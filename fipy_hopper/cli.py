@@ -7,7 +7,7 @@
     fipy-hopper demo [--out DIR] [--force] [--resume] [--quiet] [--checkpoint-interval S]
                      [--threads N] [--profile]
     fipy-hopper plot DIR
-    fipy-hopper validate CONFIG.toml [--out DIR]
+    fipy-hopper validate CONFIG.toml [--picture PATH.png]
 
 Exit codes: 0 success; 2 bad input (a configuration error, a missing or non-TOML file, an
 output directory that would be overwritten or that another run is using, a path the system
@@ -16,8 +16,12 @@ failed (unstable, or an internal error), with the reason, after writing everythi
 far, and a fill-only run (``end_time = 0``) whose fill did not come to rest by
 ``numerics.max_fill_time`` (``stop_reason`` ``"fill_not_at_rest"``: its outputs are written,
 but its loads are those of a moving fill; a discharge started from such a fill is a warning);
-130 a run interrupted with Ctrl-C or SIGTERM (continue it with ``--resume`` once a checkpoint
-has been written).
+130 a run interrupted with Ctrl-C or SIGTERM, at any moment: its outputs written whole, its
+manifest ``"interrupted"`` (``"finished"`` when only the pictures or the printing were cut
+short), and one line of advice (continue it with ``--resume`` once a checkpoint has been
+written).  ``validate`` writes nothing unless ``--picture`` asks for a drawing; ``--force``
+replaces only an earlier run's files in a directory it wrote (its ``manifest.json``), never
+through a symbolic link (:class:`fipy_hopper.io.RunDirectory`).
 """
 
 from __future__ import annotations
@@ -65,7 +69,8 @@ def _parser() -> argparse.ArgumentParser:
                        default=None if out_required else "hopper_run",
                        help="run directory" + ("" if out_required else " (default: hopper_run)"))
         q.add_argument("--force", action="store_true",
-                       help="overwrite the outputs of a previous run in DIR")
+                       help="replace the files of an earlier run in DIR (a run directory of "
+                       "fipy-hopper only; files of your own there are kept)")
         q.add_argument("--resume", action="store_true",
                        help="continue the interrupted run in DIR from its checkpoint")
         q.add_argument("--quiet", action="store_true",
@@ -104,11 +109,11 @@ def _parser() -> argparse.ArgumentParser:
     q = sub.add_parser("validate", help="check a configuration and print derived quantities",
                        description="Check CONFIG.toml and print the grid, the time step, the "
                        "wave speed, the fill mass, Beverloo's rate, Jenike's critical angle "
-                       "and the boundary (walls, corners, outlet, fill), drawn to "
-                       "geometry.png beside CONFIG.toml or in --out DIR.")
+                       "and the boundary (walls, corners, outlet, fill); it writes nothing, "
+                       "unless --picture names a PNG file to draw the boundary to.")
     q.add_argument("config", metavar="CONFIG.toml", help="configuration file (TOML)")
-    q.add_argument("--out", metavar="DIR", default=None,
-                   help="directory for geometry.png (default: the configuration's)")
+    q.add_argument("--picture", metavar="PATH.png", default=None,
+                   help="draw the boundary to this PNG file (default: no file is written)")
     return p
 
 
@@ -200,14 +205,21 @@ def _validate(args) -> int:
         lines[-1:-1] = _cohesion_lines(cfg, e)
     if cfg.numerics.formulation == "lagrangian":
         lines[1], lines[3] = _lagrangian_lines(cfg)
-    picture = Path(args.out if args.out is not None else Path(args.config).parent)
-    try:
-        picture.mkdir(parents=True, exist_ok=True)
-        picture = picture / "geometry.png"
-        cfg.boundary.draw(picture)
-    except OSError as exc:
-        return _error(f"cannot write {_short(picture)}: {exc.strerror or exc}", EXIT_BAD_INPUT)
-    lines.append(f"  boundary           drawn to {_short(picture)}")
+    if args.picture is not None:      # nothing is written unless asked
+        from .io import atomic_path
+        picture = Path(args.picture)
+        if picture.suffix.lower() != ".png":
+            return _error(f"--picture = {_short(args.picture)}: expected the name of a PNG "
+                          "file (ending in .png)", EXIT_BAD_INPUT)
+        try:
+            with atomic_path(picture) as tmp:
+                cfg.boundary.draw(tmp)
+        except OSError as exc:
+            return _error(f"cannot write {_short(picture)}: {exc.strerror or exc}",
+                          EXIT_BAD_INPUT)
+        lines.append(f"  boundary           drawn to {_short(picture)}")
+    else:
+        lines.append("  boundary")
     lines += ["    " + line for line in cfg.boundary.describe(cfg.material.density).split("\n")]
     print("\n".join(lines))
     return EXIT_OK
@@ -273,8 +285,8 @@ def _run(args, config, source=None) -> int:
     except (ConfigError, RunDirectoryError) as exc:
         return _error(exc, EXIT_BAD_INPUT)
     except api.PicturesInterrupted:
-        return _error(f"interrupted while drawing the pictures; the results of the run are "
-                      f"complete in {args.out}; draw its pictures with: {PROG} plot "
+        return _error(f"interrupted after the run finished; its results are complete in "
+                      f"{args.out}; draw its pictures with: {PROG} plot "
                       f"{shlex.quote(args.out)}", EXIT_INTERRUPTED)
     except KeyboardInterrupt:
         return _error(_interrupted_message(args.out, start, again), EXIT_INTERRUPTED)
@@ -285,6 +297,21 @@ def _run(args, config, source=None) -> int:
         where = f"; the traceback is in {log}" if log.is_file() else ""
         return _error(f"{kind}: {exc} (everything measured so far is in {args.out}{where})",
                       EXIT_FAILED)
+    try:
+        return _after_the_run(args, config, summary, again)
+    except KeyboardInterrupt:       # while printing: the run and its files are complete
+        if summary.get("stop_reason") == "wall_time_limit":
+            return _error(f"interrupted; the run had stopped at run.wall_time_limit with its "
+                          f"outputs in {args.out}; continue with: {again}", EXIT_INTERRUPTED)
+        return _error(f"interrupted after the run finished; its results are complete in "
+                      f"{args.out} (summary.json); draw its pictures again with: {PROG} plot "
+                      f"{shlex.quote(args.out)}", EXIT_INTERRUPTED)
+
+
+def _after_the_run(args, config, summary: dict, again: str) -> int:
+    """What ``run`` prints once a run has returned, and its exit code."""
+    from .io import RunDirectory
+
     if args.profile and not args.quiet:
         from .profiling import format_report
         report = json.loads((Path(args.out) / RunDirectory.PROFILE).read_text())
@@ -448,8 +475,9 @@ def main(argv=None) -> int:
         return exc.code if isinstance(exc.code, int) else EXIT_BAD_INPUT
     args.argv = argv
     if args.command is None:
-        parser.print_help()
-        return EXIT_BAD_INPUT
+        parser.print_usage(sys.stderr)
+        return _error("no command given; choose one of run, demo, plot, validate "
+                      f"({PROG} --help, or {PROG} COMMAND --help)", EXIT_BAD_INPUT)
     with warnings.catch_warnings():
         warnings.showwarning = _show_warning
         warnings.filterwarnings("default", category=ResolutionWarning)

@@ -179,6 +179,10 @@ MEMORY_BASE = 0.2e9                # bytes: Python, FiPy, numba and the compiled
 #: bytes a cell that the model and its state keep once the grid is built (measured,
 #: tracemalloc: 2.25 kB a cell at 18,414 and 72,346 cells, without markers and wall loads)
 MEMORY_KEPT_PER_CELL = 2.3e3
+#: The fill's surface lies at least this many cells above the outlet plane (a thinner fill
+#: has no cell of material at the wall: measured, a fill a tenth of a cell deep fails its
+#: run, one half a cell deep runs; two cells is the least the grid resolves).
+FILL_CELLS = 2
 #: Most explicit time steps a run may need.  Even at the cost of a step on a tiny grid
 #: (measured: 2,937 steps of a 624-cell hopper in 0.43 s, 0.15 ms a step) 1e9 steps take
 #: about two days; on the reference grid (0.5 ms a step) a week.  More cannot finish.
@@ -488,12 +492,42 @@ def _check_wall(key: str, wall: tuple, half: bool) -> None:
             raise ConfigError(f"{key}[{i}] = {_point_text(p)}: z = {p[1]:g} m is below the "
                               f"previous point's {wall[i - 1][1]:g} m; the wall must not "
                               f"descend from the lip to the top")
+    _check_wall_segments(key, wall)
     crossing = self_crossing(wall, closed=False)
     if crossing:
         i, j = crossing
         raise ConfigError(f"{key} crosses itself: its segment {i} {_point_text(wall[i])}-"
                           f"{_point_text(wall[i + 1])} meets segment {j} "
                           f"{_point_text(wall[j])}-{_point_text(wall[j + 1])}")
+
+
+def _check_wall_segments(key: str, wall: tuple) -> None:
+    """No segment of a wall along the outlet plane over the outlet (the lip is the wall's
+    point on ``z = 0`` nearest the outlet, or the outlet's width would be misread), and none
+    shorter than the least length of :data:`LENGTH_RANGE` (a sliver that no grid resolves,
+    which at the lip would be taken for the hopper's slope)."""
+    pts = np.asarray(wall, dtype=float)
+    left = key.endswith("left_wall")
+    lip = pts[0, 0]
+    over = np.flatnonzero((pts[1:, 1] == 0.0) & ((pts[1:, 0] > lip) if left
+                                                  else (pts[1:, 0] < lip))) + 1
+    if len(over):
+        i = int(over[0])
+        raise ConfigError(
+            f"{key}[{i}] = {_point_text(wall[i])}: the wall runs along the outlet plane, "
+            f"z = 0, over the outlet from its lip {key}[0] = {_point_text(wall[0])}; the lip is "
+            f"the wall's point on z = 0 nearest the outlet: start {key} there (allowed on "
+            f"z = 0: x {'<=' if left else '>='} {lip:g} m)")
+    lo, hi = LENGTH_RANGE
+    lengths = np.hypot(*np.diff(pts, axis=0).T)
+    short = np.flatnonzero(lengths < lo)
+    if len(short):
+        i = int(short[0])
+        raise ConfigError(
+            f"{key}: segment {i}, {_point_text(wall[i])} to {_point_text(wall[i + 1])}, is "
+            f"{lengths[i]:.3g} m long; allowed range is [{lo:g}, {hi:g}] m (a sliver no grid "
+            f"resolves, which at the lip would be taken for the hopper's slope): draw it as "
+            f"part of its neighbours")
 
 
 def _wall_x_at(wall: tuple, z: float) -> float:
@@ -504,7 +538,7 @@ def _wall_x_at(wall: tuple, z: float) -> float:
 
 def _check_profile(geom: "HopperGeometry") -> None:
     """Check a profile's walls and fill level; set its points and derived sizes."""
-    from .boundary import segments_meet
+    from .boundary import first_meeting, profile_rows, wall_x
 
     if geom.wall is None:
         raise ConfigError('hopper.wall is required for shape = "profile" ([[x, z], ...] in m, '
@@ -523,23 +557,26 @@ def _check_profile(geom: "HopperGeometry") -> None:
                               f"{_point_text(wall[0])}: the outlet has no width")
         for key, points, other, sign in (("hopper.left_wall", left, wall, 1.0),
                                          ("hopper.wall", wall, left, -1.0)):
-            for i, (x, z) in enumerate(points):
-                x_other = _wall_x_at(other, z)
-                if sign * (x_other - x) <= 0.0:
-                    raise ConfigError(
-                        f"{key}[{i}] = {_point_text((x, z))}: "
-                        f"{'right' if sign > 0 else 'left'} of (or on) the "
-                        f"{'right' if sign > 0 else 'left'} wall, at x = {x_other:g} m at "
-                        f"z = {z:g} m; the left wall must stay left of the right wall")
+            xz = np.asarray(points, dtype=float)
+            x_others = wall_x(xz[:, 1], profile_rows(other), other[0][0])   # all at once
+            bad = np.flatnonzero(sign * (x_others - xz[:, 0]) <= 0.0)
+            if len(bad):
+                i = int(bad[0])
+                (x, z), x_other = points[i], float(x_others[i])
+                raise ConfigError(
+                    f"{key}[{i}] = {_point_text((x, z))}: "
+                    f"{'right' if sign > 0 else 'left'} of (or on) the "
+                    f"{'right' if sign > 0 else 'left'} wall, at x = {x_other:g} m at "
+                    f"z = {z:g} m; the left wall must stay left of the right wall")
         top = max(wall[-1][1], left[-1][1])
         tall = [p + ((p[-1][0], top),) for p in (left, wall)]
-        for i in range(len(tall[0]) - 1):
-            for j in range(len(tall[1]) - 1):
-                if segments_meet(*tall[0][i:i + 2], *tall[1][j:j + 2]):
-                    raise ConfigError(
-                        f"hopper.left_wall crosses hopper.wall: its segment from "
-                        f"{_point_text(tall[0][i])} meets the right wall's from "
-                        f"{_point_text(tall[1][j])}; the left wall must stay left of it")
+        meet = first_meeting(tall[0][:-1], tall[0][1:], tall[1][:-1], tall[1][1:])
+        if meet is not None:
+            i, j = meet
+            raise ConfigError(
+                f"hopper.left_wall crosses hopper.wall: its segment from "
+                f"{_point_text(tall[0][i])} meets the right wall's from "
+                f"{_point_text(tall[1][j])}; the left wall must stay left of it")
         width = max(x for x, _ in wall) - min(x for x, _ in left)
         outlet = wall[0][0] - left[0][0]
     elif geom.left_wall is not None:    # (refused by _check_section)
@@ -559,12 +596,17 @@ def _check_profile(geom: "HopperGeometry") -> None:
                           f"{_interval(LENGTH_RANGE[0], top, unit=' m')}")
     _check_range("hopper.fill_level", level, LENGTH_RANGE[0], top, unit=" m")
     object.__setattr__(geom, "fill_level", level)
-    slope = next(p for p, q in zip(wall, wall[1:]) if p[0] != q[0])
-    nxt = wall[wall.index(slope) + 1]
+    # the hopper's slope: the lowest sloping segment of the wall (in a full section whose
+    # right wall rises straight up from its lip, of the left wall)
+    key, sloped = "hopper.wall", wall
+    if geom.full_section and all(p[0] == q[0] for p, q in zip(wall, wall[1:])):
+        key, sloped = "hopper.left_wall", geom.left_wall
+    slope, nxt = next((p, q) for p, q in zip(sloped, sloped[1:]) if p[0] != q[0])
     cone = _bin_bottom(wall)
-    if round(math.degrees(math.atan2(abs(nxt[0] - slope[0]), nxt[1] - slope[1])), 9) <= 0.0:
-        raise ConfigError(f"hopper.wall: the wall rises vertically from the lip at "
-                          f"{_point(wall[0])} (its first slope, {_point(slope)} to "
+    angle = round(math.degrees(math.atan2(abs(nxt[0] - slope[0]), nxt[1] - slope[1])), 9)
+    if angle <= 0.0:
+        raise ConfigError(f"{key}: the wall rises vertically from the lip at "
+                          f"{_point(sloped[0])} (its first slope, {_point(slope)} to "
                           f"{_point(nxt)}, is vertical to round-off): give the hopper or the "
                           f"floor a slope")
     from .boundary import hopper_shape
@@ -587,7 +629,7 @@ def _point(p) -> str:
 def _check_inserts(geom: "HopperGeometry") -> None:
     """Each insert: a table of ``outline`` (a closed polygon inside the walls, above the
     outlet plane, apart from the other inserts) and ``friction_angle_deg``."""
-    from .boundary import polygon_integrals, segments_meet, self_crossing
+    from .boundary import first_meeting, polygon_integrals, profile_rows, self_crossing, wall_x
 
     value = geom.inserts
     if isinstance(value, (str, bytes, dict)) or not isinstance(value, (list, tuple)):
@@ -597,6 +639,7 @@ def _check_inserts(geom: "HopperGeometry") -> None:
     walls = [("hopper.wall", geom.wall_points)] + (
         [] if half else [("hopper.left_wall", geom.left_wall)])
     top, done = geom.top, []
+    rows = {wkey: profile_rows(wall) for wkey, wall in walls}
     allowed = [f.name for f in fields(InsertConfig)]
     for m, item in enumerate(value):
         key = f"hopper.inserts[{m}]"
@@ -633,6 +676,8 @@ def _check_inserts(geom: "HopperGeometry") -> None:
                               f"meets the edge from {_point_text(pts[j])}")
         if polygon_integrals(pts)[0] == 0.0:       # (not reached: kept as the last guard)
             raise ConfigError(f"{outline} encloses no area: expected a closed polygon")
+        heights = np.asarray(pts, dtype=float)[:, 1]
+        x_walls = {wkey: wall_x(heights, rows[wkey], wall[0][0]) for wkey, wall in walls}
         for i, (x, z) in enumerate(pts):
             where = f"{outline}[{i}] = {_point_text((x, z))}"
             if z < 0.0:
@@ -645,7 +690,7 @@ def _check_inserts(geom: "HopperGeometry") -> None:
                                   f"an insert lies at x >= 0 (a body of revolution, or a bar "
                                   f"on the mid-plane)")
             for wkey, wall in walls:
-                x_wall = _wall_x_at(wall, z)
+                x_wall = float(x_walls[wkey][i])
                 if (x - x_wall) * (1.0 if wkey == "hopper.wall" else -1.0) >= 0.0:
                     raise ConfigError(f"{where}: in or on the wall ({wkey} is at x = "
                                       f"{x_wall:g} m at z = {z:g} m); an insert lies inside "
@@ -654,17 +699,17 @@ def _check_inserts(geom: "HopperGeometry") -> None:
         if half and sum(p[0] == 0.0 and q[0] == 0.0 for p, q in edges) > 1:
             raise ConfigError(f"{outline} lies along the axis with more than one edge; at "
                               f"most one")
+        ends = [p for p, _ in edges], [q for _, q in edges]
         for wkey, wall in walls:
-            for p, q in edges:
-                for k in range(len(wall) - 1):
-                    if segments_meet(p, q, wall[k], wall[k + 1]):
-                        raise ConfigError(f"{outline} cuts {wkey}: its edge from "
-                                          f"{_point_text(p)} to {_point_text(q)} meets the "
-                                          f"wall's segment {k}")
+            meet = first_meeting(*ends, wall[:-1], wall[1:])
+            if meet is not None:
+                (p, q), k = edges[meet[0]], meet[1]
+                raise ConfigError(f"{outline} cuts {wkey}: its edge from "
+                                  f"{_point_text(p)} to {_point_text(q)} meets the "
+                                  f"wall's segment {k}")
         from .boundary import inside_polygon
         for n, other in done:
-            if (any(segments_meet(p, q, r, s) for p, q in edges
-                    for r, s in zip(other, other[1:] + other[:1]))
+            if (first_meeting(*ends, other, other[1:] + other[:1]) is not None
                     or inside_polygon(pts[0][0], pts[0][1], np.asarray(other))
                     or inside_polygon(other[0][0], other[0][1], np.asarray(pts))):
                 raise ConfigError(f"{outline} overlaps hopper.inserts[{n}]; inserts must lie "
@@ -1058,6 +1103,7 @@ class HopperConfig:
                 f"{cells_across_outlet:.2f} cells across the outlet {across} "
                 f"({self.hopper.outlet_radius:g} m); at least 3 are needed "
                 f"(cell_size <= {self.hopper.outlet_radius / 3:.4g} m)")
+        self._check_fill_depth()
         if self.numerics.formulation == "lagrangian" and not self.hopper.axisymmetric:
             raise ConfigError('numerics.formulation = "lagrangian" models conical hoppers only; '
                               'a wedge (hopper.shape = "wedge") runs with "eulerian"')
@@ -1067,6 +1113,11 @@ class HopperConfig:
                               f'material; this {self.hopper.n_wall_segments}-segment wall'
                               f'{" with inserts" if self.hopper.inserts else ""} runs with '
                               '"eulerian"')
+        if self.numerics.formulation == "lagrangian" and self.hopper.fill_height <= 0.0:
+            raise ConfigError(f'numerics.formulation = "lagrangian" meshes a fill that reaches '
+                              f'the bin; hopper.fill_level = {self.hopper.fill_level:g} m is '
+                              f'at or below the transition, z = {self.hopper.cone_height:g} m '
+                              '(allowed range is above it); this fill runs with "eulerian"')
         if self.numerics.formulation == "lagrangian" and self.wall.segment_friction_deg \
                 and len(set(self.wall.segment_friction_deg)) > 1:
             raise ConfigError('numerics.formulation = "lagrangian" takes one wall friction '
@@ -1115,6 +1166,24 @@ class HopperConfig:
             warnings.warn(f"only {cells_across_outlet:.1f} cells across the outlet {across}; "
                           "6 or more are recommended for a discharge rate", ResolutionWarning,
                           stacklevel=3)
+
+    def _check_fill_depth(self) -> None:
+        """The fill's surface at least :data:`FILL_CELLS` cells above the outlet plane: a
+        thinner fill is not resolved by the grid (it has no cell of material at the wall to
+        measure, and its run fails)."""
+        geom, h = self.hopper, self.numerics.cell_size
+        least = FILL_CELLS * h
+        if geom.fill_level >= least:
+            return
+        if geom.shape == "profile":
+            key, value, low = "hopper.fill_level", geom.fill_level, least
+        else:
+            key, value, low = "hopper.fill_height", geom.fill_height, least - geom.cone_height
+        high = geom.top - (0.0 if geom.shape == "profile" else geom.cone_height)
+        raise ConfigError(
+            f"{key} = {value:g} m puts the fill's surface {geom.fill_level:g} m above the "
+            f"outlet plane, less than {FILL_CELLS} cells (numerics.cell_size = {h:g} m): the "
+            f"grid cannot resolve it; allowed range is [{_ceil_digits(low):.3g}, {high:g}] m")
 
     @cached_property
     def boundary(self):
@@ -1289,8 +1358,8 @@ class HopperConfig:
     def from_toml(cls, path: Union[str, Path]) -> "HopperConfig":
         """Read and validate a TOML file."""
         path = Path(path)
-        try:
-            text = path.read_text(encoding="utf-8")
+        try:       # UTF-8, with or without the byte-order mark some editors write first
+            text = path.read_text(encoding="utf-8-sig")
         except OSError as exc:
             raise ConfigError(f"cannot read configuration {path}: {exc.strerror}") from None
         except UnicodeDecodeError as exc:
@@ -1358,10 +1427,27 @@ class HopperConfig:
                                                        prefix=f"{name}."))
             if name == "hopper" and change:
                 _check_shape_keys({"shape": current.shape, **change})
+                if change.get("shape", current.shape) != current.shape:
+                    new[name] = _reshaped(current, change)
+                    continue
             new[name] = dataclasses.replace(current, **change) if change else current
         if sections:
             raise ConfigError(_unknown_message("section", next(iter(sections)), list(_SECTIONS)))
         return HopperConfig(**new)
+
+
+def _reshaped(current: HopperGeometry, change: dict) -> HopperGeometry:
+    """:meth:`HopperConfig.replace` to another ``hopper.shape``: the geometry of ``change``
+    with what the two shapes share carried over (between a cone and a wedge their half-angle
+    and heights; always the inserts; to a profile, the symmetry), never what belongs to the
+    old shape (a cone's symmetry into a wedge, a profile's points into a cone)."""
+    shared = ("half_angle_deg", "bin_height", "fill_height")
+    carried = {"inserts": current.inserts}
+    if change["shape"] == "profile":
+        carried["symmetry"] = current.symmetry
+    elif current.shape != "profile":
+        carried.update({key: getattr(current, key) for key in shared})
+    return HopperGeometry(**{**carried, **change})
 
 
 def _ceil_digits(x: float, digits: int = 3) -> float:

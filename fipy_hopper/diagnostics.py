@@ -640,7 +640,8 @@ class WallSampler:
         nb = len(self.centres)
         bins = self.bins.index(s)
         wsum = np.bincount(bins, w, nb)
-        mean = np.stack([np.bincount(bins, w * sig[:, k], nb) for k in range(4)], axis=1)
+        mean = np.stack([np.bincount(bins, w * sig[:, k], nb) for k in range(4)],
+                        axis=1).astype(float)       # (integers when no cell has material)
         ok = wsum > 0
         mean[ok] /= wsum[ok, None]
         mean[~ok] = np.nan

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -537,6 +538,28 @@ def _stacked_walker(cfg: HopperConfig, sigma_vt: float, slices: int, hopper_name
     return curves
 
 
+def _few_curves(curves: dict, most: int = 8) -> dict:
+    """Walker's stretch-by-stretch curves (:func:`_stacked_walker`) as one curve per mode
+    (stretches apart by a NaN) when there are more than ``most`` stretches: a wall drawn as
+    thousands of points would otherwise make thousands of lines and legend entries, which
+    take minutes to draw."""
+    stretch = re.compile(r"(Walker, .+) stretch \d+, (\w+)")
+    groups = {}
+    for name in curves:
+        match = stretch.fullmatch(name)
+        if match:
+            groups.setdefault(f"{match[1]} stretches, {match[2]}", []).append(name)
+    out = dict(curves)
+    for merged, names in groups.items():
+        if len(names) > most:
+            parts = sorted((curves[n] for n in names), key=lambda c: float(np.min(c[0])))
+            out[merged] = tuple(np.concatenate([np.append(np.asarray(c[k], float), np.nan)
+                                                for c in parts]) for k in (0, 1))
+            for name in names:
+                del out[name]
+    return out
+
+
 def wall_pressure(run):
     """The wall loads of a run against Janssen (bin), Walker (cone) and EN 1991-4.
 
@@ -626,7 +649,7 @@ def wall_pressure(run):
         ax_i.set_ylim(bottom=0.0)
         ax_i.legend(loc="best", fontsize=6.5)
         ax_i.set_title("Inserts (no closed form)", fontsize=10)
-    curves = theory_wall_pressure(cfg)
+    curves = _few_curves(theory_wall_pressure(cfg))
     if not discharged:               # a fill-only run: the theories at rest only
         curves = {k: v for k, v in curves.items() if not k.endswith("discharge")}
     for name, (s, p) in curves.items():

@@ -917,6 +917,11 @@ class Simulation:
                 fail(f"array {key[:60]!r} has shape {array.shape}, expected {shapes[key]}")
         if not all(is_number(t) for t in meta["schedules"]):
             fail("its schedule times are not numbers")
+        for s, t_next in zip(self.schedules, meta["schedules"]):     # when each runs next
+            high = meta["state"]["t"] + s.interval + 2.0 * self.model.dt + 1e-9
+            if not (math.isfinite(t_next) and 0.0 <= t_next <= high):
+                fail(f"its schedule time {t_next!r} is not a time of this run (allowed "
+                     f"range [0, {high:.6g}] s)")
 
     # -------------------------------------------------------------- results
     def summary(self) -> dict:

@@ -359,9 +359,9 @@ def test_validate_describes_and_draws_the_boundary(tmp_path, capsys):
     assert main(["validate", str(path)]) == 0
     out = capsys.readouterr().out
     assert "insert_1" in out and "outlet       x in [0, 0.03] m" in out
-    assert (tmp_path / "geometry.png").is_file()
-    assert main(["validate", str(path), "--out", str(tmp_path / "pictures")]) == 0
-    assert (tmp_path / "pictures" / "geometry.png").is_file()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["silo.toml"]   # nothing written
+    assert main(["validate", str(path), "--picture", str(tmp_path / "silo.png")]) == 0
+    assert (tmp_path / "silo.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
 # ---------------------------------------------------------------- configuration

@@ -275,6 +275,7 @@ def test_overwrite_refused_without_force(run_dir, capsys):
 def test_force_overwrites(tmp_path):
     out = tmp_path / "run"
     out.mkdir()
+    (out / "manifest.json").write_text('{"package": "fipy_hopper", "sessions": []}')
     (out / "summary.json").write_text("{}")
     (out / "notes.txt").write_text("mine")
     cfg = coarse_config(tmp_path)
