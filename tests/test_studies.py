@@ -400,6 +400,19 @@ def test_grain_size_study_writes_its_outputs(root):
     assert_png(out / "rate_vs_grain.png")
 
 
+def test_shear_band_study_measures_the_band_in_grains(root):
+    """The quick layers: the band is the grain size's (the same at both cells within 15 %,
+    wider in mm for the coarser grains), and the plain law's is one cell."""
+    out = root / "shear_band"
+    assert load("shear_band").main(["--quick", "--out", str(out)]) == 0
+    numbers = study_json(out)["numbers"]
+    for d in (1, 3):
+        assert numbers[f"band_change_pct_v0.5_d{d}mm"] < 15.0
+    assert numbers["band_mm_v0.5_d3mm"][-1] > numbers["band_mm_v0.5_d1mm"][-1]
+    assert all(c <= 1.01 for c in numbers["plain_band_cells_v0.5"])
+    assert_png(out / "shear_band.png")
+
+
 # ---------------------------------------------------------------- robustness
 def test_robustness_bands_are_evaluated_for_both_hoppers(robustness):
     bands = rows_of(robustness / "bands.csv")
@@ -607,6 +620,7 @@ def test_report_is_generated_from_the_outputs(root, flow_map, discharge, wall, c
                                       "convergence",
                                       "discharge_dynamics", "stiffness_spread",
                                       "robustness", "funnel_channel", "grain_size",
+                                      "shear_band",
                                       "element_tests",
                                       "lagrangian_vs_eulerian", "arching", "geometries"}
     assert "python studies/robustness.py" in (tmp_path / "partial.md").read_text()
