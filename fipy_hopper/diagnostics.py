@@ -1061,6 +1061,8 @@ def load_summary(sim) -> dict:
                  else theory.janssen_plane_wall_axial_force)
         out["janssen_wall_axial_compression_N_m"] = float(axial(
             depth, mat.density, 2.0 * classic.bin_x, K, mu))
+    elif classic is not None and mu > 0:     # filled below the bin: nothing in it to carry
+        out["janssen_wall_axial_compression_N_m"] = 0.0
     out.update(corners)
     if classic is None:           # no closed form for this silo: left out, not NaN
         del out["walker_switch_pressure_Pa"], out["janssen_wall_axial_compression_N_m"]
@@ -1105,7 +1107,8 @@ def corner_switch_peaks(rec, boundary, rows) -> list:
     largest recovered ``p_n`` (Pa) on the corner's wall within the silo's width at the
     corner's height (:meth:`~fipy_hopper.boundary.Boundary.span_at`: the bin's diameter at a
     hopper's transition) of it along the wall, and its arc length ``s`` (m); NaN without an
-    envelope."""
+    envelope, and none (NaN) at a corner at or above the fill level: the material never
+    switches there."""
     nan = (math.nan, math.nan)
     if "discharge_envelope" not in rec.wall:
         return [nan] * len(rows)
@@ -1113,6 +1116,9 @@ def corner_switch_peaks(rec, boundary, rows) -> list:
     names = np.asarray(rec.wall_names) if rec.wall_names else np.full(len(s), "wall")
     out = []
     for row in rows:
+        if row["z_m"] >= boundary.fill_level:
+            out.append(nan)
+            continue
         near = boundary.span_at(row["z_m"])
         zone = np.flatnonzero((names == row["wall"]) & (np.abs(s - row["s_m"]) <= near)
                               & np.isfinite(envelope))

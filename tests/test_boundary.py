@@ -391,8 +391,9 @@ def test_profiles_round_trip_through_toml(tmp_path):
 def test_a_profiles_shorthand_sizes_exist_only_for_the_shapes_they_describe():
     """A two-slope wall has no one half-angle, cone height or bin diameter (None, and not a
     silo the classic theories cover); the boundary gives every silo its sizes (width,
-    transition).  A cone under a bin drawn with a 1 um sliver at its lip is a cone: its
-    half-angle is the cone's by length, not the sliver's; a wall whose top slopes has none."""
+    transition).  A cone under a bin drawn with a 1.4 mm sliver at its lip (45 deg; shorter
+    ones are refused) is a cone: its half-angle is the cone's by length, not the sliver's; a
+    wall whose top slopes has none."""
     g = profile().hopper
     assert (g.bin_diameter, g.half_angle_deg, g.cone_height, g.bin_height, g.fill_height) == \
         (None,) * 5
@@ -400,8 +401,9 @@ def test_a_profiles_shorthand_sizes_exist_only_for_the_shapes_they_describe():
     assert g.boundary.transition_height() == 0.2 and g.boundary.hopper_shape is None
     assert g.axisymmetric and g.n_wall_segments == 3
     cone = [[0.03, 0.0], [0.15, 0.2], [0.15, 0.6]]
-    theta = math.degrees(math.atan2(0.12, 0.2))
-    for wall in (cone, [[0.03, 0.0], [0.030001, 0.000001]] + cone[1:]):
+    for wall, theta in ((cone, math.degrees(math.atan2(0.12, 0.2))),
+                        ([[0.03, 0.0], [0.031, 0.001]] + cone[1:],
+                         math.degrees(math.atan2(0.119, 0.199)))):
         c = profile(wall=wall).hopper
         assert c.classic and c.half_angle_deg == pytest.approx(theta, abs=1e-3)
         assert (c.bin_radius, c.cone_height, c.outlet_radius) == (0.15, 0.2, 0.03)

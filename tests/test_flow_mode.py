@@ -233,10 +233,11 @@ def test_a_stretch_without_samples_is_unknown_and_never_contradicts():
 
 
 def test_a_sliver_shorter_than_a_cell_enters_no_overall_call():
-    """A 1 um first segment at the lip (45 deg under a 31 deg cone): listed with its own calls
-    but not counted, so neither the simulated call nor Jenike's overall call is its."""
+    """A 1.4 mm first segment at the lip (45 deg under a 31 deg cone; shorter ones are
+    refused): listed with its own calls but not counted, so neither the simulated call nor
+    Jenike's overall call is its."""
     data = {"hopper": {"shape": "profile", "fill_level": 0.4, "wall": [
-        [0.03, 0.0], [0.030001, 0.000001], [0.15, 0.2], [0.15, 0.5]]},
+        [0.03, 0.0], [0.031, 0.001], [0.15, 0.2], [0.15, 0.5]]},
         "wall": {"friction_angle_deg": 15.0}, "material": {"friction_angle_deg": 40.0},
         "numerics": {"cell_size": 0.01}}
     stretches, call = _calls([[0.05, 0.5], [0.05, 0.6]], data=data)
