@@ -273,11 +273,68 @@ def build(root: Path, out: Path, copy: bool = True, only=None) -> dict:
                    f"python studies/element_tests.py --out {_display(root / name, out)}")
             lines.append(f"- `{name}`: `{cmd}`")
         lines.append("")
-    lines += body
+    moved = moved_section("\n".join(lines + body)) if only is None else kept_moved(out)
+    lines += moved + body
     from fipy_hopper.io import atomic_write_text
 
     atomic_write_text(out, "\n".join(lines).rstrip() + "\n")
     return {"present": present, "missing": missing, "path": out}
+
+
+#: the published numbers before the last change of the defaults (a copy of the
+#: ``headline.json`` of the report before it) and what explains each number that moved
+PREVIOUS = HERE / "previous_headline.json"
+MOVED = HERE / "moved.json"
+MOVED_TITLE = "## What moved since the previous report"
+
+
+def moved_section(report_text: str, previous=PREVIOUS, explanations=MOVED) -> list:
+    """The section that sets every published claim (``studies/headline.py``) of this report
+    beside the previous report's (``previous_headline.json``), with the explanation of each
+    one that moved (``moved.json``: ``{"change": what changed, "claims": {key: why}}``);
+    ``[]`` without a previous report.  A moved claim without an explanation says so."""
+    previous, explanations = Path(previous), Path(explanations)
+    if not previous.is_file():
+        return []
+    if str(HERE) not in sys.path:
+        sys.path.insert(0, str(HERE))
+    import headline
+
+    before = {c["key"]: c for c in json.loads(previous.read_text(encoding="utf-8"))["claims"]}
+    notes = (json.loads(explanations.read_text(encoding="utf-8"))
+             if explanations.is_file() else {})
+    try:
+        now = {c["key"]: c for c in headline.build(report_text)["claims"]}
+    except headline.HeadlineError as exc:       # a study still missing: no comparison yet
+        return [MOVED_TITLE, "", f"Not compared: {exc}.", ""]
+    rows = []
+    for key, claim in now.items():
+        old = before.get(key)
+        if old is None:
+            why, was = "a new claim", ""
+        else:
+            was = old["result"]
+            why = ("unchanged" if old.get("values") == claim.get("values") else
+                   notes.get("claims", {}).get(key, "**moved, not yet explained**"))
+        rows.append([claim["claim"], was, claim["result"], why])
+    made = before and next(iter(before.values())).get("study_commit", "")
+    lines = [MOVED_TITLE, "", notes.get("change", ""), "",
+             f"Each claim of the previous report (`studies/previous_headline.json`, its "
+             f"studies' commits as there{', e.g. ' + made if made else ''}) beside this one's, "
+             "and why it moved (`studies/moved.json`).", ""]
+    lines += table(["claim", "previous", "now", "why"], rows)
+    return lines + [""]
+
+
+def kept_moved(out: Path) -> list:
+    """The moved section of the report at ``out`` as it is (``--only`` keeps it)."""
+    if not Path(out).is_file():
+        return []
+    text = Path(out).read_text(encoding="utf-8")
+    if MOVED_TITLE not in text:
+        return []
+    chunk = text.split(MOVED_TITLE, 1)[1].split("\n## ", 1)[0]
+    return (MOVED_TITLE + chunk).rstrip("\n").split("\n") + [""]
 
 
 def _display(path: Path, out: Path) -> str:

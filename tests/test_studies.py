@@ -650,3 +650,29 @@ def test_report_rewrites_one_study_and_keeps_the_others(wall, tmp_path):
         assert (after[name] == before[name]) == (name != "wall_pressure"), name
     assert "Smoothness of p_n" in "\n".join(after["wall_pressure"][1])
     assert "setting **quick**" in "\n".join(after["wall_pressure"][1])
+
+
+def test_the_report_says_what_moved_and_why(tmp_path):
+    """Against a previous headline in which one claim had another number and one was
+    explained: the moved claim with its explanation, an unexplained one flagged, the others
+    unchanged (the committed report's own claims)."""
+    make_report = load("make_report")
+    report = (STUDIES / "REPORT.md").read_text(encoding="utf-8")
+    current = json.loads((STUDIES / "headline.json").read_text(encoding="utf-8"))
+    previous = json.loads(json.dumps(current))
+    a, b = previous["claims"][0], previous["claims"][1]
+    a["values"] = {"changed": True}
+    a["result"] = "an older result"
+    b["values"] = {"changed": True}
+    (tmp_path / "prev.json").write_text(json.dumps(previous))
+    (tmp_path / "moved.json").write_text(json.dumps(
+        {"change": "The default law changed.", "claims": {a["key"]: "because of the law"}}))
+    lines = make_report.moved_section(report, tmp_path / "prev.json", tmp_path / "moved.json")
+    text = "\n".join(lines)
+    assert text.startswith(make_report.MOVED_TITLE) and "The default law changed." in text
+    row_a = next(line for line in lines if line.startswith(f"| {a['claim']} |"))
+    assert "an older result" in row_a and "because of the law" in row_a
+    row_b = next(line for line in lines if line.startswith(f"| {b['claim']} |"))
+    assert "moved, not yet explained" in row_b
+    assert sum("| unchanged |" in line for line in lines) == len(current["claims"]) - 2
+    assert make_report.moved_section(report, tmp_path / "absent.json") == []
