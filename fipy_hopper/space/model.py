@@ -19,9 +19,11 @@ The sections' method (docs/physics_and_numerics.md, sections 3-7) on the 3D grid
 Masses, forces and momenta of the computed part (a quarter, a half or all of the silo) are
 reported for the whole silo by ``section_factor`` (4, 2, 1) where a method says so.
 
-Not yet: markers, layers, the opening iris (the plate goes at once), the wall-load
-diagnostics, the loop of :mod:`fipy_hopper.simulation`; the methods of the model protocol that
-the diagnostics use raise ``NotImplementedError``.
+The model implements :class:`fipy_hopper.protocol.HopperModelProtocol` and the methods the
+loop and the diagnostics call beyond it (``contact_slip``, ``bin_lateral_stress_ratio``,
+``material``); the wall loads and flow measures are 3D (:mod:`fipy_hopper.space.wall`,
+:mod:`fipy_hopper.space.flow`).  Not yet: markers, layers, the opening iris (the plate goes at
+once), the loop of :mod:`fipy_hopper.simulation` (:mod:`fipy_hopper.space.run` drives it).
 """
 
 from __future__ import annotations
@@ -141,6 +143,7 @@ class SpaceModel:
         self.open_y = g.aperture_y > 0
         self.open_x = g.aperture_x > 0
         self._mass, self._mass_of = None, None
+        self._wall_loads = None
         self._prm = self.law.kernel_parameters()
         n = g.n_cells
         self._work = (np.zeros((8, 3) + g.kappa.shape), np.empty((n, 6)), np.empty((n, 6)),
@@ -220,29 +223,86 @@ class SpaceModel:
     def reset_caches(self) -> None:
         self._mass = None
 
+    # ------------------------------------------------------------------ diagnostics
+    @property
+    def material(self):
+        """The constitutive law (the loop's fingerprint reads it)."""
+        return self.law
+
+    @property
+    def wall_loads(self):
+        """The wall's patches, the entries and cells located on them and the load maps
+        (:class:`fipy_hopper.space.wall.SpaceWallLoads`; built once)."""
+        if self._wall_loads is None:
+            from .wall import SpaceWallLoads
+            self._wall_loads = SpaceWallLoads(self)
+        return self._wall_loads
+
     def summary_extras(self, state) -> dict:
+        """The 3D keys of a run's summary: ``dimensions``, ``outlet_offset_m``,
+        ``mirror_factor`` (the computed part to the whole silo), ``wall_sectors``."""
         return {"dimensions": 3, "outlet_offset_m": self.boundary.outlet_offset,
-                "mirror_factor": self.section_factor}
+                "mirror_factor": self.section_factor, "wall_sectors": self.cfg.wall_sectors}
 
     def wall_entries(self) -> tuple:
-        """``(z, normal (n, 3), segment)`` of the rows of ``state.wall_impulse``: the height of
-        the entry's node (m), its contact normal and the profile's segment (-1 a tube, -2 the
-        lip)."""
+        """``(s, normal, segment)`` of the rows of ``state.wall_impulse``: the arc length
+        along the wall profile's meridian of the entry's wall point (m,
+        :mod:`fipy_hopper.space.wall`), its contact normal ``(n, 3)`` and the profile's
+        segment of its constraint (-1 the tube, -2 a convex corner: the lip).  Its angle
+        around the circumference: :meth:`wall_theta`."""
+        W = self.wall_loads
         nodes, ptr, normal, _, kind, entry, segment = self.contacts[:7]
-        counts = np.diff(ptr)
-        node_of = np.repeat(np.arange(len(nodes)), counts)
-        wall = kind == 0
-        z = np.empty(self.n_wall)
         nrm = np.empty((self.n_wall, 3))
-        z[entry[wall]] = self.grid.z_nodes[nodes[node_of[wall], 0]]
-        nrm[entry[wall]] = normal[wall]
-        return z, nrm, segment
+        nrm[entry[kind == 0]] = normal[kind == 0]
+        return W.entry_s, nrm, segment
 
-    def _not_yet(self, *args, **kwargs):
-        raise NotImplementedError("the 3D model's wall-load and flow-mode diagnostics are a "
-                                  "later step")
+    def wall_theta(self) -> np.ndarray:
+        """The angle (deg) around its part's axis of each wall entry's wall point
+        (:mod:`fipy_hopper.space.wall`: 0 towards the outlet's offset, +y positive)."""
+        return np.degrees(self.wall_loads.entry_theta)
 
-    wall_load_rows = wall_stress_points = flow_mode_measures = empty_channel = _not_yet
+    def wall_load_rows(self) -> np.ndarray:
+        """The profile's segment whose load each wall entry is (the lip's: the cone's or
+        floor's; -1 for the tube's entries, which are no load)."""
+        return self.wall_loads.entry_segment
+
+    def wall_stress_points(self, state) -> tuple:
+        """``(position, weight, sigma)`` of the cells 0.5 to 2.5 cells inside the material
+        from the wall: the arc length ``s`` of the nearest wall point along the meridian (m),
+        the weight ``alpha kappa V`` where ``alpha > 1/2`` (else 0) and the stress (six
+        components, Pa).  Their angles: :meth:`wall_stress_theta`."""
+        cells = self.wall_loads._wall_band()
+        flat = cells[0]
+        alpha = state.alpha.ravel()[flat]
+        w = np.where(alpha > 0.5, (state.alpha * self.open_volume).ravel()[flat], 0.0)
+        return cells[2], w, state.sigma.reshape(-1, 6)[flat]
+
+    def wall_stress_theta(self) -> np.ndarray:
+        """The angles (deg) of the cells of :meth:`wall_stress_points`."""
+        return np.degrees(self.wall_loads._wall_band()[3])
+
+    def contact_slip(self, state) -> tuple:
+        """``(slip, axis_speed)`` (m/s) of every wall entry
+        (:func:`fipy_hopper.space.flow.contact_slip`)."""
+        from .flow import contact_slip
+        return contact_slip(self, state)
+
+    def flow_mode_measures(self, state, rule) -> tuple:
+        """``(mass-flow index, stagnant fraction)``
+        (:func:`fipy_hopper.space.flow.flow_mode_measures`)."""
+        from .flow import flow_mode_measures
+        return flow_mode_measures(self, state, rule)
+
+    def empty_channel(self, state, rule) -> tuple:
+        """``(diameter, height)`` (m) of an empty channel
+        (:func:`fipy_hopper.space.flow.empty_channel`)."""
+        from .flow import empty_channel
+        return empty_channel(self, state, rule)
+
+    def bin_lateral_stress_ratio(self, state) -> float:
+        """:func:`fipy_hopper.space.flow.bin_lateral_stress_ratio`."""
+        from .flow import bin_lateral_stress_ratio
+        return bin_lateral_stress_ratio(self, state)
 
     # ------------------------------------------------------------------ steps
     def advance(self, state: SpaceState, max_steps: int) -> int:
