@@ -31,8 +31,10 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
+from .. import resources
 from ..material import principal3d as p3
 from ..material.mohr_coulomb import APEX
 from ..transport import material_rows
@@ -88,14 +90,18 @@ class SpaceState:
 class SpaceModel:
     """The 3D silo of a :class:`~fipy_hopper.space.config.SpaceConfig` on its grid.
     ``backend``: ``"numba"`` (:mod:`fipy_hopper.space.stepping`, the compiled transport) or
-    ``"numpy"`` (the reference of every part of a step)."""
+    ``"numpy"`` (the reference of every part of a step); ``threads`` the compiled steps'
+    numba threads."""
 
     formulation = "eulerian"
 
-    def __init__(self, cfg: SpaceConfig, backend: str = "numba"):
+    def __init__(self, cfg: SpaceConfig, backend: str = "numba", threads: int | None = None):
         if backend not in ("numba", "numpy"):
             raise ValueError(f"backend must be 'numba' or 'numpy', not {backend!r}")
         self.cfg, self.backend = cfg, backend
+        #: numba threads of the compiled steps (default: one per core this process may use,
+        #: :func:`fipy_hopper.resources.thread_limit`); the results do not depend on them
+        self.threads = int(threads) if threads else resources.thread_limit()
         num = cfg.numerics
         self.boundary = SiloBoundary.from_geometry(
             cfg.hopper, cfg.outlet_offset, cfg.wall.friction_angle_deg,
@@ -148,6 +154,8 @@ class SpaceModel:
         n = g.n_cells
         self._work = (np.zeros((8, 3) + g.kappa.shape), np.empty((n, 6)), np.empty((n, 6)),
                       np.empty((n, 6)), np.empty((n, 6)), np.empty(n, np.int8))
+        self._node_budget = np.zeros(((g.nz + 1) * (g.ny + 1) * (g.nx + 1), 3))
+        self._plane_top = np.zeros(g.nz + 1)
 
     # ------------------------------------------------------------------ the protocol's sizes
     @property
@@ -317,6 +325,8 @@ class SpaceModel:
                     return n + 1
             return max_steps
         g, num = self.grid, self.cfg.numerics
+        if numba.get_num_threads() != self.threads:
+            numba.set_num_threads(self.threads)
         mass = self.node_mass(state)
         carry = np.argwhere(state.alpha != 0.0).astype(np.int64)
         loaded = np.argwhere(state.alpha >= num.alpha_min).astype(np.int64)
@@ -349,7 +359,8 @@ class SpaceModel:
             self.light_mass, num.alpha_min, self.bulk_viscosity, num.transport_cfl,
             num.max_transport_interval, normal, mu, kind, entry, state.plate_closed,
             g.mirror_x, g.mirror_y, state.wall_impulse, state.plate_impulse,
-            state.momentum_budget, contrib, *self._work[1:])
+            state.momentum_budget, contrib, *self._work[1:], self._node_budget[:len(nodes)],
+            self._plane_top, self.threads)
         state.t, state.step, state.flux_time = float(clock[0]), state.step + int(done), \
             float(clock[2])
         if due:
