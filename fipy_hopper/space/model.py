@@ -44,7 +44,7 @@ from . import stepping
 from .boundary import SiloBoundary
 from .config import SpaceConfig
 from .grid import build_grid
-from .transport import SpaceTransport
+from .transport import SpaceTransport, dual_momentum_transport_compiled
 
 GRAVITY = 9.81
 #: the carried fields, alpha-weighted but alpha itself
@@ -484,10 +484,20 @@ class SpaceModel:
         mass_old = self.node_mass(state)
         mass_new = sm.node_mass(self.rho, new_alpha, self.open_volume)
         nzf, nyf, _ = g.n_faces
-        state.v, outflow, stopped = dual_momentum_transport(
-            state.v, mass_old, mass_new, oriented[:nzf].reshape(g.aperture_z.shape),
-            oriented[nzf:nzf + nyf].reshape(g.aperture_y.shape),
-            oriented[nzf + nyf:].reshape(g.aperture_x.shape), self.rho, self.light_mass)
+        fluxes = (oriented[:nzf].reshape(g.aperture_z.shape),
+                  oriented[nzf:nzf + nyf].reshape(g.aperture_y.shape),
+                  oriented[nzf + nyf:].reshape(g.aperture_x.shape))
+        if self.backend == "numba":
+            lo = [material_rows(x.reshape(g.nz, -1), margin=1) for x in (a, new_alpha)]
+            lo = [r for r in lo if r[1] > r[0]]
+            node_rows = ((min(r[0] for r in lo), max(r[1] for r in lo) + 1) if lo
+                         else (0, 0))
+            state.v, outflow, stopped = dual_momentum_transport_compiled(
+                state.v, mass_old, mass_new, *fluxes, self.rho, self.light_mass, node_rows,
+                self.threads)
+        else:
+            state.v, outflow, stopped = dual_momentum_transport(
+                state.v, mass_old, mass_new, *fluxes, self.rho, self.light_mass)
         state.momentum_budget[2] += stopped
         state.momentum_budget[3] += outflow
         state.alpha, state.sigma, state.eps_p, state.loose = new_alpha, sigma, eps_p, loose
