@@ -231,12 +231,14 @@ class StretchMap:
 
     def coefficients(self, s, theta, force) -> np.ndarray:
         """Spline coefficients ``(n_s_basis, n_theta, 3)`` (Pa) of forces ``force`` (n, 3)
-        (N) at wall points ``(s, theta)``."""
+        (N) at wall points ``(s, theta)`` (0 for a basis function with no wall under it: the
+        part of a carried-on floor beyond the bin)."""
         from ..wall_traction import design
         bs = design(self.knot_vector, s).toarray()                    # (n, ks)
         bt = periodic_cubic(theta, self.n_theta)                       # (n, kt)
         shares = np.einsum("ek,el,ec->klc", bs, bt, np.asarray(force, float))
-        return shares / self.basis_area[..., None]
+        area = self.basis_area[..., None]
+        return np.where(area > 0, shares / np.where(area > 0, area, 1.0), 0.0)
 
     def patch_integrals(self, coefficients) -> np.ndarray:
         """``int int t r J ds dtheta`` of the traction over every (local bin, sector):
