@@ -43,7 +43,9 @@ class SpaceRecord:
     """What a run measured (SI, whole silo): the fill (``fill_time``, ``fill_at_rest``, the
     ``rest`` window's two readings), the discharge's samples (``t`` since the opening,
     ``mass_in_hopper``, ``discharged``, ``rate``), the load ``windows`` (stage -> (start,
-    end) readings), the discharge ``envelope`` of the patches' pressure (n_bins, n_sectors),
+    end) readings; ``"filling"`` the rest window), the stress-sampled maps at each window's
+    end (``stress``: stage -> ``(p_n, tau, tau_theta)``), the discharge ``envelope`` of the
+    patches' recovered pressure (n_bins, n_sectors),
     the flow-mode samples (``wall_slip``: per sample the slip ratio per sector), the
     ``stop_reason``, the steps and the wall time."""
 
@@ -56,6 +58,7 @@ class SpaceRecord:
     discharged: list = field(default_factory=list)
     rate: list = field(default_factory=list)
     windows: dict = field(default_factory=dict)
+    stress: dict = field(default_factory=dict)
     envelope: np.ndarray = None
     envelope_windows: int = 0
     wall_slip: list = field(default_factory=list)
@@ -122,6 +125,8 @@ class SpaceRun:
                 break
         m.transport_step(st)
         rec.fill_time, rec.rest = st.t, window
+        rec.windows["filling"] = window
+        rec.stress["filling"] = self.loads.stress_maps(st)
         return rec.fill_at_rest
 
     def discharge(self) -> str:
@@ -160,6 +165,7 @@ class SpaceRun:
             for stage in list(open_windows):
                 if st.t - open_windows[stage]["t"] >= window - 1e-12:
                     rec.windows[stage] = (open_windows.pop(stage), self.loads.reading(m, st))
+                    rec.stress[stage] = self.loads.stress_maps(st)
             if st.t - envelope_start["t"] >= window - 1e-12:
                 current = self.loads.reading(m, st)
                 p_n = self.loads.maps(envelope_start, current)[0]
@@ -184,6 +190,7 @@ class SpaceRun:
         for stage, start in open_windows.items():      # cut short by the end
             if st.t > start["t"]:
                 rec.windows[stage] = (start, self.loads.reading(m, st))
+                rec.stress[stage] = self.loads.stress_maps(st)
         rec.stop_reason = reason
         self._callbacks(force=True)
         return reason
