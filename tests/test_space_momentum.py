@@ -151,5 +151,5 @@ def test_compiled_forces_and_node_update_equal_the_numpy_reference_to_the_bit():
     none = np.zeros((0, 3))
     stepping.node_update(nodes, len(nodes), vc, m, contrib, gravity, dt, 0.0, light, none,
                          np.zeros(0), np.zeros(0, np.int8), np.zeros(0, np.int64), True, False,
-                         False, none, none, np.zeros(4))
+                         False, none, none, np.zeros(4), np.zeros((len(nodes), 3)))
     assert np.array_equal(vc, ref)
