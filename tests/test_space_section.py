@@ -153,8 +153,9 @@ def test_flow_mode_by_sector_is_the_sections(space_run, section_run):
 
 def test_outputs_of_a_run(space_run, tmp_path):
     """The run's files: ``wall_pressure.csv`` with a row per stage, height bin and sector
-    (``theta_deg`` beside ``s_m``), ``wall_extremes.csv``, ``summary.json`` with the
-    circumference's extremes and the flow mode per sector; a field snapshot of the whole silo
+    (``theta_deg`` beside ``s_m``), ``wall_extremes.csv``, ``loads.csv`` (the vertical
+    balance over every interval closes to 1e-9 of the weight, filling and discharge),
+    ``summary.json`` with the circumference's extremes and the flow mode per sector; a field snapshot of the whole silo
     as hexahedra (four times the quarter's open cells, every one positively oriented, the
     mass of the model's state to 1e-9, a ``.pvd`` index); the three pictures."""
     import json
@@ -177,6 +178,9 @@ def test_outputs_of_a_run(space_run, tmp_path):
     assert summary["dimensions"] == 3 and len(summary["flow_mode_by_sector"]) == 12
     assert summary["filling_wall_pressure_max_over_min_largest"] < 1.03
     assert summary["mass_balance_error"] < 1e-9
+    assert summary["load_balance_residual_max"] < 1e-9           # every row of loads.csv
+    loads = read_csv(tmp_path / "loads.csv")
+    assert {"filling", "discharge"} <= set(loads["stage"])
     writer = output.SpaceFieldWriter(tmp_path / "fields", run.model)
     path = writer.write(run.state)
     writer.write(run.state)

@@ -31,6 +31,13 @@ WALL_PRESSURE_COLUMNS = ("stage", "wall", "t_s", "s_m", "r_m", "z_m", "theta_deg
 EXTREMES_COLUMNS = ("stage", "s_m", "z_m", "p_max_Pa", "theta_max_deg", "p_min_Pa",
                     "theta_min_deg", "max_over_min")
 TIMESERIES_COLUMNS = ("t_s", "mass_in_hopper_kg", "discharged_kg", "discharge_rate_kg_s")
+#: Columns of ``loads.csv``: the sections' (``fipy_hopper.io.LOADS_COLUMNS``), the vertical
+#: momentum balance over each interval as mean forces (N, whole silo, upward positive)
+LOADS_COLUMNS = ("stage", "t_s", "weight_N", "wall_vertical_N", "outlet_N", "damping_N",
+                 "light_nodes_N", "momentum_outflow_N", "momentum_rate_N", "residual_N",
+                 "relative_residual")
+_LOADS_KEYS = ("weight", "wall", "outlet", "damping", "stopped", "outflow", "momentum_rate",
+               "residual", "relative_residual")
 #: The stages of the wall loads, in the order written (the sections' ``WALL_STAGES``).
 STAGES = ("filling", "early_discharge", "mid_discharge", "discharge_envelope")
 
@@ -124,10 +131,18 @@ def write_timeseries(path, run) -> None:
     _write_csv(path, TIMESERIES_COLUMNS, rows)
 
 
+def write_loads(path, run) -> None:
+    """``loads.csv`` of the run's balance rows (:data:`LOADS_COLUMNS`)."""
+    rows = [[row["stage"], _num(row["t_s"])] + [_num(row[k]) for k in _LOADS_KEYS]
+            for row in run.record.loads]
+    _write_csv(path, LOADS_COLUMNS, rows)
+
+
 def summary(run, flow_rule=diagnostics.FlowModeRule()) -> dict:
     """The run's headline numbers: the sections' rate, mass balance, fill and rest-balance
     keys (``steady_discharge_rate_kg_s``, ``mass_balance_error``, ``fill_weight_N``,
-    ``fill_wall_vertical_N``, ``fill_outlet_N``, ``fill_equilibrium_residual``, ...), the
+    ``fill_wall_vertical_N``, ``fill_outlet_N``, ``fill_equilibrium_residual``,
+    ``load_balance_residual_max`` over the rows of ``loads.csv``, ...), the
     wall's largest and smallest pressure around the circumference at each stage
     (``wall_pressure_max_Pa``, ``..._min_Pa``, ``..._max_over_min`` per height bin, and the
     largest ratio over the bins ``wall_pressure_max_over_min``), the flow-mode call per sector
@@ -147,6 +162,9 @@ def summary(run, flow_rule=diagnostics.FlowModeRule()) -> dict:
            "stop_reason": rec.stop_reason, "cells": m.n_cells, "steps": st.step, "dt_s": m.dt,
            "cell_size_m": m.cell_size, "wall_time_s": rec.wall_time,
            "gravity_ramp_time_s": m.ramp_time}
+    residuals = [r["relative_residual"] for r in rec.loads
+                 if math.isfinite(r["relative_residual"])]
+    out["load_balance_residual_max"] = float(max(residuals)) if residuals else math.nan
     if rec.rest:
         bal = run.loads.balance(*rec.rest)
         out.update(fill_weight_N=bal["weight"], fill_wall_vertical_N=bal["wall"],
@@ -173,13 +191,14 @@ def summary(run, flow_rule=diagnostics.FlowModeRule()) -> dict:
 
 
 def write_run(folder, run) -> Path:
-    """Write ``wall_pressure.csv``, ``wall_extremes.csv``, ``timeseries.csv`` and
-    ``summary.json`` of a run into ``folder``; returns the folder."""
+    """Write ``wall_pressure.csv``, ``wall_extremes.csv``, ``timeseries.csv``, ``loads.csv``
+    and ``summary.json`` of a run into ``folder``; returns the folder."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     write_wall_pressure(folder / "wall_pressure.csv", run)
     write_extremes(folder / "wall_extremes.csv", run)
     write_timeseries(folder / "timeseries.csv", run)
+    write_loads(folder / "loads.csv", run)
     write_json(folder / "summary.json", summary(run))
     return folder
 

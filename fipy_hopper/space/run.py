@@ -46,7 +46,9 @@ class SpaceRecord:
     end) readings; ``"filling"`` the rest window), the stress-sampled maps at each window's
     end (``stress``: stage -> ``(p_n, tau, tau_theta)``), the discharge ``envelope`` of the
     patches' recovered pressure (n_bins, n_sectors),
-    the flow-mode samples (``wall_slip``: per sample the slip ratio per sector), the
+    the flow-mode samples (``wall_slip``: per sample the slip ratio per sector), the vertical
+    balance over every check interval of the fill and every sample interval of the discharge
+    (``loads``: rows of :meth:`SpaceWallLoads.balance` with ``stage`` and ``t_s``), the
     ``stop_reason``, the steps and the wall time."""
 
     fill_time: float = math.nan
@@ -62,6 +64,7 @@ class SpaceRecord:
     envelope: np.ndarray = None
     envelope_windows: int = 0
     wall_slip: list = field(default_factory=list)
+    loads: list = field(default_factory=list)
     stop_reason: str = ""
     steps: int = 0
     wall_time: float = 0.0
@@ -114,6 +117,7 @@ class SpaceRun:
             self._callbacks()
             current = self.loads.reading(m, st)
             balance = self.loads.balance(previous, current)
+            rec.loads.append({"stage": "filling", "t_s": current["t"], **balance})
             window = (previous, current)
             previous = current
             if (st.t >= m.ramp_time and m.kinetic_energy(st) < threshold
@@ -140,7 +144,7 @@ class SpaceRun:
         self._sample()
         next_sample = st.t + run.output_interval
         envelope_start = self.loads.reading(m, st)
-        slip_start = envelope_start
+        slip_start = sample_start = envelope_start
         open_windows = {}
         every = max(1, int(DISCHARGE_CHECK / m.dt))
         n_rest = max(1, int(round(AT_REST_WINDOW / run.output_interval)))
@@ -148,6 +152,10 @@ class SpaceRun:
             self._advance_to(next_sample, every)
             if st.t >= next_sample - 1e-12:
                 self._sample()
+                current = self.loads.reading(m, st)
+                rec.loads.append({"stage": "discharge", "t_s": current["t"],
+                                  **self.loads.balance(sample_start, current)})
+                sample_start = current
                 if self.flow_samples:
                     from .flow import wall_slip_by_sector
                     rec.wall_slip.append(wall_slip_by_sector(self, slip_start))
