@@ -42,11 +42,12 @@ def section_run():
 
 
 def test_fill_comes_to_rest_like_the_section(space_run, section_run):
-    """Both fills come to rest by the loop's rule at the same step (measured 0.1534 s,
-    1364 steps): the same gravity ramp and the same criteria, imported."""
+    """Both fills come to rest by the loop's rule within one check interval (5 ms) of each
+    other (measured: at the same step, 0.1534 s, 1364 steps): the same gravity ramp and the
+    same criteria, imported."""
     rec = space_run.record
     assert rec.fill_at_rest and section_run.record.fill_at_rest
-    assert rec.fill_time == pytest.approx(section_run.record.fill_time, abs=0.01)
+    assert rec.fill_time == pytest.approx(section_run.record.fill_time, abs=0.005)
 
 
 def test_vertical_balance_at_rest(space_run):
