@@ -52,19 +52,56 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..diagnostics import KNOT_CELLS
-from ..wall_traction import WallStretch, bin_edges
+from ..wall_traction import bin_edges
 
 
 
 @dataclass(frozen=True)
-class WallStretch3:
-    """A stretch of the wall of revolution: the meridian's straight ``stretch``
-    (:class:`~fipy_hopper.wall_traction.WallStretch`, ``(r, z)`` about its part's axis, ``s``
-    the profile's arc length), the index of the ``part`` it belongs to and whether its
-    patches are clipped to the bin's cylinder (the carried-on floor of a flat-bottomed silo
-    with an off-centre outlet)."""
+class Meridian:
+    """A straight stretch of the wall's meridian from ``start`` to ``end`` (``(r, z)`` about
+    its part's axis, m), the profile's arc length ``s_start`` at ``start`` (m) and the
+    profile's ``segment``; the solid on its right (a wall followed up from its lip)."""
 
-    stretch: WallStretch
+    start: tuple
+    end: tuple
+    s_start: float
+    segment: int
+
+    @property
+    def length(self) -> float:
+        return float(math.hypot(self.end[0] - self.start[0], self.end[1] - self.start[1]))
+
+    @property
+    def s_end(self) -> float:
+        return self.s_start + self.length
+
+    @property
+    def tangent(self) -> np.ndarray:
+        """Unit tangent from ``start`` to ``end`` (up the wall)."""
+        d = np.subtract(self.end, self.start, dtype=float)
+        return d / np.hypot(*d)
+
+    @property
+    def normal(self) -> np.ndarray:
+        """Unit normal into the wall: the tangent turned clockwise."""
+        t = self.tangent
+        return np.array([t[1], -t[0]])
+
+    def point(self, s):
+        """``(r, z)`` of the meridian's point at arc length ``s`` (m)."""
+        u = np.asarray(s, float) - self.s_start
+        t = self.tangent
+        return self.start[0] + u * t[0], self.start[1] + u * t[1]
+
+
+@dataclass(frozen=True)
+class WallStretch3:
+    """A stretch of the wall of revolution: its meridian's straight ``stretch``
+    (:class:`Meridian`), the index of the ``part`` it belongs to and whether its patches are
+    clipped to the bin's cylinder (the carried-on floor of a flat-bottomed silo with an
+    off-centre outlet)."""
+
+    stretch: Meridian
     part: int
     clip_radius: float = math.inf
 
@@ -91,8 +128,7 @@ def wall_stretches(boundary, fill_level: float) -> list:
                 clip = radius
             else:
                 part = 1
-        out.append(WallStretch3(WallStretch(tuple(a), tuple(b), float(s_at[k]), True, "wall",
-                                            k, 1), part, clip))
+        out.append(WallStretch3(Meridian(tuple(a), tuple(b), float(s_at[k]), k), part, clip))
     return out
 
 
