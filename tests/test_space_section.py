@@ -156,9 +156,10 @@ def test_outputs_of_a_run(space_run, tmp_path):
     """The run's files: ``wall_pressure.csv`` with a row per stage, height bin and sector
     (``theta_deg`` beside ``s_m``), ``wall_extremes.csv``, ``loads.csv`` (the vertical
     balance over every interval closes to 1e-9 of the weight, filling and discharge),
-    ``summary.json`` with the circumference's extremes and the flow mode per sector; a field snapshot of the whole silo
-    as hexahedra (four times the quarter's open cells, every one positively oriented, the
-    mass of the model's state to 1e-9, a ``.pvd`` index); the three pictures."""
+    ``summary.json`` with the circumference's extremes and the flow mode per sector; a field
+    snapshot of the whole silo as hexahedra (four times the quarter's open cells, every one
+    positively oriented, the mass of the model's state to 1e-9, a ``.pvd`` index); the three
+    pictures."""
     import json
 
     from fipy_hopper.io import read_csv, read_vtu
