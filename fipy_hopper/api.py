@@ -33,7 +33,7 @@ from . import io as fio
 from . import resources
 
 __all__ = ["load_config", "run", "read_results", "Results", "expected_quantities",
-           "make_model"]
+           "make_model", "UnfinishedRunWarning", "ResultsError"]
 
 
 def load_config(path: Union[str, os.PathLike]) -> HopperConfig:
@@ -61,57 +61,78 @@ def _resolve(config_or_path) -> tuple:
 def expected_quantities(cfg: HopperConfig) -> dict:
     """What theory and the numerics say about a configuration before it runs.
 
-    ``beverloo_rate_kg_s`` is Beverloo's flat-bottom rate (C = 0.58, k d = 0) times the
-    Rose-Tanaka hopper factor of the cone; ``jenike_critical_half_angle_deg`` uses the internal
-    friction angle as the effective angle of internal friction; ``fill_mass_kg`` is the density
-    times the filled volume (3D).  For a wedge the masses and rates are per metre of length
-    (the keys keep their names here; :func:`per_metre` renames them for the files): Beverloo's
-    slot rate (C' = 1.03, no hopper factor: ``rose_tanaka_factor`` is 1) and Jenike's
-    plane-flow angle (the conical one plus 10 deg, :func:`theory.jenike_critical_half_angle_plane`).
+    Every silo: ``fill_mass_kg`` (the density times the filled volume, 3D),
+    ``p_wave_speed_m_s``, ``transition_height_m`` (of the wall's transition,
+    :meth:`~fipy_hopper.boundary.Boundary.transition_height`), ``beverloo_flat_rate_kg_s``
+    (Beverloo's rate through the outlet in a flat floor, C = 0.58, k = 1.5 with the
+    material's grain diameter d; for a plane silo the slot rate, C' = 1.03, per metre),
+    ``outlet_grains`` (the outlet's diameter, or a slot's width, in grain diameters), ``expected_discharge_time_s`` (the fill mass
+    at the rate below, else at that one: an order of magnitude), and ``jenike_flow_mode``,
+    the overall call of Jenike's calls per stretch of hopper wall
+    (:func:`~fipy_hopper.diagnostics.stretch_calls`, by the rule of
+    :func:`~fipy_hopper.diagnostics.overall_call`; ``"unknown"`` for a friction angle below
+    the range of Jenike's fit).  For a wedge the masses and rates are per metre of length
+    (the keys keep their names here; :func:`per_metre` renames them for the files).
+
+    Only for the silos the closed forms describe (:attr:`HopperGeometry.classic`: a cone, a
+    wedge or a flat floor under a bin, no insert in the material): ``cone_height_m``,
+    ``rose_tanaka_factor`` (1 for a wedge: no plane hopper factor from a readable source),
+    ``beverloo_rate_kg_s`` (Beverloo's rate times the Rose-Tanaka hopper factor), and
+    ``jenike_critical_half_angle_deg`` (conical, or the plane-flow angle: the conical one plus
+    10 deg, :func:`theory.jenike_critical_half_angle_plane`), with the internal friction
+    angle as the effective angle of internal friction.  Other silos have a rate and a
+    critical angle per stretch only where a stretch allows (the run's ``hopper_stretches``).
 
     With a cohesion ``c > 0`` also Jenike's design numbers (``docs/correlations.md`` section g):
     ``unconfined_yield_strength_Pa`` ``sigma_c = 2 c cos(phi)/(1 - sin(phi))``;
-    ``jenike_critical_outlet_m`` ``H(theta) sigma_c/(rho g)`` (NaN for a flat bottom, outside
-    the fit of H); ``critical_outlet_simplified_m`` ``2 sigma_c/(rho g)``; and
-    ``jenike_rathole_diameter_m`` ``G(phi) sigma_c/(rho g)`` (NaN for phi outside the
-    30-70 deg of the fit of G).  An outlet smaller than the critical outlet may arch.
+    ``critical_outlet_simplified_m`` ``2 sigma_c/(rho g)``; ``jenike_rathole_diameter_m``
+    ``G(phi) sigma_c/(rho g)`` (NaN for phi outside the 30-70 deg of the fit of G); and for a
+    classic silo ``jenike_critical_outlet_m`` ``H(theta) sigma_c/(rho g)`` (NaN for a flat
+    bottom, outside the fit of H).  An outlet smaller than the critical outlet may arch.
     """
     from . import theory
+    from .diagnostics import flow_call, stretch_calls
 
     geom, mat, wall = cfg.hopper, cfg.material, cfg.wall
+    bnd = cfg.boundary
+    classic = bnd.hopper_shape if geom.classic else None
     out = {"fill_mass_kg": mat.density * geom.fill_volume(),
            "p_wave_speed_m_s": mat.p_wave_speed,
-           "cone_height_m": geom.cone_height}
+           "transition_height_m": bnd.transition_height("wall")}
+    grains = mat.grain_diameter
+    out["outlet_grains"] = geom.outlet_diameter / grains if grains > 0 else math.inf
     if geom.axisymmetric:
-        flat = float(theory.beverloo_rate(mat.density, geom.outlet_diameter))
-        factor = float(theory.rose_tanaka_factor(geom.half_angle_deg))
+        flat = float(theory.beverloo_rate(mat.density, geom.outlet_diameter, d=grains))
         critical = theory.jenike_critical_half_angle
     else:     # per metre of slot; no plane hopper factor from a readable source
-        flat = float(theory.beverloo_slot_rate(mat.density, geom.outlet_diameter))
-        factor = 1.0
+        flat = float(theory.beverloo_slot_rate(mat.density, geom.outlet_diameter, d=grains))
         critical = theory.jenike_critical_half_angle_plane
-    out.update(beverloo_flat_rate_kg_s=flat, rose_tanaka_factor=factor,
-               beverloo_rate_kg_s=flat * factor)
-    try:
-        out["jenike_critical_half_angle_deg"] = float(critical(
-            mat.friction_angle_deg, wall.friction_angle_deg))
-        out["jenike_flow_mode"] = str(theory.jenike_flow_mode(
-            geom.half_angle_deg, mat.friction_angle_deg, wall.friction_angle_deg,
-            geometry="conical" if geom.axisymmetric else "plane"))
-    except ValueError:   # friction angle below the range of Jenike's fit
-        out["jenike_critical_half_angle_deg"] = math.nan
-        out["jenike_flow_mode"] = "unknown"
-    out["expected_discharge_time_s"] = out["fill_mass_kg"] / out["beverloo_rate_kg_s"]
+    out["beverloo_flat_rate_kg_s"] = flat
+    rate = flat
+    if classic is not None:
+        factor = (float(theory.rose_tanaka_factor(classic.half_angle_deg))
+                  if geom.axisymmetric else 1.0)
+        rate = flat * factor
+        out.update(cone_height_m=classic.transition_height, rose_tanaka_factor=factor,
+                   beverloo_rate_kg_s=rate)
+        try:
+            out["jenike_critical_half_angle_deg"] = float(critical(
+                mat.friction_angle_deg, wall.friction_angle_deg))
+        except ValueError:   # friction angle below the range of Jenike's fit
+            out["jenike_critical_half_angle_deg"] = math.nan
+    out["jenike_flow_mode"] = flow_call(stretch_calls(cfg, []))["jenike_flow_mode"]
+    out["expected_discharge_time_s"] = out["fill_mass_kg"] / rate
     if mat.cohesion > 0:
         sigma_c = float(theory.unconfined_yield_strength(mat.cohesion, mat.friction_angle_deg))
         out["unconfined_yield_strength_Pa"] = sigma_c
         out["critical_outlet_simplified_m"] = float(theory.critical_outlet_simplified(
             sigma_c, mat.density))
-        for key, formula in (
-                ("jenike_critical_outlet_m", lambda: theory.jenike_critical_outlet(
-                    sigma_c, mat.density, geom.half_angle_deg)),
-                ("jenike_rathole_diameter_m", lambda: theory.jenike_rathole_diameter(
-                    sigma_c, mat.density, mat.friction_angle_deg))):
+        formulas = [("jenike_rathole_diameter_m", lambda: theory.jenike_rathole_diameter(
+            sigma_c, mat.density, mat.friction_angle_deg))]
+        if classic is not None:
+            formulas.append(("jenike_critical_outlet_m", lambda: theory.jenike_critical_outlet(
+                sigma_c, mat.density, classic.half_angle_deg)))
+        for key, formula in formulas:
             try:
                 out[key] = float(formula())
             except ValueError:   # outside the range of Jenike's fit
@@ -163,6 +184,8 @@ def run(config_or_path, out, force: bool = False, resume: bool = False, quiet: b
     ``stop_reason`` ``"fill_not_at_rest"``; a discharge started from it warns
     (:class:`~fipy_hopper.simulation.NotAtRestWarning`).
     """
+    _check_arguments(out, force=force, resume=resume, quiet=quiet, plots=plots,
+                     profile=profile, checkpoint_interval=checkpoint_interval, setup=setup)
     cfg, source = _resolve(config_or_path)
     source = config_source or source
     command = command or "fipy_hopper.run (Python API)"
@@ -202,42 +225,52 @@ def run(config_or_path, out, force: bool = False, resume: bool = False, quiet: b
     if governor is not None:
         model.threads = governor.update()
         sim.add_wall_time_callback(governor, governor.interval)
-    rundir = fio.RunDirectory(out, force=force, resume=resume)
+    # Ctrl-C while the directory is opened and the run is set up takes effect once that is
+    # done (never half-way through removing an earlier run's files), with the manifest
+    # saying "interrupted"
+    with _interrupts_deferred() as early:
+        rundir = fio.RunDirectory(out, force=force, resume=resume)
+    manifest = None
     try:
-        strength = (cfg.material.cohesion, cfg.material.friction_angle_deg)
-        fields = (fio.FieldWriter(rundir.fields, model.grid, *strength) if not lagrangian
-                  else fio.MeshFieldWriter(rundir.fields, model, *strength))
-        manifest = None
+        with _interrupts_deferred() as setting_up:
+            strength = (cfg.material.cohesion, cfg.material.friction_angle_deg)
+            fields = (fio.FieldWriter(rundir.fields, model.grid, *strength) if not lagrangian
+                      else fio.MeshFieldWriter(rundir.fields, model, *strength))
 
-        def snapshot(sim_, state):
-            with timed("snapshots and checkpoints"):
-                fields(sim_, state)
-                _write_tables(rundir, sim_.record, cfg.hopper.axisymmetric)
-
-        interval = cfg.run.field_interval
-        sim.add_callback(snapshot, interval, stages=("filling",))
-        sim.add_callback(snapshot, interval, stages=("discharge",))
-        if checkpoint_interval and checkpoint_interval > 0:
-            def checkpoint(sim_, state):
+            def snapshot(sim_, state):
                 with timed("snapshots and checkpoints"):
-                    sim_.checkpoint(rundir.checkpoint)
-                    manifest.checkpoint_written(state.t, state.step)
-            sim.add_wall_time_callback(checkpoint, checkpoint_interval)
-        if setup is not None:
-            setup(sim)
-        if resume:       # the checkpoint is checked before anything in the directory changes
-            sim.restore(rundir.checkpoint)
-            manifest = (fio.Manifest.load(rundir / rundir.MANIFEST)
-                        if (rundir / rundir.MANIFEST).is_file()
-                        else fio.Manifest.new(rundir / rundir.MANIFEST, source, command))
-            rundir.remove_profile()
-            fields.resume(sim.state.step)
-            manifest.begin_session(command, sim.state.step, sim.state.t)
-        else:
-            fio.atomic_write_text(rundir / rundir.CONFIG, cfg.to_toml())
-            manifest = fio.Manifest.new(rundir / rundir.MANIFEST, source, command)
-            manifest.begin_session(command)
-    except BaseException:
+                    fields(sim_, state)
+                    _write_tables(rundir, sim_.record, cfg.hopper.axisymmetric)
+
+            interval = cfg.run.field_interval
+            sim.add_callback(snapshot, interval, stages=("filling",))
+            sim.add_callback(snapshot, interval, stages=("discharge",))
+            if checkpoint_interval and checkpoint_interval > 0:
+                def checkpoint(sim_, state):
+                    with timed("snapshots and checkpoints"):
+                        sim_.checkpoint(rundir.checkpoint)
+                        manifest.checkpoint_written(state.t, state.step)
+                sim.add_wall_time_callback(checkpoint, checkpoint_interval)
+            if setup is not None:
+                setup(sim)
+            if resume:   # the checkpoint is checked before anything in the directory changes
+                sim.restore(rundir.checkpoint)
+                manifest = (fio.Manifest.load(rundir / rundir.MANIFEST)
+                            if (rundir / rundir.MANIFEST).is_file()
+                            else fio.Manifest.new(rundir / rundir.MANIFEST, source, command))
+                rundir.remove_profile()
+                fields.resume(sim.state.step)
+                manifest.begin_session(command, sim.state.step, sim.state.t)
+            else:    # the manifest first: a directory with a run's files is a run's (--force)
+                manifest = fio.Manifest.new(rundir / rundir.MANIFEST, source, command)
+                manifest.begin_session(command)
+                fio.atomic_write_text(rundir / rundir.CONFIG, cfg.to_toml())
+        if early.caught or setting_up.caught:
+            raise KeyboardInterrupt
+    except BaseException as exc:
+        if manifest is not None and isinstance(exc, KeyboardInterrupt):
+            with _interrupts_deferred():
+                manifest.end_session("interrupted", "interrupted", 0.0)
         rundir.close()
         raise
 
@@ -254,43 +287,160 @@ def run(config_or_path, out, force: bool = False, resume: bool = False, quiet: b
         status, reason, error = "failed", f"unstable: {exc}", exc
     except KeyboardInterrupt as exc:
         status, reason, error = "interrupted", "interrupted", exc
-    except Exception as exc:  # keep what was measured, then report
-        status, reason, error = "failed", f"failed: {type(exc).__name__}: {exc}", exc
-        fio.atomic_write_text(rundir / rundir.ERROR_LOG, traceback.format_exc())
+    except Exception as exc:
+        interrupt = _interrupt_behind(exc)
+        if interrupt is not None:   # Ctrl-C inside a writer whose clean-up then failed
+            status, reason, error = "interrupted", "interrupted", interrupt
+        else:                       # keep what was measured, then report
+            status, reason, error = "failed", f"failed: {type(exc).__name__}: {exc}", exc
+            fio.atomic_write_text(rundir / rundir.ERROR_LOG, traceback.format_exc())
     wall = time.perf_counter() - started
 
-    # everything measured so far; after an interrupt the state may be half a step old, so no
-    # snapshot of it is taken (the resumed run continues from the last checkpoint)
-    if status != "interrupted" and fields.last_step != sim.state.step:
-        try:
-            fields.write(sim.state, sim.t_open)
-        except Exception:  # pragma: no cover - never hide the run's own error
-            pass
-    _write_tables(rundir, sim.record, cfg.hopper.axisymmetric)
-    summary = _summary(sim, cfg, reason)
-    manifest.end_session(status, reason, wall)
-    summary["wall_time_s"] = manifest.total_wall_time()
-    fio.write_json(rundir / rundir.SUMMARY, summary)
-    if status == "finished":
-        rundir.checkpoint.unlink(missing_ok=True)
-    pictures_interrupted = False
-    if plots and status != "interrupted":
-        try:
-            from . import plotting
-            with timed("pictures"):
-                plotting.plot_run(rundir.path)
-        except KeyboardInterrupt:            # the results are complete: only pictures lack
-            pictures_interrupted = True
-        except Exception as exc:  # pictures are a convenience; the data are written
-            warnings.warn(f"the pictures could not be drawn: {exc}", RuntimeWarning)
-    if phases is not None:
-        fio.write_json(rundir / rundir.PROFILE, phases.report())
-    rundir.close()                           # release the run directory's lock
+    # Ctrl-C from here on is taken once the results and the manifest are written: they are
+    # always whole, and the manifest always ends in a finished state
+    try:
+        with _interrupts_deferred() as finishing:
+            status, reason, error, summary = _finish(rundir, sim, cfg, fields, manifest,
+                                                     status, reason, error, wall)
+        pictures_interrupted = finishing.caught and status != "interrupted"
+        if plots and status != "interrupted" and not pictures_interrupted:
+            try:
+                from . import plotting
+                with timed("pictures"):
+                    plotting.plot_run(rundir.path)
+            except KeyboardInterrupt:        # the results are complete: only pictures lack
+                pictures_interrupted = True
+            except Exception as exc:  # pictures are a convenience; the data are written
+                warnings.warn(f"the pictures could not be drawn: {exc}", RuntimeWarning)
+        with _interrupts_deferred() as closing:
+            if phases is not None:
+                fio.write_json(rundir / rundir.PROFILE, phases.report())
+        pictures_interrupted |= closing.caught and status != "interrupted"
+    finally:
+        rundir.close()                       # release the run directory's lock
     if error is not None:
         raise error
     if pictures_interrupted:
         raise PicturesInterrupted(rundir.path)
     return fio._jsonable(summary)
+
+
+def _finish(rundir, sim, cfg, fields, manifest, status, reason, error, wall) -> tuple:
+    """Write what a run measured (the last snapshot, the tables, ``summary.json``) and end the
+    manifest's session: ``(status, reason, error, summary)``.  An error in the tables or the
+    summary of a run that had not failed fails it (``stop_reason`` ``"failed: ..."``, the
+    traceback in ``error.log``, :class:`ResultsError` raised by :func:`run`): a summary is
+    whole or the run says it failed."""
+    # after an interrupt the state may be half a step old, so no snapshot of it is taken
+    # (the resumed run continues from the last checkpoint), and a sample may be half taken
+    if status == "interrupted":
+        _drop_half_sample(sim.record)
+    if status != "interrupted" and fields.last_step != sim.state.step:
+        try:
+            fields.write(sim.state, sim.t_open)
+        except Exception:  # pragma: no cover - never hide the run's own error
+            pass
+    try:
+        _write_tables(rundir, sim.record, cfg.hopper.axisymmetric)
+        summary = _summary(sim, cfg, reason, whole=status in ("finished", "stopped"))
+    except Exception as exc:
+        if error is None:
+            what = f"{type(exc).__name__}: {exc}"
+            status, reason = "failed", f"failed: the results could not be computed: {what}"
+            error = ResultsError(f"the results could not be computed: {what}")
+            error.__cause__ = exc
+            fio.atomic_write_text(rundir / rundir.ERROR_LOG, traceback.format_exc())
+        summary = _partial_summary(sim, cfg, reason)
+    manifest.end_session(status, reason, wall)
+    summary["wall_time_s"] = manifest.total_wall_time()
+    fio.write_json(rundir / rundir.SUMMARY, summary)
+    if status == "finished":
+        rundir.checkpoint.unlink(missing_ok=True)
+    return status, reason, error, summary
+
+
+#: the time series of :class:`~fipy_hopper.simulation.RunRecord`, one value a sample
+SAMPLE_SERIES = ("t", "mass_in_hopper", "discharged", "rate", "mass_flow_index",
+                 "stagnant_fraction", "wall_slip_ratio", "wall_slip_stretches",
+                 "wall_slip_fraction", "bin_lateral_stress_ratio")
+
+
+def _drop_half_sample(record) -> None:
+    """A sample that Ctrl-C cut short (some of its series appended, not all) is dropped: the
+    time series keep the samples they all have."""
+    series = [getattr(record, name) for name in SAMPLE_SERIES if hasattr(record, name)]
+    common = min((len(values) for values in series), default=0)
+    for values in series:
+        del values[common:]
+
+
+class ResultsError(RuntimeError):
+    """The run's tables or its summary could not be computed (the run is marked failed and
+    the traceback is in ``error.log``): never a summary with parts silently missing."""
+
+
+def _interrupt_behind(exc: BaseException):
+    """The ``KeyboardInterrupt`` an exception was raised while handling (a writer whose
+    clean-up failed after Ctrl-C), or None."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, KeyboardInterrupt):
+            return exc
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return None
+
+
+class _interrupts_deferred:
+    """Hold Ctrl-C (SIGINT) and SIGTERM while a block writes what must be whole: a signal
+    that comes is noted (``caught``) and acted on by the caller after the block.  In the main
+    thread only (elsewhere signals are not delivered to Python); the handlers are restored."""
+
+    SIGNALS = ("SIGINT", "SIGTERM")
+
+    def __enter__(self):
+        import signal
+        import threading
+
+        self.caught, self.previous = False, {}
+        if threading.current_thread() is threading.main_thread():
+            for name in self.SIGNALS:
+                number = getattr(signal, name, None)
+                if number is not None:
+                    self.previous[number] = signal.signal(number, self._note)
+        return self
+
+    def _note(self, signum, frame):
+        self.caught = True
+
+    def __exit__(self, *exc):
+        import signal
+
+        for number, handler in self.previous.items():
+            signal.signal(number, handler)
+        return False
+
+
+def _check_arguments(out, checkpoint_interval, setup, **flags) -> None:
+    """:func:`run`'s arguments, before anything is made: :class:`ConfigError` naming the
+    argument, its value and what it may be."""
+    if isinstance(out, bool) or not isinstance(out, (str, os.PathLike)):
+        raise ConfigError(f"out = {_show(out)}: expected a directory name (a str or a path)")
+    for name, value in flags.items():
+        if not isinstance(value, (bool, np.bool_)):
+            raise ConfigError(f"{name} = {_show(value)}: expected True or False")
+    if isinstance(checkpoint_interval, (bool, np.bool_)) or \
+            not isinstance(checkpoint_interval, (int, float, np.integer, np.floating)) or \
+            not (math.isfinite(checkpoint_interval) and checkpoint_interval >= 0):
+        raise ConfigError(f"checkpoint_interval = {_show(checkpoint_interval)}: expected a "
+                          "finite number of seconds >= 0 (0: no checkpoints)")
+    if setup is not None and not callable(setup):
+        raise ConfigError(f"setup = {_show(setup)}: expected None or a function setup(sim)")
+
+
+def _show(value) -> str:
+    text = repr(value)
+    return text if len(text) <= 40 else text[:37] + "..."
 
 
 class PicturesInterrupted(KeyboardInterrupt):
@@ -346,28 +496,41 @@ def _write_tables(rundir, record, axisymmetric: bool = True) -> None:
     fio.write_wall_slip(rundir / rundir.WALL_SLIP, record, FlowModeRule().slip_ratio)
 
 
-def _summary(sim, cfg, reason: str) -> dict:
+def _summary(sim, cfg, reason: str, whole: bool = True) -> dict:
+    """The run's ``summary.json``: :meth:`Simulation.summary` with the theory's numbers.  An
+    error in it is raised when the run ended as it should (``whole``); a run that failed or
+    was interrupted, which may not have measured what the summary needs, gets
+    :func:`_partial_summary` (its stop reason says it did not finish)."""
     try:
         summary = dict(sim.summary())
-    except Exception:  # a run that failed before it measured anything
-        rec = sim.record
-        summary = {"steady_discharge_rate_kg_s": math.nan, "flow_mode": "unknown",
-                   "mass_flow_index": math.nan, "wall_slip_ratio": math.nan,
-                   "wall_slip_fraction": math.nan, "initial_mass_kg": rec.initial_mass,
-                   "remaining_mass_kg": math.nan, "mass_balance_error": math.nan,
-                   "discharge_time_s": rec.t[-1] if rec.t else 0.0,
-                   "cells": sim.model.n_cells, "steps": sim.state.step,
-                   "wall_time_s": math.nan,
-                   "youngs_modulus_used": cfg.material.youngs_modulus}
+    except Exception:
+        if whole:
+            raise
+        return _partial_summary(sim, cfg, reason)
     summary["stop_reason"] = reason
     expected = expected_quantities(cfg)
-    summary["beverloo_rate_kg_s"] = expected["beverloo_rate_kg_s"]
-    summary["jenike_critical_half_angle_deg"] = expected["jenike_critical_half_angle_deg"]
-    summary["jenike_flow_mode"] = expected["jenike_flow_mode"]
-    for key in ("unconfined_yield_strength_Pa", "jenike_critical_outlet_m",
+    summary["outlet_grains"] = expected["outlet_grains"]
+    for key in ("beverloo_rate_kg_s", "jenike_critical_half_angle_deg", "jenike_flow_mode",
+                "unconfined_yield_strength_Pa", "jenike_critical_outlet_m",
                 "critical_outlet_simplified_m", "jenike_rathole_diameter_m"):
-        if key in expected:
+        if key in expected:          # the closed forms only for the silos they describe
             summary[key] = expected[key]
+    return summary if cfg.hopper.axisymmetric else per_metre(summary)
+
+
+def _partial_summary(sim, cfg, reason: str) -> dict:
+    """The summary of a run that did not finish (failed or interrupted) and whose full
+    summary could not be computed: what is known without measurements, the rest NaN
+    (``null``), ``flow_mode`` ``"unknown"``; its ``stop_reason`` says why."""
+    rec = sim.record
+    summary = {"steady_discharge_rate_kg_s": math.nan, "flow_mode": "unknown",
+               "mass_flow_index": math.nan, "wall_slip_ratio": math.nan,
+               "wall_slip_fraction": math.nan, "initial_mass_kg": rec.initial_mass,
+               "remaining_mass_kg": math.nan, "mass_balance_error": math.nan,
+               "discharge_time_s": rec.t[-1] if rec.t else 0.0,
+               "cells": sim.model.n_cells, "steps": sim.state.step,
+               "wall_time_s": math.nan, "stop_reason": reason,
+               "youngs_modulus_used": cfg.material.youngs_modulus}
     return summary if cfg.hopper.axisymmetric else per_metre(summary)
 
 
@@ -398,14 +561,31 @@ class Results:
         """The ``meshio.Mesh`` of snapshot ``index`` (cell data ``alpha``, ``layer``, ...)."""
         return fio.read_vtu(self.path / fio.RunDirectory.FIELDS / self.snapshots[index]["file"])
 
+    @property
+    def finished(self) -> bool:
+        """True when the run finished (its manifest says so)."""
+        return self.manifest.get("status") == "finished"
+
     def wall_stage(self, stage: str) -> dict:
         """The wall pressure rows of one stage (``filling``, ``early_discharge``, ...)."""
         sel = self.wall_pressure["stage"] == stage
         return {k: v[sel] for k, v in self.wall_pressure.items()}
 
 
+class UnfinishedRunWarning(RuntimeWarning):
+    """:func:`read_results` of a run that did not finish (running, interrupted, stopped or
+    failed, by its manifest, or one without a manifest): its files hold what was measured so
+    far, which is no run's final result."""
+
+
 def read_results(out) -> Results:
-    """Read a run directory written by :func:`run` or ``fipy-hopper run``."""
+    """Read a run directory written by :func:`run` or ``fipy-hopper run``.
+
+    A run that did not finish (``manifest.json``'s status ``"running"``, ``"interrupted"``,
+    ``"stopped"`` or ``"failed"``, or no manifest) is read all the same, with an
+    :class:`UnfinishedRunWarning` saying so: its files are whole (every file is written
+    atomically) and what it measured is what one looks at to see why it stopped, but its
+    summary is not a finished run's (``Results.finished`` is False)."""
     import json
 
     path = Path(out)
@@ -430,6 +610,28 @@ def read_results(out) -> Results:
     snapshots = []
     if (path / names.FIELDS / fio.FieldWriter.INDEX).is_file():
         snapshots = fio.read_snapshot_index(path / names.FIELDS)
+    _warn_unfinished(path, manifest, summary)
     return Results(path=path, summary=summary, manifest=manifest, config=cfg,
                    timeseries=fio.read_csv(path / names.TIMESERIES), wall_pressure=wall,
                    snapshots=snapshots)
+
+
+def _warn_unfinished(path: Path, manifest: dict, summary: dict) -> None:
+    """:class:`UnfinishedRunWarning` for a run directory whose run did not finish."""
+    status = manifest.get("status")
+    reason = manifest.get("stop_reason") or summary.get("stop_reason") or ""
+    why = f" ({reason})" if reason and reason != status else ""
+    if not manifest:
+        what = "has no manifest.json, so whether its run finished is unknown"
+    elif status == "finished":
+        return
+    elif status == "running":
+        what = ("holds a run that has not finished (manifest status 'running': a run is "
+                "writing it now, or it was killed)")
+    elif status in ("interrupted", "stopped"):
+        what = (f"holds a run that was {status}{why}; continue it with --resume "
+                "(resume=True)")
+    else:
+        what = f"holds a run that did not finish: {status}{why}"
+    warnings.warn(f"{path} {what}: its files hold what was measured until then, not a "
+                  "finished run's results", UnfinishedRunWarning, stacklevel=3)

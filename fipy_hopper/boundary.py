@@ -18,8 +18,8 @@ half-section), outside every insert.  ``X(z)`` is the wall's ``x`` at height ``z
 below the outlet plane (the tube), the first segment's (from the lip) whose heights hold ``z``
 (at a horizontal segment its start: a floor or ledge belongs to the solid), and above the top
 the wall goes on straight up.  Each tube starts at ``z = -FAR`` and each wall's top is carried
-on to ``z = FAR``, as in :mod:`fipy_hopper.geometry`, whose cone and wedge a boundary
-reproduces bit for bit (the same arithmetic on the same vertices).
+on to ``z = FAR``.  The conical and wedge shorthands are boundaries of three points (the
+lip, the transition, the top): the one geometry of the code.
 
 Arc length ``s`` (m) runs along each chain from its lowest point: a wall's lip, the lowest
 vertex of a closed insert (counter-clockwise), the lower axis end of an insert on the axis.
@@ -30,6 +30,7 @@ The compiled marker and Lagrangian code take :meth:`Boundary.kernel_arrays` and
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass, replace
 from functools import cached_property
@@ -45,6 +46,11 @@ SYMMETRIES = ("axisymmetric", "plane")
 SECTIONS = ("half", "full")
 #: Angles (deg) below which two consecutive segments count as one straight line.
 STRAIGHT_DEG = 1e-9
+#: A wall describes a cone (a wedge, a flat floor) under a bin (:func:`hopper_shape`) when,
+#: below its top vertical stretch, the segments within ``SAME_SLOPE_DEG`` of the longest one's
+#: slope make up at least ``SAME_SLOPE_SHARE`` of the length: a sliver of another slope (a
+#: 1 um segment at the lip) does not make another hopper, a second slope of any length does.
+SAME_SLOPE_DEG, SAME_SLOPE_SHARE = 0.5, 0.99
 
 
 @dataclass(frozen=True)
@@ -113,12 +119,21 @@ class Section:
 
 @dataclass(frozen=True)
 class Segment:
-    """A straight wall segment from ``a`` to ``b`` (m), ``s`` from ``s_start`` (m)."""
+    """A straight wall segment from ``a`` to ``b`` (m), the arc length ``s`` (m) running from
+    ``s_start`` at ``a``: segment ``index`` of the chain named ``chain``, with the solid on
+    its right (``side`` +1: a wall followed up from its lip) or left (-1: a left wall, an
+    insert followed counter-clockwise), its wall friction, and whether its areas are per
+    radian of an axisymmetric wall (``c = r``) or per metre of a plane one (``c = 1``).  The
+    wall loads' stretches are segments too (:func:`fipy_hopper.diagnostics.wall_stretches`)."""
 
     a: tuple
     b: tuple
     friction_deg: float = math.nan
     s_start: float = 0.0
+    chain: str = "wall"
+    index: int = 0
+    side: int = 1
+    axisymmetric: bool = True
 
     @property
     def length(self) -> float:
@@ -132,6 +147,36 @@ class Segment:
     def angle_deg(self) -> float:
         """Angle of the segment's line from the vertical, in ``[0, 90]`` deg."""
         return math.degrees(math.atan2(abs(self.b[0] - self.a[0]), abs(self.b[1] - self.a[1])))
+
+    @property
+    def tangent(self) -> np.ndarray:
+        """Unit tangent from ``a`` to ``b``."""
+        d = np.subtract(self.b, self.a, dtype=float)
+        return d / np.hypot(*d)
+
+    @property
+    def normal(self) -> np.ndarray:
+        """Unit normal into the solid: the tangent turned clockwise, or anticlockwise for
+        ``side = -1``."""
+        t = self.tangent
+        return self.side * np.array([t[1], -t[0]])
+
+    def point(self, s):
+        """``(x, z)`` of the point at arc length ``s`` (m)."""
+        u = np.asarray(s, float) - self.s_start
+        t = self.tangent
+        return self.a[0] + u * t[0], self.a[1] + u * t[1]
+
+    def weight(self, s):
+        """The area weight ``c(s)``: the radius ``r(s)`` (m) per radian, or 1 (plane)."""
+        s = np.asarray(s, float)
+        return self.point(s)[0] if self.axisymmetric else np.ones_like(s)
+
+    def area(self, s1, s2):
+        """Wall area ``int_s1^s2 c ds`` (m^2 per radian; m^2 per metre of a plane wall),
+        0 where ``s2 <= s1``."""
+        s1, s2 = np.asarray(s1, float), np.asarray(s2, float)
+        return np.where(s2 > s1, (s2 - s1) * self.weight(0.5 * (s1 + s2)), 0.0)
 
 
 @dataclass(frozen=True)
@@ -208,7 +253,8 @@ class Chain:
     def segments(self) -> tuple:
         a, b = self.ends()
         return tuple(Segment(tuple(a[k]), tuple(b[k]), self.friction_deg[k]
-                             if self.friction_deg else math.nan, float(self.s_vertices[k]))
+                             if self.friction_deg else math.nan, float(self.s_vertices[k]),
+                             self.name, k, self.side)
                      for k in range(self.n_segments))
 
     @property
@@ -283,10 +329,59 @@ def wall_x(z, rows: np.ndarray, x_below: float):
     """The wall's ``x`` (m) at heights ``z`` (array): ``x_lo <= xa + (z - za) slope <= x_hi``
     of the first row with ``za <= z <= zb``, ``x_below`` below the lip."""
     z = np.asarray(z, dtype=float)
+    rows = np.asarray(rows, dtype=float)
+    if len(rows) and np.all(rows[1:, 0] == rows[:-1, 1]) and np.all(rows[1:, 1] >= rows[:-1, 1]):
+        # a wall from its lip up (each row starts where the last ends, the heights never
+        # fall): the first row holding z is the first whose top reaches it (a binary search,
+        # the same arithmetic on the same row)
+        k = np.searchsorted(rows[:, 1], z, side="left")
+        r = rows[np.minimum(k, len(rows) - 1)]
+        za, zb, xa, slope, lo, hi = (r[..., c] for c in range(6))
+        inside = (k < len(rows)) & (z >= za) & (z <= zb)
+        return np.where(inside, np.clip(xa + (z - za) * slope, lo, hi), x_below)
     x = np.full(z.shape, x_below)
     for za, zb, xa, slope, lo, hi in rows[::-1]:
         x = np.where((z >= za) & (z <= zb), np.clip(xa + (z - za) * slope, lo, hi), x)
     return x
+
+
+@dataclass(frozen=True)
+class HopperShape:
+    """What a wall of one slope under a vertical bin wall is, in the shorthand's sizes (m,
+    deg): ``half_angle_deg`` the hopper's slope from the vertical (90: a flat floor),
+    ``outlet_x`` the lip's ``x``, ``bin_x`` the bin wall's, ``transition_height`` the height of
+    the junction (:meth:`Boundary.transition`)."""
+
+    half_angle_deg: float
+    outlet_x: float
+    bin_x: float
+    transition_height: float
+
+
+def hopper_shape(wall) -> Optional[HopperShape]:
+    """The :class:`HopperShape` of a wall ``[(x, z), ...]`` from its lip up, or None when it
+    describes no cone (wedge, flat floor) under a bin: a top segment that is not vertical, or
+    below the top vertical stretch more than one slope by length (``SAME_SLOPE_DEG``,
+    ``SAME_SLOPE_SHARE``; the segments of that slope rising outwards).  The half-angle is the
+    length-weighted mean slope of the segments of that slope (the longest one's to round-off
+    when there is one), to 1e-9 deg."""
+    p = [tuple(map(float, q)) for q in wall]
+    k = len(p) - 1
+    while k > 0 and p[k - 1][0] == p[k][0]:
+        k -= 1
+    if k in (0, len(p) - 1):
+        return None
+    dx = np.array([b[0] - a[0] for a, b in zip(p[:k], p[1:k + 1])])
+    dz = np.array([b[1] - a[1] for a, b in zip(p[:k], p[1:k + 1])])
+    length = np.hypot(dx, dz)
+    angle = np.degrees(np.arctan2(np.abs(dx), dz))
+    longest = int(np.argmax(length))
+    same = np.abs(angle - angle[longest]) <= SAME_SLOPE_DEG
+    if length[same].sum() < SAME_SLOPE_SHARE * length.sum() or np.any(dx[same] <= 0.0):
+        return None
+    theta = angle[longest] + float(np.sum(length[same] * (angle[same] - angle[longest]))
+                                   / np.sum(length[same]))
+    return HopperShape(round(float(theta), 9), p[0][0], p[k][0], p[k][1])
 
 
 def nearest_on_segments(x, z, a, b) -> tuple:
@@ -373,25 +468,111 @@ def segments_meet(p1, p2, q1, q2) -> bool:
             or (o3 == 0 and within(q1, q2, p1)) or (o4 == 0 and within(q1, q2, p2)))
 
 
+def _orient_many(a, b, c) -> np.ndarray:
+    """The sign of the turn ``a -> b -> c`` (points ``(k, 2)``): the arithmetic of
+    :func:`segments_meet`'s, element by element."""
+    v = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
+    return np.sign(v)
+
+
+def _within_many(a, b, c) -> np.ndarray:
+    return ((np.minimum(a[:, 0], b[:, 0]) <= c[:, 0]) & (c[:, 0] <= np.maximum(a[:, 0], b[:, 0]))
+            & (np.minimum(a[:, 1], b[:, 1]) <= c[:, 1])
+            & (c[:, 1] <= np.maximum(a[:, 1], b[:, 1])))
+
+
+def segments_meet_many(p1, p2, q1, q2) -> np.ndarray:
+    """:func:`segments_meet` of the segments ``p1[k] p2[k]`` and ``q1[k] q2[k]`` (arrays
+    ``(n, 2)``), vectorised: the same decisions from the same arithmetic."""
+    o1, o2 = _orient_many(p1, p2, q1), _orient_many(p1, p2, q2)
+    o3, o4 = _orient_many(q1, q2, p1), _orient_many(q1, q2, p2)
+    cross = (o1 != o2) & (o3 != o4) & (o1 * o2 <= 0) & (o3 * o4 <= 0)
+    return cross | ((o1 == 0) & _within_many(p1, p2, q1)) | \
+        ((o2 == 0) & _within_many(p1, p2, q2)) | ((o3 == 0) & _within_many(q1, q2, p1)) | \
+        ((o4 == 0) & _within_many(q1, q2, p2))
+
+
+#: pairs of segments tested at once by :func:`first_meeting` (bounds its memory)
+_PAIRS_AT_ONCE = 2_000_000
+
+
+def first_meeting(a1, b1, a2, b2, same: bool = False, closed: bool = False) -> Optional[tuple]:
+    """The first pair ``(i, j)`` (by ``i``, then ``j``) of a segment ``a1[i] b1[i]`` and a
+    segment ``a2[j] b2[j]`` that share a point (:func:`segments_meet`), or None; with
+    ``same`` (both sets one chain's segments) only the pairs ``j > i + 1`` that are not the
+    first and last of a ``closed`` chain.
+
+    Near-linear for the shapes of silos: only segments whose heights overlap are compared
+    (a binary search among the others sorted by their lower end, the few segments much
+    taller than the rest compared with every one), then their boxes, then exactly."""
+    a1, b1, a2, b2 = (np.asarray(v, dtype=float).reshape(-1, 2) for v in (a1, b1, a2, b2))
+    n1, n2 = len(a1), len(a2)
+    if not n1 or not n2:
+        return None
+    lo1, hi1 = np.minimum(a1[:, 1], b1[:, 1]), np.maximum(a1[:, 1], b1[:, 1])
+    lo2, hi2 = np.minimum(a2[:, 1], b2[:, 1]), np.maximum(a2[:, 1], b2[:, 1])
+    span = hi2 - lo2
+    tall = span > 8.0 * max(float(np.median(span)), float(span.mean()))
+    short, tall = np.flatnonzero(~tall), np.flatnonzero(tall)
+    order = short[np.argsort(lo2[short], kind="stable")]
+    reach = float(span[order].max()) if len(order) else 0.0
+    start = np.searchsorted(lo2[order], lo1 - reach, side="left")
+    count = np.maximum(np.searchsorted(lo2[order], hi1, side="right") - start, 0) + len(tall)
+    xlo1, xhi1 = np.minimum(a1[:, 0], b1[:, 0]), np.maximum(a1[:, 0], b1[:, 0])
+    xlo2, xhi2 = np.minimum(a2[:, 0], b2[:, 0]), np.maximum(a2[:, 0], b2[:, 0])
+    first = 0
+    while first < n1:            # chunks of the first set, in order: stop at the first hit
+        last = first + max(1, int(np.searchsorted(np.cumsum(count[first:]), _PAIRS_AT_ONCE)))
+        rows = np.arange(first, min(last, n1))
+        k = np.maximum(count[rows] - len(tall), 0)
+        i = np.repeat(rows, k)
+        j = order[np.repeat(start[rows], k) + np.arange(k.sum()) - np.repeat(np.cumsum(k) - k, k)]
+        if len(tall):
+            i = np.concatenate([i, np.repeat(rows, len(tall))])
+            j = np.concatenate([j, np.tile(tall, len(rows))])
+        keep = (lo2[j] <= hi1[i]) & (hi2[j] >= lo1[i]) & (xlo2[j] <= xhi1[i]) & \
+            (xhi2[j] >= xlo1[i])
+        if same:
+            keep &= (j > i + 1) & ~(closed & (i == 0) & (j == n1 - 1))
+        i, j = i[keep], j[keep]
+        hit = segments_meet_many(a1[i], b1[i], a2[j], b2[j])
+        if hit.any():
+            i, j = i[hit], j[hit]
+            best = np.lexsort((j, i))[0]
+            return int(i[best]), int(j[best])
+        first = int(rows[-1]) + 1
+    return None
+
+
 def self_crossing(points, closed: bool) -> Optional[tuple]:
     """The first pair ``(i, j)`` of segments of a polyline (a polygon when ``closed``) that
-    cross, touch or fold back on each other, or None."""
-    p = [tuple(map(float, q)) for q in points]
+    cross, touch or fold back on each other, or None (vectorised: :func:`first_meeting` for
+    the segments apart, the joints of neighbours element by element)."""
+    p = np.asarray(points, dtype=float).reshape(-1, 2)
     n = len(p) if closed else len(p) - 1
-    seg = [(p[k], p[(k + 1) % len(p)]) for k in range(n)]
-    for i in range(n):
-        for j in range(i + 1, n):
-            adjacent = j == i + 1 or (closed and i == 0 and j == n - 1)
-            if adjacent:
-                (a, b), (c, d) = (seg[i], seg[j]) if j == i + 1 else (seg[j], seg[i])
-                d1, d2 = (b[0] - a[0], b[1] - a[1]), (d[0] - c[0], d[1] - c[1])
-                if d1[0] * d2[1] - d1[1] * d2[0] == 0 and d1[0] * d2[0] + d1[1] * d2[1] < 0:
-                    return i, j                               # folds back on itself
-                if n > 2 and (segments_meet(a, a, c, d) or segments_meet(a, b, d, d)):
-                    return i, j
-            elif segments_meet(*seg[i], *seg[j]):
-                return i, j
-    return None
+    if n < 2:
+        return None
+    a, b = p[:n], np.roll(p, -1, axis=0)[:n]
+    found = []
+    # neighbours (i, i + 1), and a closed chain's (0, n - 1) with its last segment first
+    i = np.arange(n - 1)
+    pairs = [(i, i + 1, i, i + 1)]
+    if closed and n > 2:
+        pairs.append((np.array([0]), np.array([n - 1]), np.array([n - 1]), np.array([0])))
+    for i, j, first, second in pairs:
+        pa, pb, pc, pd = a[first], b[first], a[second], b[second]
+        d1, d2 = pb - pa, pd - pc
+        folds = (d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0] == 0) & \
+            (d1[:, 0] * d2[:, 0] + d1[:, 1] * d2[:, 1] < 0)
+        touch = (segments_meet_many(pa, pa, pc, pd) | segments_meet_many(pa, pb, pd, pd)) \
+            if n > 2 else np.zeros(len(i), dtype=bool)
+        bad = np.flatnonzero(folds | touch)
+        if len(bad):
+            found.append((int(i[bad[0]]), int(j[bad[0]])))
+    apart = first_meeting(a, b, a, b, same=True, closed=closed)
+    if apart is not None:
+        found.append(apart)
+    return min(found) if found else None
 
 
 def insert_chain_points(outline, half: bool) -> tuple:
@@ -454,6 +635,71 @@ class Boundary:
     def top(self) -> float:
         """Height of the highest wall point (m)."""
         return max(p[1] for c in self.walls for p in c.points)
+
+    # ------------------------------------------------------------------ sizes of the section
+    @property
+    def x_extent(self) -> tuple:
+        """``(x_min, x_max)`` (m) of the section: the axis (a half-section) or the left wall's
+        leftmost point, and the (right) wall's rightmost point."""
+        right = max(p[0] for p in self.chain("wall").points)
+        if self.section.half:
+            return 0.0, right
+        return min(p[0] for p in self.chain("left_wall").points), right
+
+    @property
+    def width(self) -> float:
+        """The silo's widest span (m): twice the wall's largest ``x`` of a half-section (the
+        diameter, or the width of a plane silo), or from wall to wall of a full section."""
+        x_min, x_max = self.x_extent
+        return 2.0 * x_max if self.section.half else x_max - x_min
+
+    def wall_x(self, z, chain="wall"):
+        """A wall's ``x`` (m) at heights ``z`` (:func:`wall_x`: the lip's below the outlet
+        plane, a floor's start, straight up above the top)."""
+        rows, below, _ = self._profiles[[c.name for c in self.walls].index(
+            self.chain(chain).name)]
+        return wall_x(z, rows, below)
+
+    def span_at(self, z: float) -> float:
+        """The silo's width (m) at height ``z``: from wall to wall (twice the wall's ``x`` in a
+        half-section: the diameter, or the plane silo's width)."""
+        right = float(self.wall_x(z))
+        if self.section.half:
+            return 2.0 * right
+        return right - float(self.wall_x(z, "left_wall"))
+
+    @cached_property
+    def hopper_shape(self) -> Optional[HopperShape]:
+        """The wall's :class:`HopperShape` in a half-section (:func:`hopper_shape`): a cone, a
+        wedge or a flat floor under a bin, with its sizes; None for any other wall and for a
+        full section."""
+        return hopper_shape(self.chain("wall").points) if self.section.half else None
+
+    def transition(self, chain="wall") -> Optional[Corner]:
+        """The corner of a wall where its top vertical stretch begins (a hopper's or a flat
+        floor's junction with the bin wall above it), or None when the wall's top segment is
+        not vertical (no bin wall stands on the rest)."""
+        c = self.chain(chain)
+        p = c.points
+        k = len(p) - 1
+        while k > 0 and p[k - 1][0] == p[k][0]:
+            k -= 1
+        if k in (0, len(p) - 1):
+            return None
+        return next((q for q in c.corners if q.segment == k), None)
+
+    def transition_height(self, chain="wall") -> float:
+        """The height (m) of a wall's :meth:`transition`: below it the wall hangs from it, above
+        it the bin wall stands on it; the wall's top when it has none (all of it hangs)."""
+        corner = self.transition(chain)
+        return float(corner.point[1]) if corner is not None else \
+            float(self.chain(chain).points[-1][1])
+
+    def transition_s(self, chain="wall") -> float:
+        """The arc length (m) of a wall's :meth:`transition` along it (the wall's length when
+        it has none)."""
+        corner = self.transition(chain)
+        return float(corner.s) if corner is not None else self.chain(chain).length
 
     def with_friction(self, wall_deg: float, segment_deg: Sequence[float] = None) -> "Boundary":
         """A copy whose walls have friction ``segment_deg`` (one per segment of ``wall``) or
@@ -617,10 +863,18 @@ class Boundary:
 
         A point is in contact with a segment when its projection falls on it (``0 <= t <=
         1``, extended by ``reach`` past a concave corner, where the segment's line runs into
-        the solid) and it lies less than ``reach`` in front of it or anywhere behind it.  Near
-        a concave corner a point is in contact with both segments; near a convex corner (a
-        lip) a point projecting beyond both belongs to none (:meth:`wall_normal` gives its
-        normal).  The rule of ``geometry.segment_contacts``, segment by segment.
+        the solid) and it lies less than ``reach`` in front of it, less than ``reach`` behind
+        it, or further behind it inside the solid it bounds (a wall's: anywhere behind it; an
+        insert's: inside the insert).  Near a concave corner a point is in
+        contact with both segments; near a convex corner (a lip) a point projecting beyond
+        both belongs to none (:meth:`wall_normal` gives its normal).
+
+        "Behind" stops where the insert does: behind a wall's segment everything is its
+        solid, but behind an insert's face lies, past the insert, the material again (the
+        strip under an insert's top face runs down through the hopper to the outlet).  Held
+        by the top face's normal there, every node of that column was stopped from falling:
+        an insert 3.5 cells above the fill held up the material under it (at 1 cm, a box
+        insert on the axis stopped the discharge and carried 70 N of it).
         """
         x = np.asarray(x, dtype=float)
         z = np.asarray(z, dtype=float)
@@ -641,6 +895,10 @@ class Boundary:
             lo = -ext if tab.concave[k, 0] else 0.0
             hi = 1.0 + ext if tab.concave[k, 1] else 1.0
             mask = (t >= lo - 1e-12) & (t <= hi + 1e-12) & (front < reach)
+            chain = self.chains[tab.chain[k]]
+            far_behind = mask & (front <= -reach)
+            if chain.kind == "insert" and np.any(far_behind):
+                mask &= ~far_behind | inside_polygon(x, z, np.asarray(chain.polygon, float))
             out.append((k, mask, float(normal[0]), float(normal[1])))
         return out
 
@@ -773,7 +1031,7 @@ class Boundary:
         ax.fill(fill[:, 0], fill[:, 1], color="#e8d9a8", zorder=0,
                 label=f"fill to z = {self.fill_level:g} m")
         depth = 0.15 * max(self.top, self.outlet[1] - self.outlet[0])
-        colours = iter(["C0", "C1", "C2", "C3", "C4", "C5", "C6", "C8", "C9"])
+        colours = itertools.cycle(["C0", "C1", "C2", "C3", "C4", "C5", "C6", "C8", "C9"])
         for c in self.chains:
             p = np.asarray(c.points, dtype=float)
             if c.kind == "tube":
@@ -788,8 +1046,11 @@ class Boundary:
             ax.plot(q[:, 0], q[:, 1], "-", color=colour, lw=2.5, label=c.name)
             if sec.mirror:
                 ax.plot(-q[:, 0], q[:, 1], "-", color="0.75", lw=1.5)
-            for k in c.corners:
-                ax.plot(*k.point, "o", ms=7, mec="k", mfc="k" if k.concave else "w", zorder=5)
+            for concave in (True, False):        # one call each: a wall may have 10,000
+                points = np.array([k.point for k in c.corners if k.concave == concave])
+                if len(points):
+                    ax.plot(points[:, 0], points[:, 1], "o", ms=7, mec="k",
+                            mfc="k" if concave else "w", zorder=5)
         x0, x1 = self.outlet
         ax.plot([x0, x1], [0.0, 0.0], "-", color="r", lw=4, solid_capstyle="butt",
                 label=f"outlet, x in [{x0:g}, {x1:g}] m")

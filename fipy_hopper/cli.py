@@ -7,7 +7,7 @@
     fipy-hopper demo [--out DIR] [--force] [--resume] [--quiet] [--checkpoint-interval S]
                      [--threads N] [--profile]
     fipy-hopper plot DIR
-    fipy-hopper validate CONFIG.toml [--out DIR]
+    fipy-hopper validate CONFIG.toml [--picture PATH.png]
 
 Exit codes: 0 success; 2 bad input (a configuration error, a missing or non-TOML file, an
 output directory that would be overwritten or that another run is using, a path the system
@@ -16,8 +16,12 @@ failed (unstable, or an internal error), with the reason, after writing everythi
 far, and a fill-only run (``end_time = 0``) whose fill did not come to rest by
 ``numerics.max_fill_time`` (``stop_reason`` ``"fill_not_at_rest"``: its outputs are written,
 but its loads are those of a moving fill; a discharge started from such a fill is a warning);
-130 a run interrupted with Ctrl-C or SIGTERM (continue it with ``--resume`` once a checkpoint
-has been written).
+130 a run interrupted with Ctrl-C or SIGTERM, at any moment: its outputs written whole, its
+manifest ``"interrupted"`` (``"finished"`` when only the pictures or the printing were cut
+short), and one line of advice (continue it with ``--resume`` once a checkpoint has been
+written).  ``validate`` writes nothing unless ``--picture`` asks for a drawing; ``--force``
+replaces only an earlier run's files in a directory it wrote (its ``manifest.json``), never
+through a symbolic link (:class:`fipy_hopper.io.RunDirectory`).
 """
 
 from __future__ import annotations
@@ -50,10 +54,11 @@ class _Parser(argparse.ArgumentParser):
 
 def _parser() -> argparse.ArgumentParser:
     p = _Parser(prog=PROG, description=(
-        "Eulerian Mohr-Coulomb simulation of granular flow in silos and hoppers (conical, "
-        "axisymmetric, or wedge-shaped, in plane strain; on FiPy): filling, discharge rate, "
-        "flow mode and wall loads, compared with Beverloo, Jenike, Janssen, Walker and "
-        "EN 1991-4."),
+        "Eulerian Mohr-Coulomb simulation of the filling and discharge of silos and hoppers "
+        "on FiPy: a conical or wedge-shaped hopper under a bin, or any wall drawn as straight "
+        "segments with inserts, in an axisymmetric or a plane section; the discharge rate, "
+        "the flow mode per stretch of hopper wall and the wall loads, compared with "
+        "Beverloo, Jenike, Janssen, Walker and EN 1991-4 where they describe the silo."),
         epilog="Exit codes: 0 success, 1 the run failed (or a fill-only run's fill did not "
         "come to rest), 2 bad input, 130 interrupted.")
     p.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
@@ -64,7 +69,8 @@ def _parser() -> argparse.ArgumentParser:
                        default=None if out_required else "hopper_run",
                        help="run directory" + ("" if out_required else " (default: hopper_run)"))
         q.add_argument("--force", action="store_true",
-                       help="overwrite the outputs of a previous run in DIR")
+                       help="replace the files of an earlier run in DIR (a run directory of "
+                       "fipy-hopper only; files of your own there are kept)")
         q.add_argument("--resume", action="store_true",
                        help="continue the interrupted run in DIR from its checkpoint")
         q.add_argument("--quiet", action="store_true",
@@ -103,11 +109,11 @@ def _parser() -> argparse.ArgumentParser:
     q = sub.add_parser("validate", help="check a configuration and print derived quantities",
                        description="Check CONFIG.toml and print the grid, the time step, the "
                        "wave speed, the fill mass, Beverloo's rate, Jenike's critical angle "
-                       "and the boundary (walls, corners, outlet, fill), drawn to "
-                       "geometry.png beside CONFIG.toml or in --out DIR.")
+                       "and the boundary (walls, corners, outlet, fill); it writes nothing, "
+                       "unless --picture names a PNG file to draw the boundary to.")
     q.add_argument("config", metavar="CONFIG.toml", help="configuration file (TOML)")
-    q.add_argument("--out", metavar="DIR", default=None,
-                   help="directory for geometry.png (default: the configuration's)")
+    q.add_argument("--picture", metavar="PATH.png", default=None,
+                   help="draw the boundary to this PNG file (default: no file is written)")
     return p
 
 
@@ -148,7 +154,7 @@ def _validate(args) -> int:
     geom, run = cfg.hopper, cfg.run
     nr, nz = cfg.grid_shape()
     h = cfg.numerics.cell_size
-    theta_c = e["jenike_critical_half_angle_deg"]
+    theta_c = e.get("jenike_critical_half_angle_deg", math.nan)
     if e["jenike_flow_mode"] == "unknown":
         theta_c_text = "n/a (friction angle below the 19.5 deg range of the fit)"
     elif theta_c != theta_c:
@@ -164,23 +170,34 @@ def _validate(args) -> int:
         f"{'radius' if geom.axisymmetric else 'half-width'}), {memory}",
         f"  P-wave speed c_p   {e['p_wave_speed_m_s']:.4g} m/s",
         f"  time step          {cfg.time_step:.4g} s (at most {cfg.step_estimate():.3g} steps)",
-        f"  {hopper + ' height':<18} {geom.cone_height:.4g} m (transition to the bin)",
+        f"  transition height  {e['transition_height_m']:.4g} m (the bin wall's foot"
+        + ("" if cfg.boundary.transition("wall") else "; none: the wall's top") + ")",
         f"  fill mass          {e['fill_mass_kg']:.4g} kg{per}",
+        _grain_line(cfg.material, e),
         (f"  Beverloo rate      {e['beverloo_rate_kg_s']:.4g} kg/s = "
-         f"{e['beverloo_flat_rate_kg_s']:.4g} kg/s (flat bottom, C = 0.58) x "
+         f"{e['beverloo_flat_rate_kg_s']:.4g} kg/s (flat bottom, C = 0.58, k = 1.5) x "
          f"{e['rose_tanaka_factor']:.3f} (Rose-Tanaka, {geom.half_angle_deg:g} deg cone)"
          if geom.axisymmetric else
          f"  Beverloo rate      {e['beverloo_rate_kg_s']:.4g} kg/s per m of slot "
-         f"(plane flow, W' = C' rho sqrt(g) B^1.5, C' = 1.03, no hopper factor)"),
-        f"  discharge time     about {e['expected_discharge_time_s']:.3g} s at that rate",
-        f"  Jenike theta_c     {theta_c_text} (phi = {cfg.material.friction_angle_deg:g} deg, "
-        f"phi_w = {cfg.wall.friction_angle_deg:g} deg"
-        + ("" if geom.axisymmetric else "; plane flow: the conical angle + 10 deg") + ")",
+         f"(plane flow, W' = C' rho sqrt(g) (B - k d)^1.5, C' = 1.03, k = 1.5, no hopper "
+         f"factor)")
+        if "beverloo_rate_kg_s" in e else
+        (f"  Beverloo rate      n/a: no closed form for this silo (the outlet's flat-bottom "
+         f"rate is {e['beverloo_flat_rate_kg_s']:.4g} kg/s{per})"),
+        f"  discharge time     about {e['expected_discharge_time_s']:.3g} s at "
+        + ("that rate" if "beverloo_rate_kg_s" in e else "the flat-bottom rate"),
+        (f"  Jenike theta_c     {theta_c_text} (phi = {cfg.material.friction_angle_deg:g} deg, "
+         f"phi_w = {cfg.wall.friction_angle_deg:g} deg"
+         + ("" if geom.axisymmetric else "; plane flow: the conical angle + 10 deg") + ")")
+        if "jenike_critical_half_angle_deg" in e else
+        "  Jenike theta_c     per stretch of hopper wall (below)",
         (f"  expected flow      {e['jenike_flow_mode']} flow ({geom.half_angle_deg:g} deg "
          f"{hopper})" if geom.classic else
-         "  expected flow      by Jenike, per stretch of hopper wall: " + "; ".join(
+         f"  expected flow      {e['jenike_flow_mode']} flow by Jenike over the stretches of "
+         "hopper wall: " + "; ".join(
              f"{st['wall']} segment {st['segment']}, {st['half_angle_deg']:.1f} deg: "
-             f"{st['jenike_call']}" for st in stretch_calls(cfg, []))),
+             f"{st['jenike_call']}" + ("" if st["counted"] else " (not counted)")
+             for st in stretch_calls(cfg, []))),
         f"  run                until {end}, samples every {run.output_interval:g} s, "
         f"fields every {run.field_interval:g} s",
     ]
@@ -188,14 +205,21 @@ def _validate(args) -> int:
         lines[-1:-1] = _cohesion_lines(cfg, e)
     if cfg.numerics.formulation == "lagrangian":
         lines[1], lines[3] = _lagrangian_lines(cfg)
-    picture = Path(args.out if args.out is not None else Path(args.config).parent)
-    try:
-        picture.mkdir(parents=True, exist_ok=True)
-        picture = picture / "geometry.png"
-        cfg.boundary.draw(picture)
-    except OSError as exc:
-        return _error(f"cannot write {_short(picture)}: {exc.strerror or exc}", EXIT_BAD_INPUT)
-    lines.append(f"  boundary           drawn to {_short(picture)}")
+    if args.picture is not None:      # nothing is written unless asked
+        from .io import atomic_path
+        picture = Path(args.picture)
+        if picture.suffix.lower() != ".png":
+            return _error(f"--picture = {_short(args.picture)}: expected the name of a PNG "
+                          "file (ending in .png)", EXIT_BAD_INPUT)
+        try:
+            with atomic_path(picture) as tmp:
+                cfg.boundary.draw(tmp)
+        except OSError as exc:
+            return _error(f"cannot write {_short(picture)}: {exc.strerror or exc}",
+                          EXIT_BAD_INPUT)
+        lines.append(f"  boundary           drawn to {_short(picture)}")
+    else:
+        lines.append("  boundary")
     lines += ["    " + line for line in cfg.boundary.describe(cfg.material.density).split("\n")]
     print("\n".join(lines))
     return EXIT_OK
@@ -261,8 +285,8 @@ def _run(args, config, source=None) -> int:
     except (ConfigError, RunDirectoryError) as exc:
         return _error(exc, EXIT_BAD_INPUT)
     except api.PicturesInterrupted:
-        return _error(f"interrupted while drawing the pictures; the results of the run are "
-                      f"complete in {args.out}; draw its pictures with: {PROG} plot "
+        return _error(f"interrupted after the run finished; its results are complete in "
+                      f"{args.out}; draw its pictures with: {PROG} plot "
                       f"{shlex.quote(args.out)}", EXIT_INTERRUPTED)
     except KeyboardInterrupt:
         return _error(_interrupted_message(args.out, start, again), EXIT_INTERRUPTED)
@@ -273,6 +297,21 @@ def _run(args, config, source=None) -> int:
         where = f"; the traceback is in {log}" if log.is_file() else ""
         return _error(f"{kind}: {exc} (everything measured so far is in {args.out}{where})",
                       EXIT_FAILED)
+    try:
+        return _after_the_run(args, config, summary, again)
+    except KeyboardInterrupt:       # while printing: the run and its files are complete
+        if summary.get("stop_reason") == "wall_time_limit":
+            return _error(f"interrupted; the run had stopped at run.wall_time_limit with its "
+                          f"outputs in {args.out}; continue with: {again}", EXIT_INTERRUPTED)
+        return _error(f"interrupted after the run finished; its results are complete in "
+                      f"{args.out} (summary.json); draw its pictures again with: {PROG} plot "
+                      f"{shlex.quote(args.out)}", EXIT_INTERRUPTED)
+
+
+def _after_the_run(args, config, summary: dict, again: str) -> int:
+    """What ``run`` prints once a run has returned, and its exit code."""
+    from .io import RunDirectory
+
     if args.profile and not args.quiet:
         from .profiling import format_report
         report = json.loads((Path(args.out) / RunDirectory.PROFILE).read_text())
@@ -331,6 +370,18 @@ class _sigterm_as_interrupt:
         return False
 
 
+def _grain_line(mat, e: dict) -> str:
+    """The grains and the law's rate dependence, for ``validate``."""
+    law = ("mu(I) above the Mohr-Coulomb limit (delta_mu = "
+           f"{mat.friction_rise:g}, I_0 = {mat.inertial_number_i0:g}, rho_s = "
+           f"{mat.grain_density:g} kg/m3)" if mat.rate_dependence == "mu_I"
+           else "none (the plain rate-independent law)")
+    across = (f", the outlet {e['outlet_grains']:.3g} grains across"
+              if mat.grain_diameter > 0 else "")
+    return (f"  grains             d = {mat.grain_diameter:g} m{across}; rate dependence "
+            f"{law}")
+
+
 def _cohesion_lines(cfg, e: dict) -> list:
     """The lines of ``validate`` for a cohesive material: Jenike's design numbers."""
     mat, geom = cfg.material, cfg.hopper
@@ -339,8 +390,10 @@ def _cohesion_lines(cfg, e: dict) -> list:
     def length(value, why):
         return f"{value:.4g} m" if value == value else f"n/a ({why})"
 
-    jenike, simple = e["jenike_critical_outlet_m"], e["critical_outlet_simplified_m"]
+    jenike, simple = e.get("jenike_critical_outlet_m", math.nan), e["critical_outlet_simplified_m"]
     critical = jenike if jenike == jenike else simple
+    why = ("flat bottom, outside the fit of H" if "jenike_critical_outlet_m" in e
+           else "no one hopper angle: not a cone under a bin")
 
     def verdict(value):
         if value != critical:
@@ -352,7 +405,7 @@ def _cohesion_lines(cfg, e: dict) -> list:
         f"  cohesion           c = {mat.cohesion:g} Pa: unconfined yield strength "
         f"sigma_c = {e['unconfined_yield_strength_Pa']:.4g} Pa",
         f"  critical outlet    Jenike H(theta) sigma_c/(rho g) = "
-        f"{length(jenike, 'flat bottom, outside the fit of H')}{verdict(jenike)}",
+        f"{length(jenike, why)}{verdict(jenike)}",
         f"                     simplified 2 sigma_c/(rho g) = {simple:.4g} m{verdict(simple)}",
         f"  critical rathole   Jenike G(phi) sigma_c/(rho g) = "
         f"{length(e['jenike_rathole_diameter_m'], 'phi outside the 30-70 deg of the fit')}",
@@ -370,6 +423,22 @@ def _print_summary(s: dict, out) -> None:
 
     per = "/m" if wedge else ""
     theory = "Beverloo, slot" if wedge else "Beverloo x Rose-Tanaka"
+    if s.get("stop_reason") in ("filled", "fill_not_at_rest"):      # the loads at rest
+        print(f"{PROG}: {s.get('stop_reason')} after {num('fill_time_s', '.3g')} s of filling "
+              f"({num('steps', 'd')} steps, {num('wall_time_s', '.0f')} s wall time)\n"
+              f"  weight at rest         {num('fill_weight_N', '.4g')} N{per}: the walls carry "
+              f"{num('fill_wall_vertical_N', '.4g')} N{per}, the outlet plate "
+              f"{num('fill_outlet_N', '.4g')} N{per} (residual "
+              f"{num('fill_equilibrium_residual', '.1e')})\n"
+              f"  bin wall               K = p_n / sigma_v {num('wall_k_bin', '.3f')}, axial "
+              f"compression at the transition {num('bin_wall_axial_compression_N_m', '.4g')} "
+              f"N/m (Janssen {num('janssen_wall_axial_compression_N_m', '.4g')} N/m)\n"
+              f"  hopper                 tension at the transition "
+              f"{num('hopper_meridional_tension_N_m', '.4g')} N/m, ring compression "
+              f"{num('transition_ring_compression_N', '.4g')} N\n"
+              f"  mass                   {num('initial_mass_kg', '.4g')} kg{per} filled\n"
+              f"  results in             {out}/ (wall_pressure.csv: the loads along the wall)")
+        return
     print(f"{PROG}: {s.get('stop_reason')} after {num('discharge_time_s', '.3g')} s of discharge "
           f"({num('steps', 'd')} steps, {num('wall_time_s', '.0f')} s wall time)\n"
           f"  steady discharge rate  {num('steady_discharge_rate_kg_s', '.4g')} kg/s{per} "
@@ -390,7 +459,10 @@ def _print_summary(s: dict, out) -> None:
         print(f"  outcome                {s.get('flow_mode')}: the flow stopped {stopped:.3g} s "
               f"after the opening with {100 * left:.2f} % of the mass left"
               + (f", a rathole {channel:.3g} m wide"
-                 if channel is not None and channel == channel else ""))
+                 if channel is not None and channel == channel else "")
+              + (f", its surface at {s['heap_angle_deg']:.1f} deg from the horizontal (against "
+                 f"the angle of repose)" if s.get("heap_angle_deg") is not None
+                 and s["heap_angle_deg"] == s["heap_angle_deg"] else ""))
 
 
 def main(argv=None) -> int:
@@ -403,8 +475,9 @@ def main(argv=None) -> int:
         return exc.code if isinstance(exc.code, int) else EXIT_BAD_INPUT
     args.argv = argv
     if args.command is None:
-        parser.print_help()
-        return EXIT_BAD_INPUT
+        parser.print_usage(sys.stderr)
+        return _error("no command given; choose one of run, demo, plot, validate "
+                      f"({PROG} --help, or {PROG} COMMAND --help)", EXIT_BAD_INPUT)
     with warnings.catch_warnings():
         warnings.showwarning = _show_warning
         warnings.filterwarnings("default", category=ResolutionWarning)

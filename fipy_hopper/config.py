@@ -44,6 +44,10 @@ class ResolutionWarning(UserWarning):
     """The grid resolves a feature of the hopper with few cells."""
 
 
+class ArchingWarning(UserWarning):
+    """The outlet is only a few grains wide: it will arch (Beverloo's regime ends)."""
+
+
 class SamplingWarning(UserWarning):
     """The discharge gets few outputs (a field interval longer than ``run.end_time``)."""
 
@@ -112,6 +116,11 @@ def _check_range(key: str, value: Any, low=None, high=None, low_open=False, high
     return value
 
 
+def _is_zero(value: Any) -> bool:
+    """``value`` is the number 0 (not a bool, not a string)."""
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and value == 0
+
+
 def _check_int(key: str, value: Any, low: int, high: int) -> int:
     """An integer (not a bool, not a float) in ``[low, high]``."""
     if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
@@ -142,6 +151,15 @@ DENSITY_RANGE = (1.0, 2.0e4)
 MODULUS_RANGE = (1e3, 1e12)
 #: Cohesion (Pa): up to 100 MPa, the strength of strong rock; granular media have kPa.
 COHESION_MAX = 1e8
+#: The rate dependence above the Mohr–Coulomb limit (material.rate_dependence): the mu(I)
+#: overstress with the grain size (fipy_hopper.material.rate), or none (the plain
+#: rate-independent law of the published method).
+RATE_DEPENDENCES = ("mu_I", "none")
+#: Grain diameter (m): 1 um (fine powders) to 0.1 m (coarse gravel, rock fill).
+GRAIN_DIAMETER_RANGE = (1e-6, 0.1)
+#: An outlet fewer than this many grains wide arches (Beverloo's regime ends; the classic
+#: figure for free-flowing grains is about 5 grain diameters): a warning.
+ARCHING_GRAINS = 5.0
 #: Cell size (m): 0.1 mm (the size of a sand grain) to 10 m.
 CELL_SIZE_RANGE = (1e-4, 10.0)
 #: Simulated times (s): at most 1e6 s (11.6 days; the largest silos empty in hours).
@@ -161,6 +179,10 @@ MEMORY_BASE = 0.2e9                # bytes: Python, FiPy, numba and the compiled
 #: bytes a cell that the model and its state keep once the grid is built (measured,
 #: tracemalloc: 2.25 kB a cell at 18,414 and 72,346 cells, without markers and wall loads)
 MEMORY_KEPT_PER_CELL = 2.3e3
+#: The fill's surface lies at least this many cells above the outlet plane (a thinner fill
+#: has no cell of material at the wall: measured, a fill a tenth of a cell deep fails its
+#: run, one half a cell deep runs; two cells is the least the grid resolves).
+FILL_CELLS = 2
 #: Most explicit time steps a run may need.  Even at the cost of a step on a tiny grid
 #: (measured: 2,937 steps of a 624-cell hopper in 0.43 s, 0.15 ms a step) 1e9 steps take
 #: about two days; on the reference grid (0.5 ms a step) a week.  More cannot finish.
@@ -199,14 +221,16 @@ class HopperGeometry:
     position); ``fill_level`` (m above the outlet plane).  ``inserts`` (any shape): closed
     polygons (:class:`InsertConfig`), inside the walls, above the outlet plane.
 
-    A profile's shorthand sizes, which the rest of the code reads, are derived:
-    ``bin_diameter`` is twice the wall's widest ``x`` (a full section: the rightmost ``x``
-    of ``wall`` less the leftmost of ``left_wall``), ``outlet_diameter`` twice the lip's ``x``
-    (a full section: the outlet's width), ``half_angle_deg`` the angle from the vertical of
-    the lowest sloping segment of ``wall`` (to 1e-9 deg), :attr:`cone_height` the bottom of
-    the top vertical stretch of ``wall`` (its top if the top segment slopes), ``bin_height``
-    and ``fill_height`` are above it (the latter negative for a fill below it), :attr:`top`
-    is the lower of the walls' tops.  The boundary itself is :attr:`boundary`.
+    The silo itself is :attr:`boundary` (:class:`fipy_hopper.boundary.Boundary`), which every
+    part of the code reads.  A profile's shorthand sizes exist only where they describe it:
+    when its wall is a cone (a wedge, a flat floor) under a bin in a half-section
+    (:attr:`fipy_hopper.boundary.Boundary.hopper_shape`, one slope by length),
+    ``bin_diameter`` is twice the bin wall's ``x``, ``half_angle_deg`` that slope,
+    :attr:`cone_height` the height of the transition, ``bin_height`` and ``fill_height`` above
+    it (the latter negative for a fill below it); for any other wall they are None.
+    ``outlet_diameter`` (twice the lip's ``x``, or a full section's outlet width),
+    :attr:`width` (the widest span) and :attr:`top` (the lower of the walls' tops) describe
+    every silo.
     """
 
     bin_diameter: float = 0.3
@@ -338,22 +362,30 @@ class HopperGeometry:
         """The silo the classic theories cover: a half-section without inserts in the material
         (an insert wholly above the fill level does not count) whose wall is a cone, a
         wedge's plate or a flat floor under one vertical bin wall (the shorthands, and a
-        profile drawn as one).  Janssen, Walker and EN 1991-4's hopper loads apply to
-        it as a whole; other silos get them where a stretch allows (Janssen on a top vertical
+        profile drawn as one: :attr:`fipy_hopper.boundary.Boundary.hopper_shape`).
+        Beverloo's rate with the Rose-Tanaka factor, Jenike's critical half-angle, Janssen,
+        Walker and EN 1991-4's hopper loads apply to it as a whole; other silos get them
+        where a stretch allows (Jenike per stretch of hopper wall, Janssen on a top vertical
         stretch)."""
-        wall = self.wall_points
         buried = [i for i in self.inserts
                   if min(z for _, z in i.outline) < (self.fill_level or self.top)]
-        return (not self.full_section and not buried and len(wall) == 3
-                and wall[1][0] == wall[2][0] and wall[1][0] != wall[0][0])
+        return not buried and self.boundary.hopper_shape is not None
 
     @property
     def x_extent(self) -> tuple:
         """``(x_min, x_max)`` (m) of the section: the axis to the widest point, or the two
         walls' extremes in a full section (the width the grid must span)."""
+        right = max(x for x, _ in self.wall_points)
         if not self.full_section:
-            return 0.0, self.bin_radius
-        return (min(x for x, _ in self.left_wall), max(x for x, _ in self.wall))
+            return 0.0, right
+        return min(x for x, _ in self.left_wall), right
+
+    @property
+    def width(self) -> float:
+        """The silo's widest span (m): the bin's diameter (width) of a shorthand, twice a
+        half-section's widest ``x``, or wall to wall of a full section."""
+        x_min, x_max = self.x_extent
+        return 2.0 * x_max if not self.full_section else x_max - x_min
 
     @cached_property
     def boundary(self):
@@ -365,25 +397,28 @@ class HopperGeometry:
                      fill_level=self.fill_level)
 
     @property
-    def bin_radius(self) -> float:
-        """The bin's radius, or half its width for a wedge (m)."""
-        return 0.5 * self.bin_diameter
+    def bin_radius(self) -> Optional[float]:
+        """The bin's radius, or half its width for a wedge (m); None where there is no one
+        bin (:attr:`bin_diameter`)."""
+        return None if self.bin_diameter is None else 0.5 * self.bin_diameter
 
     @property
     def outlet_radius(self) -> float:
         return 0.5 * self.outlet_diameter
 
     @property
-    def half_angle(self) -> float:
-        """Cone half-angle in radians."""
-        return math.radians(self.half_angle_deg)
+    def half_angle(self) -> Optional[float]:
+        """Cone half-angle in radians (None where there is no one hopper angle)."""
+        return None if self.half_angle_deg is None else math.radians(self.half_angle_deg)
 
     @property
-    def cone_height(self) -> float:
+    def cone_height(self) -> Optional[float]:
         """Height of the cone-cylinder transition above the outlet, ``(R - R0) / tan(theta)``
-        (zero for a flat-bottomed bin); a profile's: the bottom of its top vertical stretch."""
+        (zero for a flat-bottomed bin); a profile's: the height of its transition where it
+        describes a cone under a bin, else None (every silo's is
+        :meth:`fipy_hopper.boundary.Boundary.transition_height`)."""
         if self.shape == "profile":
-            return _bin_bottom(self.wall)
+            return None if self.half_angle_deg is None else _bin_bottom(self.wall)
         if self.half_angle_deg >= 90.0:
             return 0.0
         return (self.bin_radius - self.outlet_radius) / math.tan(self.half_angle)
@@ -457,12 +492,42 @@ def _check_wall(key: str, wall: tuple, half: bool) -> None:
             raise ConfigError(f"{key}[{i}] = {_point_text(p)}: z = {p[1]:g} m is below the "
                               f"previous point's {wall[i - 1][1]:g} m; the wall must not "
                               f"descend from the lip to the top")
+    _check_wall_segments(key, wall)
     crossing = self_crossing(wall, closed=False)
     if crossing:
         i, j = crossing
         raise ConfigError(f"{key} crosses itself: its segment {i} {_point_text(wall[i])}-"
                           f"{_point_text(wall[i + 1])} meets segment {j} "
                           f"{_point_text(wall[j])}-{_point_text(wall[j + 1])}")
+
+
+def _check_wall_segments(key: str, wall: tuple) -> None:
+    """No segment of a wall along the outlet plane over the outlet (the lip is the wall's
+    point on ``z = 0`` nearest the outlet, or the outlet's width would be misread), and none
+    shorter than the least length of :data:`LENGTH_RANGE` (a sliver that no grid resolves,
+    which at the lip would be taken for the hopper's slope)."""
+    pts = np.asarray(wall, dtype=float)
+    left = key.endswith("left_wall")
+    lip = pts[0, 0]
+    over = np.flatnonzero((pts[1:, 1] == 0.0) & ((pts[1:, 0] > lip) if left
+                                                  else (pts[1:, 0] < lip))) + 1
+    if len(over):
+        i = int(over[0])
+        raise ConfigError(
+            f"{key}[{i}] = {_point_text(wall[i])}: the wall runs along the outlet plane, "
+            f"z = 0, over the outlet from its lip {key}[0] = {_point_text(wall[0])}; the lip is "
+            f"the wall's point on z = 0 nearest the outlet: start {key} there (allowed on "
+            f"z = 0: x {'<=' if left else '>='} {lip:g} m)")
+    lo, hi = LENGTH_RANGE
+    lengths = np.hypot(*np.diff(pts, axis=0).T)
+    short = np.flatnonzero(lengths < lo)
+    if len(short):
+        i = int(short[0])
+        raise ConfigError(
+            f"{key}: segment {i}, {_point_text(wall[i])} to {_point_text(wall[i + 1])}, is "
+            f"{lengths[i]:.3g} m long; allowed range is [{lo:g}, {hi:g}] m (a sliver no grid "
+            f"resolves, which at the lip would be taken for the hopper's slope): draw it as "
+            f"part of its neighbours")
 
 
 def _wall_x_at(wall: tuple, z: float) -> float:
@@ -473,7 +538,7 @@ def _wall_x_at(wall: tuple, z: float) -> float:
 
 def _check_profile(geom: "HopperGeometry") -> None:
     """Check a profile's walls and fill level; set its points and derived sizes."""
-    from .boundary import segments_meet
+    from .boundary import first_meeting, profile_rows, wall_x
 
     if geom.wall is None:
         raise ConfigError('hopper.wall is required for shape = "profile" ([[x, z], ...] in m, '
@@ -492,23 +557,26 @@ def _check_profile(geom: "HopperGeometry") -> None:
                               f"{_point_text(wall[0])}: the outlet has no width")
         for key, points, other, sign in (("hopper.left_wall", left, wall, 1.0),
                                          ("hopper.wall", wall, left, -1.0)):
-            for i, (x, z) in enumerate(points):
-                x_other = _wall_x_at(other, z)
-                if sign * (x_other - x) <= 0.0:
-                    raise ConfigError(
-                        f"{key}[{i}] = {_point_text((x, z))}: "
-                        f"{'right' if sign > 0 else 'left'} of (or on) the "
-                        f"{'right' if sign > 0 else 'left'} wall, at x = {x_other:g} m at "
-                        f"z = {z:g} m; the left wall must stay left of the right wall")
+            xz = np.asarray(points, dtype=float)
+            x_others = wall_x(xz[:, 1], profile_rows(other), other[0][0])   # all at once
+            bad = np.flatnonzero(sign * (x_others - xz[:, 0]) <= 0.0)
+            if len(bad):
+                i = int(bad[0])
+                (x, z), x_other = points[i], float(x_others[i])
+                raise ConfigError(
+                    f"{key}[{i}] = {_point_text((x, z))}: "
+                    f"{'right' if sign > 0 else 'left'} of (or on) the "
+                    f"{'right' if sign > 0 else 'left'} wall, at x = {x_other:g} m at "
+                    f"z = {z:g} m; the left wall must stay left of the right wall")
         top = max(wall[-1][1], left[-1][1])
         tall = [p + ((p[-1][0], top),) for p in (left, wall)]
-        for i in range(len(tall[0]) - 1):
-            for j in range(len(tall[1]) - 1):
-                if segments_meet(*tall[0][i:i + 2], *tall[1][j:j + 2]):
-                    raise ConfigError(
-                        f"hopper.left_wall crosses hopper.wall: its segment from "
-                        f"{_point_text(tall[0][i])} meets the right wall's from "
-                        f"{_point_text(tall[1][j])}; the left wall must stay left of it")
+        meet = first_meeting(tall[0][:-1], tall[0][1:], tall[1][:-1], tall[1][1:])
+        if meet is not None:
+            i, j = meet
+            raise ConfigError(
+                f"hopper.left_wall crosses hopper.wall: its segment from "
+                f"{_point_text(tall[0][i])} meets the right wall's from "
+                f"{_point_text(tall[1][j])}; the left wall must stay left of it")
         width = max(x for x, _ in wall) - min(x for x, _ in left)
         outlet = wall[0][0] - left[0][0]
     elif geom.left_wall is not None:    # (refused by _check_section)
@@ -528,18 +596,27 @@ def _check_profile(geom: "HopperGeometry") -> None:
                           f"{_interval(LENGTH_RANGE[0], top, unit=' m')}")
     _check_range("hopper.fill_level", level, LENGTH_RANGE[0], top, unit=" m")
     object.__setattr__(geom, "fill_level", level)
-    slope = next(p for p, q in zip(wall, wall[1:]) if p[0] != q[0])
-    nxt = wall[wall.index(slope) + 1]
+    # the hopper's slope: the lowest sloping segment of the wall (in a full section whose
+    # right wall rises straight up from its lip, of the left wall)
+    key, sloped = "hopper.wall", wall
+    if geom.full_section and all(p[0] == q[0] for p, q in zip(wall, wall[1:])):
+        key, sloped = "hopper.left_wall", geom.left_wall
+    slope, nxt = next((p, q) for p, q in zip(sloped, sloped[1:]) if p[0] != q[0])
     cone = _bin_bottom(wall)
     angle = round(math.degrees(math.atan2(abs(nxt[0] - slope[0]), nxt[1] - slope[1])), 9)
     if angle <= 0.0:
-        raise ConfigError(f"hopper.wall: the wall rises vertically from the lip at "
-                          f"{_point(wall[0])} (its first slope, {_point(slope)} to "
+        raise ConfigError(f"{key}: the wall rises vertically from the lip at "
+                          f"{_point(sloped[0])} (its first slope, {_point(slope)} to "
                           f"{_point(nxt)}, is vertical to round-off): give the hopper or the "
                           f"floor a slope")
-    for key, value in (("bin_diameter", width), ("outlet_diameter", outlet),
-                       ("half_angle_deg", angle),
-                       ("bin_height", top - cone), ("fill_height", level - cone),
+    from .boundary import hopper_shape
+    shape = None if geom.full_section else hopper_shape(wall)
+    sizes = {"bin_diameter": None, "half_angle_deg": None, "bin_height": None,
+             "fill_height": None}
+    if shape is not None:
+        sizes = {"bin_diameter": 2.0 * shape.bin_x, "half_angle_deg": shape.half_angle_deg,
+                 "bin_height": top - cone, "fill_height": level - cone}
+    for key, value in (("outlet_diameter", outlet), *sizes.items(),
                        ("bin_width", None), ("outlet_width", None)):
         object.__setattr__(geom, key, value)
 
@@ -552,7 +629,7 @@ def _point(p) -> str:
 def _check_inserts(geom: "HopperGeometry") -> None:
     """Each insert: a table of ``outline`` (a closed polygon inside the walls, above the
     outlet plane, apart from the other inserts) and ``friction_angle_deg``."""
-    from .boundary import polygon_integrals, segments_meet, self_crossing
+    from .boundary import first_meeting, polygon_integrals, profile_rows, self_crossing, wall_x
 
     value = geom.inserts
     if isinstance(value, (str, bytes, dict)) or not isinstance(value, (list, tuple)):
@@ -562,6 +639,7 @@ def _check_inserts(geom: "HopperGeometry") -> None:
     walls = [("hopper.wall", geom.wall_points)] + (
         [] if half else [("hopper.left_wall", geom.left_wall)])
     top, done = geom.top, []
+    rows = {wkey: profile_rows(wall) for wkey, wall in walls}
     allowed = [f.name for f in fields(InsertConfig)]
     for m, item in enumerate(value):
         key = f"hopper.inserts[{m}]"
@@ -587,14 +665,19 @@ def _check_inserts(geom: "HopperGeometry") -> None:
             friction = _check_range(f"{key}.friction_angle_deg", friction, 0, 90,
                                     high_open=True, unit=" deg")
         outline = f"{key}.outline"
-        if polygon_integrals(pts)[0] == 0.0:
+        (x0, z0), (x1, z1) = pts[0], pts[1]
+        if all((x1 - x0) * (z - z0) == (z1 - z0) * (x - x0) for x, z in pts[2:]):
             raise ConfigError(f"{outline} encloses no area (its points are on one line): "
                               f"expected a closed polygon")
         crossing = self_crossing(pts, closed=True)
-        if crossing:
+        if crossing:              # a bow-tie too: its signed area may be zero
             i, j = crossing
             raise ConfigError(f"{outline} crosses itself: its edge from {_point_text(pts[i])} "
                               f"meets the edge from {_point_text(pts[j])}")
+        if polygon_integrals(pts)[0] == 0.0:       # (not reached: kept as the last guard)
+            raise ConfigError(f"{outline} encloses no area: expected a closed polygon")
+        heights = np.asarray(pts, dtype=float)[:, 1]
+        x_walls = {wkey: wall_x(heights, rows[wkey], wall[0][0]) for wkey, wall in walls}
         for i, (x, z) in enumerate(pts):
             where = f"{outline}[{i}] = {_point_text((x, z))}"
             if z < 0.0:
@@ -607,7 +690,7 @@ def _check_inserts(geom: "HopperGeometry") -> None:
                                   f"an insert lies at x >= 0 (a body of revolution, or a bar "
                                   f"on the mid-plane)")
             for wkey, wall in walls:
-                x_wall = _wall_x_at(wall, z)
+                x_wall = float(x_walls[wkey][i])
                 if (x - x_wall) * (1.0 if wkey == "hopper.wall" else -1.0) >= 0.0:
                     raise ConfigError(f"{where}: in or on the wall ({wkey} is at x = "
                                       f"{x_wall:g} m at z = {z:g} m); an insert lies inside "
@@ -616,17 +699,17 @@ def _check_inserts(geom: "HopperGeometry") -> None:
         if half and sum(p[0] == 0.0 and q[0] == 0.0 for p, q in edges) > 1:
             raise ConfigError(f"{outline} lies along the axis with more than one edge; at "
                               f"most one")
+        ends = [p for p, _ in edges], [q for _, q in edges]
         for wkey, wall in walls:
-            for p, q in edges:
-                for k in range(len(wall) - 1):
-                    if segments_meet(p, q, wall[k], wall[k + 1]):
-                        raise ConfigError(f"{outline} cuts {wkey}: its edge from "
-                                          f"{_point_text(p)} to {_point_text(q)} meets the "
-                                          f"wall's segment {k}")
+            meet = first_meeting(*ends, wall[:-1], wall[1:])
+            if meet is not None:
+                (p, q), k = edges[meet[0]], meet[1]
+                raise ConfigError(f"{outline} cuts {wkey}: its edge from "
+                                  f"{_point_text(p)} to {_point_text(q)} meets the "
+                                  f"wall's segment {k}")
         from .boundary import inside_polygon
         for n, other in done:
-            if (any(segments_meet(p, q, r, s) for p, q in edges
-                    for r, s in zip(other, other[1:] + other[:1]))
+            if (first_meeting(*ends, other, other[1:] + other[:1]) is not None
                     or inside_polygon(pts[0][0], pts[0][1], np.asarray(other))
                     or inside_polygon(other[0][0], other[0][1], np.asarray(pts))):
                 raise ConfigError(f"{outline} overlaps hopper.inserts[{n}]; inserts must lie "
@@ -645,6 +728,15 @@ class MaterialConfig:
 
     Ranges: density ``[1, 20000]`` kg/m3 (:data:`DENSITY_RANGE`), Young's modulus
     ``[1 kPa, 1 TPa]`` (:data:`MODULUS_RANGE`), cohesion ``[0, 100 MPa]``.
+
+    The grains: ``grain_diameter`` d (m, ``[1 um, 0.1 m]``; 1 mm by default, a medium to
+    coarse silica sand: docs/physics_and_numerics.md §2) and ``grain_density`` rho_s (kg/m3,
+    not below the bulk density; 2650, quartz).  ``rate_dependence``: ``"mu_I"`` (the default)
+    adds the mu(I) rise of the friction in flowing material to the Mohr–Coulomb law
+    (:mod:`fipy_hopper.material.rate`: ``friction_rise`` delta_mu = mu_2 - mu_s in ``(0, 2]``,
+    ``inertial_number_i0`` I_0 in ``(0, 10]``), with d as its length; ``"none"`` is the plain
+    rate-independent law of the published method (d then only enters the comparisons with
+    Beverloo's correlation, and may be 0).
     """
 
     density: float = 1500.0
@@ -653,6 +745,11 @@ class MaterialConfig:
     friction_angle_deg: float = 30.0
     dilation_angle_deg: float = 0.0
     cohesion: float = 0.0
+    grain_diameter: float = 1.0e-3
+    grain_density: float = 2650.0
+    rate_dependence: str = "mu_I"
+    friction_rise: float = 0.26
+    inertial_number_i0: float = 0.28
 
     def __post_init__(self):
         _check_range("material.density", self.density, *DENSITY_RANGE, unit=" kg/m3")
@@ -664,14 +761,45 @@ class MaterialConfig:
         _check_range("material.dilation_angle_deg", self.dilation_angle_deg, 0,
                      self.friction_angle_deg, unit=" deg")
         _check_range("material.cohesion", self.cohesion, 0, COHESION_MAX, unit=" Pa")
+        if not isinstance(self.rate_dependence, str) \
+                or self.rate_dependence not in RATE_DEPENDENCES:
+            raise ConfigError(f"material.rate_dependence = {_show(self.rate_dependence)}: "
+                              f"expected one of {', '.join(repr(r) for r in RATE_DEPENDENCES)}")
+        plain = self.rate_dependence == "none"
+        if not (plain and _is_zero(self.grain_diameter)):     # the plain law may have none
+            _check_range("material.grain_diameter", self.grain_diameter,
+                         *GRAIN_DIAMETER_RANGE,
+                         unit=" m" + ('; or 0 with rate_dependence = "none"' if plain else ""))
+        _check_range("material.grain_density", self.grain_density, *DENSITY_RANGE,
+                     unit=" kg/m3")
+        if self.grain_density < self.density:
+            raise ConfigError(f"material.grain_density = {self.grain_density:g} kg/m3 is below "
+                              f"the bulk density material.density = {self.density:g} kg/m3: "
+                              f"allowed range is [{self.density:g}, {DENSITY_RANGE[1]:g}] kg/m3")
+        _check_range("material.friction_rise", self.friction_rise, 0, 2, low_open=True)
+        _check_range("material.inertial_number_i0", self.inertial_number_i0, 0, 10,
+                     low_open=True)
+
+    @property
+    def rheology(self):
+        """The rate dependence of the law: a :class:`fipy_hopper.material.rate.
+        InertialRheology`, or None for ``rate_dependence = "none"``."""
+        if self.rate_dependence == "none":
+            return None
+        from .material.rate import InertialRheology
+        return InertialRheology(grain_diameter=self.grain_diameter,
+                                grain_density=self.grain_density,
+                                friction_rise=self.friction_rise,
+                                inertial_number_i0=self.inertial_number_i0)
 
     def law(self):
         """The constitutive law of this material (:mod:`fipy_hopper.material.law`): a
-        :class:`fipy_hopper.material.MohrCoulomb` in the Abaqus form."""
+        :class:`fipy_hopper.material.MohrCoulomb` in the Abaqus form, with the mu(I)
+        overstress of :attr:`rheology` unless ``rate_dependence = "none"``."""
         from .material import MohrCoulomb
         return MohrCoulomb(E=self.youngs_modulus, nu=self.poisson_ratio, rho=self.density,
                            phi=self.friction_angle_deg, psi=self.dilation_angle_deg,
-                           c=self.cohesion)
+                           c=self.cohesion, rate=self.rheology)
 
     @property
     def p_wave_speed(self) -> float:
@@ -733,10 +861,11 @@ class NumericsConfig:
       0.41 Pa s``, the order of the rate dependence of a 1 mm sand (``mu(I)``).  Eulerian
       formulation only.
     - ``viscosity_length`` ``l`` (m, 0: the cell size, the default): the length in ``eta``,
-      ``eta = b rho sqrt(g l) l``: a viscosity of fixed size, a material's rate dependence,
-      the same on every grid (it gives a shear band, such as the edge of a funnel's flow
-      channel, a width that does not shrink with the cells; ``docs/physics_and_numerics.md``
-      section 4).
+      ``eta = b rho sqrt(g l) l``: a viscosity of fixed size, the same on every grid.  A
+      numerical knob only: the material's own length, which gives a shear band such as the
+      edge of a funnel's flow channel a width that does not shrink with the cells, is the
+      grain size of the law's rate dependence (``material.grain_diameter``,
+      ``docs/physics_and_numerics.md`` section 2).
     - ``bulk_viscosity`` ``b_1`` (dimensionless, 0: off; ``"auto"``, the default, is
       :data:`DEFAULT_BULK_VISCOSITY` with the Eulerian formulation and 0 with the Lagrangian
       one, see :attr:`HopperConfig.bulk_viscosity`): a viscous pressure ``eta_b tr(D)``
@@ -845,7 +974,8 @@ class RunConfig:
     ``wall_bin_width`` (m): the resolution of the wall-load profiles along the wall: the
     traction recovered from the wall's reaction is a spline on knots this far apart and is
     reported as its mean over bins of this width (:mod:`fipy_hopper.wall_traction`).
-    ``"auto"`` (the default) is a twentieth of the bin's diameter (width), but at least three
+    ``"auto"`` (the default) is a twentieth of the silo's widest span (the bin's diameter or
+    width), but at least three
     cells (:meth:`HopperConfig.wall_bin_width_m`); a width in metres stays the same under
     refinement, so profiles of different cell sizes compare bin by bin.
 
@@ -897,10 +1027,10 @@ class RunConfig:
         if isinstance(self.wall_bin_width, str):
             if self.wall_bin_width != "auto":
                 raise ConfigError(f"run.wall_bin_width = {_show(self.wall_bin_width)}: expected "
-                                  f'a length in metres in (0, {LENGTH_RANGE[1]:g}] or "auto"')
-        else:
-            _check_range("run.wall_bin_width", self.wall_bin_width, 0, LENGTH_RANGE[1],
-                         low_open=True, unit=" m")
+                                  f"a length in metres in [{LENGTH_RANGE[0]:g}, "
+                                  f'{LENGTH_RANGE[1]:g}] or "auto"')
+        else:       # bins finer than a millimetre resolve nothing a continuum of grains has
+            _check_range("run.wall_bin_width", self.wall_bin_width, *LENGTH_RANGE, unit=" m")
         if self.end_time != "empty" and self.end_time > self.max_time:
             raise ConfigError(
                 f"run.end_time = {self.end_time:g} s is beyond run.max_time = "
@@ -973,6 +1103,7 @@ class HopperConfig:
                 f"{cells_across_outlet:.2f} cells across the outlet {across} "
                 f"({self.hopper.outlet_radius:g} m); at least 3 are needed "
                 f"(cell_size <= {self.hopper.outlet_radius / 3:.4g} m)")
+        self._check_fill_depth()
         if self.numerics.formulation == "lagrangian" and not self.hopper.axisymmetric:
             raise ConfigError('numerics.formulation = "lagrangian" models conical hoppers only; '
                               'a wedge (hopper.shape = "wedge") runs with "eulerian"')
@@ -982,6 +1113,11 @@ class HopperConfig:
                               f'material; this {self.hopper.n_wall_segments}-segment wall'
                               f'{" with inserts" if self.hopper.inserts else ""} runs with '
                               '"eulerian"')
+        if self.numerics.formulation == "lagrangian" and self.hopper.fill_height <= 0.0:
+            raise ConfigError(f'numerics.formulation = "lagrangian" meshes a fill that reaches '
+                              f'the bin; hopper.fill_level = {self.hopper.fill_level:g} m is '
+                              f'at or below the transition, z = {self.hopper.cone_height:g} m '
+                              '(allowed range is above it); this fill runs with "eulerian"')
         if self.numerics.formulation == "lagrangian" and self.wall.segment_friction_deg \
                 and len(set(self.wall.segment_friction_deg)) > 1:
             raise ConfigError('numerics.formulation = "lagrangian" takes one wall friction '
@@ -995,6 +1131,7 @@ class HopperConfig:
                               f"{'s' * (len(angles) != 1)}; {what} "
                               f"{self.hopper.n_wall_segments} segments: one angle per segment, "
                               f"from the lip up")
+        self._check_grains()
         if self.numerics.formulation == "lagrangian" and self.run.opening_time > 0.0:
             raise ConfigError(f"run.opening_time = {self.run.opening_time:g} s applies to "
                               'numerics.formulation = "eulerian" only; allowed range with '
@@ -1030,6 +1167,24 @@ class HopperConfig:
                           "6 or more are recommended for a discharge rate", ResolutionWarning,
                           stacklevel=3)
 
+    def _check_fill_depth(self) -> None:
+        """The fill's surface at least :data:`FILL_CELLS` cells above the outlet plane: a
+        thinner fill is not resolved by the grid (it has no cell of material at the wall to
+        measure, and its run fails)."""
+        geom, h = self.hopper, self.numerics.cell_size
+        least = FILL_CELLS * h
+        if geom.fill_level >= least:
+            return
+        if geom.shape == "profile":
+            key, value, low = "hopper.fill_level", geom.fill_level, least
+        else:
+            key, value, low = "hopper.fill_height", geom.fill_height, least - geom.cone_height
+        high = geom.top - (0.0 if geom.shape == "profile" else geom.cone_height)
+        raise ConfigError(
+            f"{key} = {value:g} m puts the fill's surface {geom.fill_level:g} m above the "
+            f"outlet plane, less than {FILL_CELLS} cells (numerics.cell_size = {h:g} m): the "
+            f"grid cannot resolve it; allowed range is [{_ceil_digits(low):.3g}, {high:g}] m")
+
     @cached_property
     def boundary(self):
         """The boundary (:class:`fipy_hopper.boundary.Boundary`) with every segment's wall
@@ -1052,7 +1207,8 @@ class HopperConfig:
     @property
     def wall_bin_width_m(self) -> float:
         """The wall-load bins' width (m): ``run.wall_bin_width``, or for ``"auto"`` a twentieth
-        of the bin's diameter (a wedge's width), at least three cells.  Three cells is what
+        of the silo's widest span (:attr:`HopperGeometry.width`: the bin's diameter, a wedge's
+        width), at least three cells.  Three cells is what
         averages the cut cells' pattern of the wall's reaction to a smooth profile (the
         traction's spline spans four bins); a twentieth of the silo resolves its loads
         (15 mm in the reference hopper) independently of the cell size."""
@@ -1062,7 +1218,7 @@ class HopperConfig:
         """:attr:`wall_bin_width_m` on a grid of ``cell_size`` m."""
         if self.run.wall_bin_width != "auto":
             return float(self.run.wall_bin_width)
-        return max(3.0 * cell_size, self.hopper.bin_diameter / 20.0)
+        return max(3.0 * cell_size, self.hopper.width / 20.0)
 
     def memory_estimate(self) -> float:
         """Peak resident memory of a run (bytes): the grid, its markers and its wall loads
@@ -1083,6 +1239,25 @@ class HopperConfig:
         """Most time steps a run can take: filling up to ``max_fill_time`` plus the discharge."""
         return (self.numerics.max_fill_time + self.run.discharge_time) / self.time_step
 
+    def _check_grains(self) -> None:
+        """The outlet against the grains: no wider grain than the outlet (an error), and an
+        outlet under :data:`ARCHING_GRAINS` grains wide arches (a warning, :class:`
+        ArchingWarning`): Beverloo's regime, and the continuum's, end there."""
+        d = self.material.grain_diameter
+        if d <= 0.0:
+            return
+        width = 2.0 * self.hopper.outlet_radius
+        what = "diameter" if self.hopper.axisymmetric else "width"
+        if d >= width:
+            raise ConfigError(f"material.grain_diameter = {d:g} m is not smaller than the "
+                              f"outlet's {what} {width:g} m: allowed range is (0, {width:g}) m")
+        if width < ARCHING_GRAINS * d:
+            warnings.warn(f"the outlet's {what} {width:g} m is {width / d:.2f} grain diameters "
+                          f"(material.grain_diameter = {d:g} m), fewer than about "
+                          f"{ARCHING_GRAINS:g}: such an outlet arches and does not flow "
+                          f"steadily; Beverloo's correlation and this continuum do not "
+                          f"describe it", ArchingWarning, stacklevel=3)
+
     def _check_grid_size(self) -> None:
         h = self.numerics.cell_size
         n = self.n_cells
@@ -1090,7 +1265,7 @@ class HopperConfig:
             return
         # the smallest cell size whose grid fits: the count never grows with the cell size,
         # so bisect on the exact count, then round up to 3 digits
-        lo, hi = h, max(h, 2 * (self.hopper.top + self.hopper.bin_diameter))
+        lo, hi = h, max(h, 2 * (self.hopper.top + self.hopper.width))
         for _ in range(100):
             mid = 0.5 * (lo + hi)
             lo, hi = (mid, hi) if math.prod(self.grid_shape(mid)) > MAX_CELLS else (lo, mid)
@@ -1183,8 +1358,8 @@ class HopperConfig:
     def from_toml(cls, path: Union[str, Path]) -> "HopperConfig":
         """Read and validate a TOML file."""
         path = Path(path)
-        try:
-            text = path.read_text(encoding="utf-8")
+        try:       # UTF-8, with or without the byte-order mark some editors write first
+            text = path.read_text(encoding="utf-8-sig")
         except OSError as exc:
             raise ConfigError(f"cannot read configuration {path}: {exc.strerror}") from None
         except UnicodeDecodeError as exc:
@@ -1252,10 +1427,27 @@ class HopperConfig:
                                                        prefix=f"{name}."))
             if name == "hopper" and change:
                 _check_shape_keys({"shape": current.shape, **change})
+                if change.get("shape", current.shape) != current.shape:
+                    new[name] = _reshaped(current, change)
+                    continue
             new[name] = dataclasses.replace(current, **change) if change else current
         if sections:
             raise ConfigError(_unknown_message("section", next(iter(sections)), list(_SECTIONS)))
         return HopperConfig(**new)
+
+
+def _reshaped(current: HopperGeometry, change: dict) -> HopperGeometry:
+    """:meth:`HopperConfig.replace` to another ``hopper.shape``: the geometry of ``change``
+    with what the two shapes share carried over (between a cone and a wedge their half-angle
+    and heights; always the inserts; to a profile, the symmetry), never what belongs to the
+    old shape (a cone's symmetry into a wedge, a profile's points into a cone)."""
+    shared = ("half_angle_deg", "bin_height", "fill_height")
+    carried = {"inserts": current.inserts}
+    if change["shape"] == "profile":
+        carried["symmetry"] = current.symmetry
+    elif current.shape != "profile":
+        carried.update({key: getattr(current, key) for key in shared})
+    return HopperGeometry(**{**carried, **change})
 
 
 def _ceil_digits(x: float, digits: int = 3) -> float:

@@ -12,11 +12,10 @@ state, never change it.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .wall_traction import WallStretch
 
 
 # ---------------------------------------------------------------- discharge rate
@@ -28,8 +27,9 @@ def steady_rate(t, mass_in_hopper, discharge_rate, t_open=0.0, upper=0.9, lower=
     hopper still held between ``lower`` and ``upper`` of its initial mass (the start transient
     and the final emptying of the cone are excluded).  The steady rate is the median of ``W``
     over the plateau, the spread its interquartile range relative to the median.  When no sample
-    qualifies (a short run), the samples of the last 75% of the run are used.  Returns
-    ``(rate, spread, n_samples)``; ``rate`` is NaN when there is nothing to measure.
+    qualifies (a short run), the samples of the last 75% of the run are used.  Samples without
+    a rate (NaN: the last one when it covers less than half an interval) are left out.
+    Returns ``(rate, spread, n_samples)``; ``rate`` is NaN when there is nothing to measure.
     """
     t = np.asarray(t, float)
     m = np.asarray(mass_in_hopper, float)
@@ -37,9 +37,9 @@ def steady_rate(t, mass_in_hopper, discharge_rate, t_open=0.0, upper=0.9, lower=
     if len(t) == 0:
         return math.nan, math.nan, 0
     m0 = m[0] if len(m) else 0.0
-    sel = (t >= t_open + settle_time) & (m <= upper * m0) & (m >= lower * m0)
+    sel = (t >= t_open + settle_time) & (m <= upper * m0) & (m >= lower * m0) & np.isfinite(w)
     if sel.sum() < 3:
-        sel = t >= t_open + 0.25 * (t[-1] - t_open)
+        sel = (t >= t_open + 0.25 * (t[-1] - t_open)) & np.isfinite(w)
     if sel.sum() == 0:
         return math.nan, math.nan, 0
     ws = w[sel]
@@ -72,9 +72,11 @@ class FlowModeRule:
     i.e. the wall's friction power ``sum mu N_e u_e`` over what it would be if the material
     slid along the wall at the axis speed.  Its **wall slip fraction** is the share of its
     loaded contact length (each contact standing for the wall between the midpoints to its
-    neighbours) with ``u_e >= slip_ratio U_e``.  Mass flow when every hopper stretch has
-    ``S >= slip_ratio``, funnel flow otherwise; ``slip_ratio`` is the rule's one threshold
-    (docs/physics_and_numerics.md, section 8).
+    neighbours) with ``u_e >= slip_ratio U_e``.  A stretch's S over a run is the median of its
+    samples' (:func:`stretch_calls`), its call mass where ``S >= slip_ratio``, funnel below,
+    unknown without a sample; the run's call is funnel when any counted stretch says funnel,
+    mass when at least one says mass, else unknown (:func:`overall_call`); ``slip_ratio`` is
+    the rule's one threshold (docs/physics_and_numerics.md, section 8).
 
     Reported beside it (not used for the call): the mass-flow index, the mean ratio of the
     downward speed of the cells 1 to 2.5 cells from the wall to the speed at the axis at the
@@ -156,21 +158,26 @@ def normal_load(impulse, normals):
 
 def wall_slip_measures(model, state, previous_impulse=None,
                        rule: FlowModeRule = FlowModeRule()):
-    """``(ratio, fraction, stretch ratios, profile)`` of :class:`FlowModeRule` from a model's
-    wall contact: the smallest wall slip ratio over the hopper stretches, the slip fraction of
-    that stretch, every stretch's ratio, and the loaded hopper contacts as rows
-    ``(s, r, z, u/U)`` (their wall point, m, and slip ratio; (0, 4) when none).  The loads are
-    ``state.wall_impulse`` less ``previous_impulse`` (its value at the previous sample;
-    ``None``: since the start), the slip and axis speeds the model's :meth:`contact_slip`
-    (read from the state, which is left as it is)."""
+    """``(ratio, fraction, stretch ratios, stretch fractions, profile)`` of
+    :class:`FlowModeRule` from a model's wall contact at one sample: the smallest wall slip
+    ratio over the hopper stretches, the slip fraction of that stretch, every stretch's ratio
+    and slip fraction (one per :func:`hopper_rows`, NaN where a stretch has no loaded
+    contact), and the loaded hopper contacts as rows ``(s, r, z, u/U)`` (their wall point, m,
+    and slip ratio; (0, 4) when none).  The loads are ``state.wall_impulse`` less
+    ``previous_impulse`` (its value at the previous sample; ``None``: since the start), the
+    slip and axis speeds the model's :meth:`contact_slip` (read from the state, which is left
+    as it is)."""
     s, normals, segment = model.wall_entries()
     impulse = state.wall_impulse if previous_impulse is None else (
         state.wall_impulse - previous_impulse)
     slip, axis_speed = model.contact_slip(state)
     bnd = model.cfg.boundary
-    stretch = hopper_stretches(segment, hopper_rows(bnd))
+    rows = hopper_rows(bnd)
+    stretch = hopper_stretches(segment, rows)
     load = normal_load(impulse, normals)
-    ratios, fractions = wall_slip(load, slip, axis_speed, s, stretch, rule)
+    measured = wall_slip(load, slip, axis_speed, s, stretch, rule)
+    ratios, fractions = (np.concatenate([m, np.full(len(rows) - len(m), math.nan)])
+                         for m in measured)
     on = np.flatnonzero((stretch >= 0) & (load > 0.0) & (axis_speed > 0.0) & np.isfinite(slip))
     on = on[np.argsort(s[on], kind="stable")]
     chain = bnd.table.chain[np.maximum(segment[on], 0)]
@@ -179,34 +186,59 @@ def wall_slip_measures(model, state, previous_impulse=None,
         r_w[chain == c], z_w[chain == c] = bnd.wall_point(int(c), s[on][chain == c])[:2]
     profile = np.column_stack([s[on], r_w, z_w, slip[on] / axis_speed[on]])
     if not np.isfinite(ratios).any():
-        return math.nan, math.nan, ratios, profile
+        return math.nan, math.nan, ratios, fractions, profile
     worst = int(np.nanargmin(ratios))
-    return float(ratios[worst]), float(fractions[worst]), ratios, profile
+    return float(ratios[worst]), float(fractions[worst]), ratios, fractions, profile
+
+
+def axis_columns(grid, boundary, centre_column: int) -> np.ndarray:
+    """Per node row of the grid, the node column whose downward speed is the flow-mode rule's
+    axis speed at that height: the centreline's (``centre_column``), or where that node lies
+    in the solid or within half a cell of it (an insert on the axis), the nearest node column
+    of the row to the centreline at least half a cell from every wall and insert: the
+    material's nearest column beside the insert.  A row with no such node keeps the
+    centreline's (its speed, zero, gives no ratio)."""
+    h = grid.h
+    offset = np.abs(grid.r_nodes - boundary.section.centreline)
+    X, Z = np.meshgrid(grid.r_nodes, grid.z_nodes)
+    clear = boundary.signed_distance(X, Z) >= 0.5 * h
+    ranked = np.where(clear, offset[None, :], np.inf)
+    nearest = np.argmin(ranked, axis=1)
+    keep = clear[:, centre_column] | ~np.isfinite(ranked[np.arange(len(nearest)), nearest])
+    return np.where(keep, centre_column, nearest).astype(np.int64)
 
 
 def flow_mode_measures(model, state, rule: FlowModeRule = FlowModeRule()):
-    """Mass-flow index and stagnant fraction of the cone from the current velocity field."""
+    """Mass-flow index and stagnant fraction of the hopper (the wall below its transition,
+    :meth:`~fipy_hopper.boundary.Boundary.transition_height`) from the current velocity
+    field.  The index's axis speed is that of the full cells within two cells of the row's
+    open cell nearest to the centreline (the axis, or beside an insert on it the material's
+    nearest column)."""
     g = model.grid
-    geom = model.cfg.hopper
+    bnd = model.cfg.boundary
+    z_t = bnd.transition_height("wall")
     vz_cell = 0.25 * (state.v[1, :-1, :-1] + state.v[1, :-1, 1:] + state.v[1, 1:, :-1]
                       + state.v[1, 1:, 1:])
     down = -vz_cell
     R, Z = np.meshgrid(g.r_cells, g.z_cells)
-    d = model.cfg.boundary.signed_distance(R, Z)
-    centre = abs(g.r_cells - model.cfg.boundary.section.centreline) < 2.0 * g.h
+    d = bnd.signed_distance(R, Z)
+    offset = np.abs(g.r_cells - bnd.section.centreline)
     full = state.alpha > 0.5
     ratios = []
     for frac in rule.heights:
-        zc = frac * geom.cone_height
-        row = int(np.argmin(np.abs(g.z_cells - zc)))
+        row = int(np.argmin(np.abs(g.z_cells - frac * z_t)))
+        open_ = g.kappa[row] > 0
+        if not open_.any():
+            continue
+        centre = offset - offset[open_].min() < 1.5 * g.h     # two columns from the axis
         near_wall = (d[row] >= 1.0 * g.h) & (d[row] <= 2.5 * g.h) & full[row]
-        axis = centre & full[row]
+        axis = centre & open_ & full[row]
         if near_wall.any() and axis.any():
             v_axis = float(np.mean(down[row, axis]))
             if v_axis > 1e-9:
                 ratios.append(float(np.mean(down[row, near_wall])) / v_axis)
     index = float(np.mean(ratios)) if ratios else math.nan
-    cone = full & (Z > 0) & (Z < geom.cone_height) & (g.kappa > 0)
+    cone = full & (Z > 0) & (Z < z_t) & (g.kappa > 0)
     if cone.any():
         weights = (state.alpha * model.open_volume)[cone]
         mean_down = float(np.sum(down[cone] * weights) / np.sum(weights))
@@ -219,13 +251,17 @@ def flow_mode_measures(model, state, rule: FlowModeRule = FlowModeRule()):
 
 def bin_lateral_stress_ratio(model, state) -> float:
     """The bin's lateral stress ratio ``K = sum(w sigma_rr) / sum(w sigma_zz)`` (-), ``w`` the
-    material volume ``alpha kappa V``, over the full cells (``alpha >= 0.99``) of the bin from
-    a quarter of its diameter above the transition to a quarter below the material's surface
-    (the highest cell of the bin with ``alpha >= 1/2``): about ``nu / (1 - nu)`` in a bin
-    filled at rest, larger where discharge switches the stress state.  NaN when the band holds
+    material volume ``alpha kappa V``, over the full cells (``alpha >= 0.99``) of the bin (above
+    the wall's transition, :meth:`~fipy_hopper.boundary.Boundary.transition`) from a quarter
+    of its width above the transition to a quarter below the material's surface (the highest
+    cell of the bin with ``alpha >= 1/2``): about ``nu / (1 - nu)`` in a bin filled at rest,
+    larger where discharge switches the stress state.  NaN without a bin, when the band holds
     no cell (a bin emptied below it) or no compression."""
-    g, geom = model.grid, model.cfg.hopper
-    z_t, quarter = geom.cone_height, 0.25 * geom.bin_diameter
+    g, bnd = model.grid, model.cfg.boundary
+    if bnd.transition("wall") is None:
+        return math.nan
+    z_t = bnd.transition_height("wall")
+    quarter = 0.25 * bnd.span_at(z_t)
     Z = np.broadcast_to(g.z_cells[:, None], state.alpha.shape)
     in_bin = (Z > z_t) & (g.kappa > 0)
     filled = in_bin & (state.alpha >= 0.5)
@@ -240,26 +276,61 @@ def bin_lateral_stress_ratio(model, state) -> float:
     return float(np.sum(weights * state.sigma[..., 0][band])) / vertical
 
 
-def stretch_calls(cfg, samples, rule: FlowModeRule = FlowModeRule()) -> list:
+def counted_stretches(cfg) -> np.ndarray:
+    """Which stretches of hopper wall (:func:`hopper_rows`) enter the overall calls
+    (:func:`overall_call`): those at least one cell long (the grid resolves them: a sliver
+    shorter than a cell neither carries a contact of its own nor describes the hopper) whose
+    bottom lies below the fill level (the material fills them)."""
+    tab, bnd = cfg.boundary.table, cfg.boundary
+    rows = hopper_rows(bnd)
+    length = np.hypot(*(tab.b[rows] - tab.a[rows]).T)
+    bottom = np.minimum(tab.a[rows, 1], tab.b[rows, 1])
+    return (length >= cfg.numerics.cell_size) & (bottom < bnd.fill_level)
+
+
+def overall_call(calls) -> str:
+    """The overall call from the calls of the stretches that count (:func:`counted_stretches`):
+    ``"funnel"`` when any says funnel (the material rests against part of the hopper wall),
+    else ``"mass"`` when at least one says mass (it slides along every measured stretch), else
+    ``"unknown"`` (no stretch measured: a run too short, or no hopper wall in the material)."""
+    calls = list(calls)
+    if "funnel" in calls:
+        return "funnel"
+    return "mass" if "mass" in calls else "unknown"
+
+
+def stretch_calls(cfg, samples, fractions=(), rule: FlowModeRule = FlowModeRule()) -> list:
     """The call per stretch of hopper wall (:func:`hopper_rows`): a dict of its ``wall``,
-    ``segment``, ``z_m`` (its bottom and top), ``half_angle_deg`` (its slope from the
-    vertical), ``wall_friction_deg``, ``slip_ratio`` (the median of the samples' ratios of
-    that stretch), the ``call`` (``"mass"`` where it slides: ``slip_ratio >= rule.slip_ratio``,
-    else ``"funnel"``: a stagnant zone on it), and Jenike's critical half-angle for its wall
-    friction with the call it gives for that slope (``jenike_critical_half_angle_deg``,
-    ``jenike_call``; conical or plane by the section)."""
+    ``segment``, ``z_m`` (its bottom and top), ``length_m``, ``half_angle_deg`` (its slope
+    from the vertical), ``wall_friction_deg``, ``counted`` (whether it enters the overall
+    calls, :func:`counted_stretches`), ``samples`` (the samples in which it was measured),
+    ``slip_ratio`` and ``slip_fraction`` (the medians of those samples' ratios and slip
+    fractions of that stretch: ``samples``, ``fractions``, one row per sample), the ``call``
+    (:func:`classify_flow_mode`: ``"mass"`` where it slides, ``slip_ratio >=
+    rule.slip_ratio``, ``"funnel"`` where it does not: a stagnant zone on it, ``"unknown"``
+    without a sample), and Jenike's critical half-angle for its wall friction with the call it
+    gives for that slope (``jenike_critical_half_angle_deg``, ``jenike_call``; conical or
+    plane by the section; ``"unknown"`` outside the range of Jenike's fit)."""
     from . import theory
 
     bnd, mat = cfg.boundary, cfg.material
     tab = bnd.table
-    ratios = np.asarray(samples, float) if len(samples) else np.zeros((0, 0))
+    counted = counted_stretches(cfg)
+
+    def table(values):
+        values = np.asarray(values, float) if len(values) else np.zeros((0, 0))
+        return values if values.ndim == 2 else np.zeros((0, 0))
+
+    ratios, shares = table(samples), table(fractions)
     out = []
     for k, row in enumerate(hopper_rows(bnd)):
         a, b = tab.a[row], tab.b[row]
         angle = float(np.degrees(np.arctan2(abs(b[0] - a[0]), b[1] - a[1])))
-        values = ratios[:, k] if ratios.ndim == 2 and ratios.shape[1] > k else np.zeros(0)
-        values = values[np.isfinite(values)]
-        slip = float(np.median(values)) if values.size else math.nan
+        values = ratios[:, k] if ratios.shape[1] > k else np.zeros(0)
+        measured = np.isfinite(values)
+        slip = float(np.median(values[measured])) if measured.any() else math.nan
+        share = shares[:, k][measured] if shares.shape[1] > k else np.zeros(0)
+        share = share[np.isfinite(share)]
         phi_w = float(tab.friction_deg[row])
         geometry = "conical" if bnd.section.axisymmetric else "plane"
         critical = (theory.jenike_critical_half_angle if geometry == "conical"
@@ -269,19 +340,39 @@ def stretch_calls(cfg, samples, rule: FlowModeRule = FlowModeRule()) -> list:
             jenike = str(theory.jenike_flow_mode(angle, mat.friction_angle_deg, phi_w,
                                                  geometry=geometry))
         except ValueError:
-            theta_c, jenike = math.nan, "funnel"
+            theta_c, jenike = math.nan, "unknown"
         out.append({"wall": bnd.chains[tab.chain[row]].name, "segment": int(tab.segment[row]),
-                    "z_m": [float(a[1]), float(b[1])], "half_angle_deg": angle,
-                    "wall_friction_deg": phi_w, "slip_ratio": slip,
+                    "z_m": [float(a[1]), float(b[1])],
+                    "length_m": float(np.hypot(*(b - a))), "half_angle_deg": angle,
+                    "wall_friction_deg": phi_w, "counted": bool(counted[k]),
+                    "samples": int(measured.sum()), "slip_ratio": slip,
+                    "slip_fraction": float(np.median(share)) if share.size else math.nan,
                     "call": classify_flow_mode(slip, rule),
                     "jenike_critical_half_angle_deg": theta_c, "jenike_call": jenike})
     return out
 
 
+def flow_call(stretches) -> dict:
+    """The overall flow-mode numbers of the per-stretch calls (:func:`stretch_calls`), by the
+    documented rule (:func:`overall_call` over the stretches that count): ``flow_mode``,
+    ``wall_slip_ratio`` and ``wall_slip_fraction`` (the measured counted stretch with the
+    smallest slip ratio: the call is mass exactly when it reaches the threshold) and
+    ``jenike_flow_mode`` (the same rule over the stretches' Jenike calls)."""
+    counted = [st for st in stretches if st["counted"]]
+    measured = [st for st in counted if math.isfinite(st["slip_ratio"])]
+    worst = min(measured, key=lambda st: st["slip_ratio"]) if measured else None
+    return {"flow_mode": overall_call(st["call"] for st in counted),
+            "wall_slip_ratio": worst["slip_ratio"] if worst else math.nan,
+            "wall_slip_fraction": worst["slip_fraction"] if worst else math.nan,
+            "jenike_flow_mode": overall_call(st["jenike_call"] for st in counted)}
+
+
 def classify_flow_mode(slip_ratio, rule: FlowModeRule = FlowModeRule()) -> str:
-    """``"mass"`` or ``"funnel"`` by :class:`FlowModeRule` from the wall slip ratio (the
-    smallest over the hopper stretches); funnel when it was not measured (NaN)."""
-    return "mass" if np.isfinite(slip_ratio) and slip_ratio >= rule.slip_ratio else "funnel"
+    """``"mass"`` or ``"funnel"`` by :class:`FlowModeRule` from a stretch's wall slip ratio;
+    ``"unknown"`` when it was not measured (NaN)."""
+    if not np.isfinite(slip_ratio):
+        return "unknown"
+    return "mass" if slip_ratio >= rule.slip_ratio else "funnel"
 
 
 @dataclass(frozen=True)
@@ -323,7 +414,9 @@ def empty_channel(model, state, rule: OutcomeRule = OutcomeRule()):
     """``(diameter, height)`` (m) of the empty channel of :class:`OutcomeRule` from the outlet
     through the material to its top, measured from the section's centreline outwards (in a
     full section on its right side); ``(nan, nan)`` where the material closes the centreline
-    (or there is none)."""
+    (or there is none).  In each row the channel's first cell is the first open cell from
+    the centreline: beside an insert on the axis, the material's column next to the insert
+    (the insert itself is solid, not an empty channel)."""
     g = model.grid
     centre = centreline(model)
     c0 = int(np.searchsorted(g.r_cells, centre))   # the first cell column past the centreline
@@ -334,7 +427,9 @@ def empty_channel(model, state, rule: OutcomeRule = OutcomeRule()):
         return math.nan, math.nan
     j0, top = int(np.flatnonzero(above)[0]), int(rows[-1])
     band = full[j0:top + 1]
-    if band[:, 0].any():
+    open_ = np.asarray(g.kappa)[j0:top + 1, c0:] > 0.0
+    first = np.argmax(open_, axis=1)                   # first open cell from the centreline
+    if band[np.arange(len(band)), first].any():
         return math.nan, math.nan
     held = band.any(axis=1)
     k = np.argmax(band, axis=1)[held]                  # first full cell from the centreline
@@ -344,6 +439,65 @@ def empty_channel(model, state, rule: OutcomeRule = OutcomeRule()):
     r0, r1 = g.r_cells[c0 + k - 1] - centre, g.r_cells[c0 + k] - centre
     radius = r0 + (rule.full - a0) / (a1 - a0) * (r1 - r0)
     return 2.0 * float(np.median(radius)), float(g.z_nodes[top + 1])
+
+
+def material_speed(model, state, full: float = 0.5) -> float:
+    """The rms speed (m/s) of the material in the hopper (above the outlet plane): on the
+    Eulerian grid over the cells holding more than ``full`` material (the mean of their four
+    nodes' velocities), weighted by their material volume ``alpha kappa V``; on the
+    Lagrangian mesh over the active elements (their nodes' mean), by volume.  A node of
+    almost no mass (a trace at a free surface, which gravity alone moves) does not count, as
+    it would in the kinetic energy.  0 where there is no material."""
+    g = getattr(model, "grid", None)
+    if g is None:                                       # the Lagrangian mesh
+        conn = model.mesh.conn
+        v = state.v[conn].mean(axis=1)
+        sel = state.active & (state.x[conn, 1].mean(axis=1) > 0.0)
+        w = model.volume0[sel]
+        speed2 = np.sum(v[sel] ** 2, axis=1)
+    else:
+        v = state.v
+        vc = 0.25 * (v[:, :-1, :-1] + v[:, :-1, 1:] + v[:, 1:, :-1] + v[:, 1:, 1:])
+        sel = (state.alpha > full) & (g.z_cells > 0.0)[:, None]
+        w = (state.alpha * model.open_volume)[sel]
+        speed2 = (vc[0] ** 2 + vc[1] ** 2)[sel]
+    return float(math.sqrt(np.sum(w * speed2) / np.sum(w))) if np.sum(w) > 0 else 0.0
+
+
+def heap_angle(model, state, full: float = 0.5) -> float:
+    """The angle (deg from the horizontal) of the free surface of the material left in the
+    hopper once the flow has stopped: in each open cell column above the outlet plane the
+    surface is where ``alpha`` falls below ``full`` going up from the highest cell holding
+    more (linear between cell centres; a column whose next cell up is closed, under an
+    insert, has no free surface there), and the angle is that of the least-squares line
+    through the surface heights against the distance from the centreline, over the columns
+    holding material, the column at the wall left out (its cell is cut).  Set it against the
+    angle of repose (for this Mohr-Coulomb material about its friction angle).  NaN with
+    fewer than three such columns, or on a model without a grid (the Lagrangian mode)."""
+    g = getattr(model, "grid", None)
+    if g is None:
+        return math.nan
+    alpha = np.asarray(state.alpha, float)
+    kappa = np.asarray(g.kappa, float)
+    rows = np.flatnonzero(g.z_cells > 0.0)
+    held = (alpha > full) & (g.z_cells > 0.0)[:, None]
+    x, z = [], []
+    for i in range(alpha.shape[1]):
+        top = np.flatnonzero(held[:, i])
+        if not len(top):
+            continue
+        j = int(top[-1])
+        if j + 1 >= alpha.shape[0] or kappa[j + 1, i] <= 0.0 or j < rows[0]:
+            continue
+        if kappa[j, i] < 1.0 and (i + 1 == alpha.shape[1] or kappa[j, i + 1] <= 0.0):
+            continue                                  # the cut cell at the wall
+        frac = (alpha[j, i] - full) / max(alpha[j, i] - alpha[j + 1, i], 1e-12)
+        x.append(abs(g.r_cells[i] - model.cfg.boundary.section.centreline))
+        z.append(g.z_cells[j] + min(frac, 1.0) * g.h)
+    if len(x) < 3:
+        return math.nan
+    slope = np.polyfit(np.asarray(x), np.asarray(z), 1)[0]
+    return float(np.degrees(np.arctan(abs(slope))))
 
 
 def classify_outcome(mode: str, stopped: bool, left_fraction: float, channel_diameter: float,
@@ -366,11 +520,11 @@ KNOT_CELLS = 4.0
 
 def wall_stretches(cfg) -> list:
     """The straight stretches of wall the material can load
-    (:class:`~fipy_hopper.wall_traction.WallStretch`, one per segment of the boundary's walls
+    (:class:`~fipy_hopper.boundary.Segment` s, one per segment of the boundary's walls
     and inserts; the free-fall tubes left out): a wall's segments up to the fill level (the
     one through it cut there), every segment of every insert.  Their arc length ``s_start`` is
     the boundary's position along all the chains (:meth:`Boundary.position`), their
-    ``segment`` the chain's segment index and ``name`` the chain's name."""
+    ``index`` the chain's segment index and ``chain`` the chain's name."""
     bnd = cfg.boundary
     out = []
     for ci, chain in enumerate(bnd.chains):
@@ -384,8 +538,8 @@ def wall_stretches(cfg) -> list:
                     break
                 if b[1] > bnd.fill_level > a[1]:
                     b = a + (b - a) * (bnd.fill_level - a[1]) / (b[1] - a[1])
-            out.append(WallStretch(tuple(a), tuple(b), offset + seg.s_start,
-                                   bnd.section.axisymmetric, chain.name, k, chain.side))
+            out.append(replace(seg, a=tuple(a), b=tuple(b), s_start=offset + seg.s_start,
+                               axisymmetric=bnd.section.axisymmetric))
     return out
 
 
@@ -425,7 +579,7 @@ class WallBins:
             centres = 0.5 * (edges[1:] + edges[:-1])
             r, z = st.point(centres)
             n = len(centres)
-            parts.append((np.full(n, st.name, dtype=object), centres - offsets[st.name],
+            parts.append((np.full(n, st.chain, dtype=object), centres - offsets[st.chain],
                           centres, r, z, np.tile(st.normal, (n, 1)),
                           np.tile(st.tangent, (n, 1)), st.area(edges[:-1], edges[1:]),
                           np.full(n, k), edges[:-1], edges[1:]))
@@ -486,7 +640,8 @@ class WallSampler:
         nb = len(self.centres)
         bins = self.bins.index(s)
         wsum = np.bincount(bins, w, nb)
-        mean = np.stack([np.bincount(bins, w * sig[:, k], nb) for k in range(4)], axis=1)
+        mean = np.stack([np.bincount(bins, w * sig[:, k], nb) for k in range(4)],
+                        axis=1).astype(float)       # (integers when no cell has material)
         ok = wsum > 0
         mean[ok] /= wsum[ok, None]
         mean[~ok] = np.nan
@@ -546,10 +701,10 @@ class WallLoads:
         width = model.cfg.wall_bin_width_m
         self.recoveries = []
         for k, st in enumerate(stretches):
-            ci = bnd.chain_index(st.name)
-            last = k + 1 == len(stretches) or stretches[k + 1].name != st.name
+            ci = bnd.chain_index(st.chain)
+            last = k + 1 == len(stretches) or stretches[k + 1].chain != st.chain
             # a wall's segments above the fill level load its top stretch
-            on = (segment >= st.segment) if last else (segment == st.segment)
+            on = (segment >= st.index) if last else (segment == st.index)
             members = np.flatnonzero((chain == ci) & on & ~tab.tube[rows])
             self.recoveries.append(StretchRecovery.build(st, members, position[members],
                                                          width, KNOT_CELLS * model.cell_size))
@@ -623,61 +778,19 @@ class WallLoads:
     def membrane_forces(self, start: dict, end: dict, p_n, tau=None):
         """The forces in the wall per unit length of its circumference (N/m; per metre of a
         wedge's length), tension positive, from the recovered traction over a window, as a
-        shell of revolution carries them (membrane theory):
-
-        * hoop ``N_theta = p_n r / n_r`` per bin (the normal pressure over the wall's second
-          radius of curvature, ``r / cos(theta)`` in the cone, ``R`` in the bin; NaN on a flat
-          floor and for a wedge, whose plates carry ``p_n`` in bending);
-        * meridional ``N_m`` along each wall (``wall``, ``left_wall``; NaN on inserts): the
-          hopper (the wall below the transition, ``z < cone_height``) hangs from the
-          transition, so at a bin centre on it ``N_m = V / (c cos(theta))``, ``V`` the
-          downward load (per radian) of the material on the hopper below that point,
-          ``c = r`` (1 for a wedge), ``theta`` the local slope from the vertical
-          (``cos(theta) = |n_r|``); the bin's wall stands on the transition, so above it
-          ``N_m = -U / c``, ``U`` the downward load (per radian) on the wall above that point,
-          a compression (NaN on a flat floor or ledge, which is not hung);
-        * at the transition ``(N_m of the hopper there, the bin wall's axial compression
-          there)`` (N/m) of the (right) wall, from the hopper's and the bin wall's shares of
-          its vertical reaction, so that ``section factor * c_t * (cos(theta) N_hopper +
-          N_bin) = the wall's vertical force``.
-
-        A bin's vertical load is its traction's: ``A_b (-p_n n_z + tau t_z)`` (upward on the
-        material), with ``p_n``, ``tau`` the window's recovered bin means (:meth:`profile`,
-        computed here when not given); each stretch's loads add up to its entries' vertical
-        reaction.  Loads are taken at the bin centres by the midpoint rule (half the own
-        bin's).  Returns ``(hoop, meridional, (hopper_tension_t, bin_compression_t))``.
-        """
-        geom = self.model.cfg.hopper
+        shell of revolution carries them: the hoop force per bin (:meth:`hoop_force`) and the
+        meridional force per bin and at the transition of :func:`membrane_statics` (the
+        window's recovered bin means ``p_n``, ``tau``: :meth:`profile`, computed here when not
+        given).  Returns ``(hoop, meridional, (hopper_tension_t, bin_compression_t))``, the
+        last the (right) wall's transition's (NaN without one), so that ``section factor * c_t
+        * (cos(theta) N_hopper + N_bin)`` is the wall's vertical force."""
         if tau is None:
             p_n, tau = self.profile(start, end)[3:]
-        bins = self.bins
-        down = bins.area * (-p_n * bins.normal[:, 1] + tau * bins.tangent[:, 1])   # N/rad
-        c = np.abs(bins.r) if geom.axisymmetric else np.ones_like(bins.r)
-        n_r = np.abs(bins.normal[:, 0])
-        meridional = np.full(len(down), np.nan)
-        at_transition = (math.nan, math.nan)
-        z_t = geom.cone_height
-        for name in ("wall", "left_wall"):
-            on = bins.wall == name
-            if not on.any():
-                continue
-            curved = n_r > 1e-12
-            hung = on & (bins.z < z_t)
-            stands = on & ~hung & curved
-            load_h, load_s = np.where(hung, down, 0.0), np.where(stands, down, 0.0)
-            below = np.cumsum(load_h) - 0.5 * load_h
-            above = np.cumsum(load_s[::-1])[::-1] - 0.5 * load_s
-            hanging = hung & curved               # a flat floor or ledge is not hung
-            meridional[hanging] = below[hanging] / (c[hanging] * n_r[hanging])
-            meridional[stands] = -above[stands] / c[stands]
-            if name == "wall":
-                top = np.flatnonzero(hung)
-                c_t = geom.bin_radius if geom.axisymmetric else 1.0
-                at_transition = (float(np.sum(load_h)) / (c_t * n_r[top[-1]])
-                                 if len(top) and n_r[top[-1]] > 1e-12 else math.nan,
-                                 float(np.sum(load_s)) / c_t)
-        hoop = self.hoop_force(p_n)
-        return hoop, meridional, at_transition
+        meridional, corners = membrane_statics(self.model.cfg.boundary, self.bins, p_n, tau)
+        at = next((c for c in corners if c["wall"] == "wall" and c["transition"]), None)
+        at_transition = ((at["meridional_below_N_m"], -at["meridional_above_N_m"])
+                         if at is not None else (math.nan, math.nan))
+        return self.hoop_force(p_n), meridional, at_transition
 
     def chain_forces(self, start: dict, end: dict) -> dict:
         """The mean force of each wall and insert on the material over a window,
@@ -694,51 +807,11 @@ class WallLoads:
                 for k, c in enumerate(bnd.chains) if c.kind != "tube"}
 
     def corner_forces(self, p_n, tau) -> list:
-        """The forces at every corner of the walls (``wall``, ``left_wall``) for the bins'
-        recovered ``p_n`` and ``tau`` of a window, as the membrane statics of
-        :meth:`membrane_forces` give them (the hopper, below ``cone_height``, hung from the
-        transition; the bin wall standing on it): per corner a dict of its ``wall``, ``s_m``,
-        ``r_m``, ``z_m``, the meridional forces on the segments below and above it
-        (``meridional_below_N_m``, ``meridional_above_N_m``, N/m, tension positive), the
-        horizontal pull the corner takes, ``horizontal_pull_N_m = N_b sin(b_b) - N_a
-        sin(b_a)`` (``b`` a segment's slope from the vertical; inward positive), and for a
-        section of revolution the ring there, ``ring_compression_N = r`` times that pull.
-        NaN next to a horizontal floor or ledge (not hung)."""
-        bins, geom = self.bins, self.model.cfg.hopper
-        bnd = self.model.cfg.boundary
-        down = bins.area * (-p_n * bins.normal[:, 1] + tau * bins.tangent[:, 1])
-        out = []
-        for name in ("wall", "left_wall"):
-            if name not in [c.name for c in bnd.chains]:
-                continue
-            chain = bnd.chain(name)
-            on = bins.wall == name
-            normals = chain.normals
-            for corner in chain.corners:
-                k = corner.segment                       # the segment above the corner
-                x, z = corner.point
-                if z >= bnd.fill_level:
-                    continue
-                c = abs(x) if geom.axisymmetric else 1.0
-                below, above = normals[k - 1], normals[k]
-                n_b, n_a = abs(below[0]), abs(above[0])
-                hung = on & (bins.z < geom.cone_height)
-                load_below = float(np.sum(down[hung & (bins.s < corner.s)]))
-                load_above = float(np.sum(down[on & ~hung & (bins.s > corner.s)]))
-                m_b = load_below / (c * n_b) if n_b > 1e-12 and z <= geom.cone_height \
-                    else math.nan
-                if z < geom.cone_height:
-                    m_a = load_below / (c * n_a) if n_a > 1e-12 else math.nan
-                else:
-                    m_a = -load_above / c if n_a > 1e-12 else math.nan
-                pull = m_b * abs(below[1]) - (m_a * abs(above[1]) if math.isfinite(m_a)
-                                              and abs(above[1]) > 0 else 0.0)
-                out.append({"wall": name, "s_m": float(corner.s), "r_m": float(x),
-                            "z_m": float(z), "meridional_below_N_m": m_b,
-                            "meridional_above_N_m": m_a, "horizontal_pull_N_m": pull,
-                            "ring_compression_N": (pull * abs(x) if geom.axisymmetric
-                                                   else math.nan)})
-        return out
+        """The forces at every corner of the walls for the bins' recovered ``p_n`` and
+        ``tau`` of a window (:func:`membrane_statics`), one dict per corner without its
+        ``transition`` flag (a record holds numbers and names only)."""
+        _, corners = membrane_statics(self.model.cfg.boundary, self.bins, p_n, tau)
+        return [{k: v for k, v in c.items() if k != "transition"} for c in corners]
 
     def balance(self, start: dict, end: dict) -> dict:
         """The vertical momentum balance of the whole grid over a window, as mean forces in N
@@ -772,17 +845,93 @@ class WallLoads:
         return out
 
 
+def vertical_loads(bins: WallBins, p_n, tau) -> np.ndarray:
+    """The vertical load of each bin's recovered traction on the material, ``A_b (-p_n n_z +
+    tau t_z)`` (N per radian; per metre of a plane wall; upward on the material, so the
+    material's load on the wall downward), taken at the bin centre."""
+    return bins.area * (-np.asarray(p_n, float) * bins.normal[:, 1]
+                        + np.asarray(tau, float) * bins.tangent[:, 1])
+
+
+def membrane_statics(boundary, bins: WallBins, p_n, tau) -> tuple:
+    """The membrane statics of the walls (``wall``, ``left_wall``) under the bins' traction
+    ``p_n``, ``tau`` (Pa): the meridional force per bin and the forces at every corner, one
+    computation for both.
+
+    The supports: each wall hangs from its :meth:`~fipy_hopper.boundary.Boundary.transition`
+    (the bottom of its top vertical stretch) and its bin wall stands on it.  With ``V`` the
+    material's downward load (per radian; per metre of a plane wall) on the wall below a
+    point, ``U`` that on the wall above it (:func:`vertical_loads`, summed bin by bin), ``c``
+    the point's radius (1 in plane flow) and ``beta`` the slope from the vertical of the
+    segment there (``cos(beta) = |n_x|``), the meridional force (N/m, tension positive) is
+
+        N_m = V / (c cos(beta))   below the transition (hung),
+        N_m = -U / c              above it (standing: a compression),
+
+    NaN on a horizontal floor or ledge (``cos(beta) = 0``: it carries its load in bending,
+    not hung).  Per bin the load is taken at the bin centre (half its own bin's).  At a
+    corner (a point of the chain's :attr:`~fipy_hopper.boundary.Chain.corners`, at arc length
+    ``s``) the same forces on the segments below and above it, ``N_b`` and ``N_a``, leave a
+    horizontal pull ``N_b sin(beta_b) - N_a sin(beta_a)`` (inward positive) that a ring there
+    takes: in a section of revolution the ring's compression is ``c`` times the pull (N).
+
+    Returns ``(meridional, corners)``: ``meridional`` (nb,) N/m (NaN off the walls), and one
+    dict per corner of ``wall``, ``s_m``, ``r_m``, ``z_m``, ``transition`` (True at the
+    wall's transition), ``meridional_below_N_m``, ``meridional_above_N_m``,
+    ``horizontal_pull_N_m`` and ``ring_compression_N`` (NaN in plane flow)."""
+    axisymmetric = boundary.section.axisymmetric
+    down = vertical_loads(bins, p_n, tau)
+    c = np.abs(bins.r) if axisymmetric else np.ones_like(bins.r)
+    n_r = np.abs(bins.normal[:, 0])
+    curved = n_r > 1e-12
+    meridional = np.full(len(down), np.nan)
+    corners = []
+    for chain in boundary.walls:
+        on = bins.wall == chain.name
+        z_t = boundary.transition_height(chain.name)
+        hung = on & (bins.z < z_t)
+        stands = on & ~hung & curved
+        load_h, load_s = np.where(hung, down, 0.0), np.where(stands, down, 0.0)
+        below = np.cumsum(load_h) - 0.5 * load_h
+        above = np.cumsum(load_s[::-1])[::-1] - 0.5 * load_s
+        hanging = hung & curved
+        meridional[hanging] = below[hanging] / (c[hanging] * n_r[hanging])
+        meridional[stands] = -above[stands] / c[stands]
+        transition = boundary.transition(chain.name)
+        for corner in chain.corners:
+            x, z = corner.point
+            radius = abs(x) if axisymmetric else 1.0
+            n_b, n_a = chain.normals[corner.segment - 1], chain.normals[corner.segment]
+            load_below = float(np.sum(load_h[bins.s < corner.s]))
+            load_above = float(np.sum(load_s[bins.s > corner.s]))
+            m_b = load_below / (radius * abs(n_b[0])) if abs(n_b[0]) > 1e-12 else math.nan
+            if z < z_t:
+                m_a = load_below / (radius * abs(n_a[0])) if abs(n_a[0]) > 1e-12 else math.nan
+            else:
+                m_a = -load_above / radius if abs(n_a[0]) > 1e-12 else math.nan
+            pull = m_b * abs(n_b[1]) - (m_a * abs(n_a[1]) if math.isfinite(m_a)
+                                        and abs(n_a[1]) > 0 else 0.0)
+            corners.append({"wall": chain.name, "s_m": float(corner.s), "r_m": float(x),
+                            "z_m": float(z), "transition": corner == transition,
+                            "meridional_below_N_m": m_b, "meridional_above_N_m": m_a,
+                            "horizontal_pull_N_m": pull,
+                            "ring_compression_N": pull * abs(x) if axisymmetric else math.nan})
+    return meridional, corners
+
+
 def wall_k(wall_loads: WallLoads, p_n, state, geom, margin_bins: int = 2) -> float:
     """The lateral pressure ratio measured at the bin wall: the median over the bin wall's
-    bins (the wall's top vertical stretch, above ``cone_height``) of ``p_n / (-sigma_zz)``,
+    bins (the wall's top vertical stretch, above its transition) of ``p_n / (-sigma_zz)``,
     ``p_n`` from the reaction and ``sigma_zz`` the mean vertical stress of the cells next to
     the wall (:meth:`WallSampler.mean_stress`), leaving out ``margin_bins`` bins next to the
     transition and next to the free surface."""
     bins = wall_loads.bins
     s = bins.s
     bnd = wall_loads.model.cfg.boundary
-    s_t = bnd.arc_at_height("wall", geom.cone_height)
-    s_top = bnd.arc_at_height("wall", geom.fill_level)
+    if bnd.transition("wall") is None:
+        return math.nan
+    s_t = bnd.transition_s("wall")
+    s_top = bnd.arc_at_height("wall", bnd.fill_level)
     margin = margin_bins * bins.width
     szz = wall_loads.sampler.mean_stress(state)[:, 1]
     keep = ((bins.wall == "wall") & (np.abs(bins.normal[:, 1]) < 1e-9)
@@ -835,18 +984,23 @@ def load_summary(sim) -> dict:
     * ``overpressure_factor_bin_max``, ``overpressure_factor_cone_max``: the largest ratio of
       the discharge envelope to the filled pressure in the bin (above the transition zone)
       and in the cone, with EN 1991-4's discharge factor ``en1991_discharge_factor_bin``;
-    * ``switch_peak_Pa``, ``switch_peak_s_m``: the envelope's peak within a bin diameter of
-      the transition, and ``walker_switch_pressure_Pa``, Walker's passive pressure just below
-      the transition for the Janssen vertical stress there (with the measured ``K``);
-    * the forces in the wall at the transition per unit length of circumference (N/m,
-      :meth:`WallLoads.membrane_forces`), at rest and the larger of the 90 % and 50 % stages:
-      ``hopper_meridional_tension_N_m`` / ``..._discharge_N_m`` (the hopper hangs from the
-      transition), ``bin_wall_axial_compression_N_m`` / ``..._discharge_N_m`` (the bin's
-      wall friction carried down to it), ``transition_ring_compression_N`` / ``..._discharge_N``
-      (the ring that takes the inward pull of the hopper's tension, ``N_m sin(theta) R``), and
+    * ``corners``: every corner of the walls with its forces and switch peak
+      (:func:`_insert_and_corner_loads`); the wall's transition's values are also given at
+      the top level (:func:`_transition_forces`), the same numbers:
+      ``switch_peak_Pa``, ``switch_peak_s_m`` (the envelope's peak within a bin diameter of
+      the transition), and the forces in the wall at the transition per unit length of
+      circumference (N/m, :func:`membrane_statics`), at rest and the larger of the 90 % and
+      50 % stages: ``hopper_meridional_tension_N_m`` / ``..._discharge_N_m`` (the hopper
+      hangs from the transition), ``bin_wall_axial_compression_N_m`` / ``..._discharge_N_m``
+      (the bin's wall friction carried down to it), ``transition_ring_compression_N`` /
+      ``..._discharge_N`` (the ring that takes the inward pull of the hopper's tension,
+      ``N_m sin(beta) r`` with ``beta`` the slope of the segment under the transition);
+      NaN where they do not apply (no transition; no hopper: a flat floor; the ring: a plane
+      section);
+    * ``walker_switch_pressure_Pa``, Walker's passive pressure just below the transition for
+      the Janssen vertical stress there (with the measured ``K``), and
       ``janssen_wall_axial_compression_N_m``, Janssen's at the transition for the fill's
-      height with the measured ``K``.  NaN where they do not apply (no hopper: a flat floor;
-      the ring: a wedge).
+      height with the measured ``K``: for the silos the classic theories cover.
     """
     from . import theory
 
@@ -858,9 +1012,9 @@ def load_summary(sim) -> dict:
            "wall_k_bin": getattr(rec, "wall_k", nan), "overpressure_factor_bin_max": nan,
            "overpressure_factor_cone_max": nan,
            "en1991_discharge_factor_bin": theory.en1991_discharge_factors()[0],
-           "switch_peak_Pa": nan, "switch_peak_s_m": nan, "walker_switch_pressure_Pa": nan,
-           **_transition_forces(rec, geom),
-           "janssen_wall_axial_compression_N_m": nan}
+           "walker_switch_pressure_Pa": nan, "janssen_wall_axial_compression_N_m": nan}
+    corners = _insert_and_corner_loads(rec, m.cfg)
+    out.update(_transition_forces(corners.get("corners", [])))
     rest = rec.rest_balance
     if rest and rest.get("weight", 0) > 0:
         out.update(fill_weight_N=rest["weight"], fill_wall_vertical_N=rest["wall"],
@@ -880,36 +1034,38 @@ def load_summary(sim) -> dict:
         s, p_fill = rec.wall["filling"][1][on_wall], rec.wall["filling"][4][on_wall]
         envelope = rec.wall["discharge_envelope"][4][on_wall]
         bnd = m.cfg.boundary
-        s_t = bnd.arc_at_height("wall", geom.cone_height)
-        s_top = bnd.arc_at_height("wall", geom.fill_level)
+        z_t = bnd.transition_height("wall")
+        s_t = bnd.transition_s("wall")
+        s_top = bnd.arc_at_height("wall", bnd.fill_level)
         loaded = p_fill > 0.05 * np.nanmax(p_fill)
         ratio = np.where(loaded, envelope / np.where(loaded, p_fill, 1.0), np.nan)
-        near = geom.bin_diameter
+        near = bnd.span_at(z_t)
         in_bin = (s > s_t + 0.5 * near) & (s < s_top - 0.25 * near)
         in_cone = (s < s_t - 0.1 * near) & (s > 0.25 * near)
         if np.isfinite(ratio[in_bin]).any():
             out["overpressure_factor_bin_max"] = float(np.nanmax(ratio[in_bin]))
         if np.isfinite(ratio[in_cone]).any():
             out["overpressure_factor_cone_max"] = float(np.nanmax(ratio[in_cone]))
-        zone = np.abs(s - s_t) <= near
-        if zone.any():
-            k = np.flatnonzero(zone)[np.argmax(envelope[zone])]
-            out["switch_peak_Pa"], out["switch_peak_s_m"] = float(envelope[k]), float(s[k])
-        if geom.cone_height > 0 and geom.classic:
-            if mu > 0:
-                janssen = (theory.janssen_vertical_stress if geom.axisymmetric
-                           else theory.janssen_plane_vertical_stress)
-                sigma_vt = float(janssen(geom.fill_height, mat.density, geom.bin_diameter, K,
-                                         mu))
-                out["walker_switch_pressure_Pa"] = float(theory.walker_switch_pressure(
-                    sigma_vt, K, mat.friction_angle_deg, m.cfg.wall.friction_angle_deg,
-                    geom.half_angle_deg).hopper)
-    if mu > 0 and geom.classic:
+    classic = m.cfg.boundary.hopper_shape if geom.classic else None
+    if classic is not None and mu > 0 and m.cfg.boundary.fill_level > classic.transition_height:
+        depth = m.cfg.boundary.fill_level - classic.transition_height
+        if "filling" in rec.wall and "discharge_envelope" in rec.wall \
+                and classic.half_angle_deg < 90.0:
+            janssen = (theory.janssen_vertical_stress if geom.axisymmetric
+                       else theory.janssen_plane_vertical_stress)
+            sigma_vt = float(janssen(depth, mat.density, 2.0 * classic.bin_x, K, mu))
+            out["walker_switch_pressure_Pa"] = float(theory.walker_switch_pressure(
+                sigma_vt, K, mat.friction_angle_deg, m.cfg.wall.friction_angle_deg,
+                classic.half_angle_deg).hopper)
         axial = (theory.janssen_wall_axial_force if geom.axisymmetric
                  else theory.janssen_plane_wall_axial_force)
         out["janssen_wall_axial_compression_N_m"] = float(axial(
-            geom.fill_height, mat.density, geom.bin_diameter, K, mu))
-    out.update(_insert_and_corner_loads(rec, m.cfg))
+            depth, mat.density, 2.0 * classic.bin_x, K, mu))
+    elif classic is not None and mu > 0:     # filled below the bin: nothing in it to carry
+        out["janssen_wall_axial_compression_N_m"] = 0.0
+    out.update(corners)
+    if classic is None:           # no closed form for this silo: left out, not NaN
+        del out["walker_switch_pressure_Pa"], out["janssen_wall_axial_compression_N_m"]
     return out
 
 
@@ -917,9 +1073,9 @@ def _insert_and_corner_loads(rec, cfg) -> dict:
     """The inserts' and the corners' numbers of :func:`load_summary`: per insert the
     material's downward load on it at rest, ``<insert>_vertical_force_N``, and the largest
     over the discharge's load windows, ``<insert>_vertical_force_discharge_max_N`` (N, 3D);
-    and ``corners``, the forces at every corner of the walls at rest and, as
-    ``..._discharge``, the larger in size of the 90 % and 50 % stages
-    (:meth:`WallLoads.corner_forces`)."""
+    and ``corners``, the forces at every corner of the walls (:func:`membrane_statics`) at
+    rest and, as ``..._discharge``, the larger in size of the 90 % and 50 % stages, with its
+    ``transition`` flag and its switch peak (:func:`corner_switch_peaks`)."""
     out = {}
     rest = getattr(rec, "chain_forces", {}).get("filling", {})
     for insert in cfg.boundary.inserts:
@@ -931,36 +1087,63 @@ def _insert_and_corner_loads(rec, cfg) -> dict:
     if "filling" in corners:
         rows = [dict(c) for c in corners["filling"]]
         stages = [corners[s] for s in ("early_discharge", "mid_discharge") if s in corners]
+        peaks = corner_switch_peaks(rec, cfg.boundary, rows)
         for k, row in enumerate(rows):
+            transition = cfg.boundary.transition(row["wall"])
+            row["transition"] = transition is not None and transition.s == row["s_m"]
             for key in ("meridional_below_N_m", "meridional_above_N_m", "horizontal_pull_N_m",
                         "ring_compression_N"):
                 values = [st[k][key] for st in stages if len(st) > k
                           and math.isfinite(st[k][key])]
                 row[key.replace("_N", "_discharge_N", 1)] = (
                     max(values, key=abs) if values else math.nan)
+            row["switch_peak_Pa"], row["switch_peak_s_m"] = peaks[k]
         out["corners"] = rows
     return out
 
 
-def _transition_forces(rec, geom) -> dict:
-    """The transition's forces of :func:`load_summary` from ``rec.wall_forces``."""
-    ring = (math.sin(geom.half_angle) * geom.bin_radius
-            if geom.axisymmetric and geom.cone_height > 0 else math.nan)
-    forces = getattr(rec, "wall_forces", {})
+def corner_switch_peaks(rec, boundary, rows) -> list:
+    """Per corner row (its ``wall`` and ``s_m``), ``(p, s)``: the discharge envelope's
+    largest recovered ``p_n`` (Pa) on the corner's wall within the silo's width at the
+    corner's height (:meth:`~fipy_hopper.boundary.Boundary.span_at`: the bin's diameter at a
+    hopper's transition) of it along the wall, and its arc length ``s`` (m); NaN without an
+    envelope, and none (NaN) at a corner at or above the fill level: the material never
+    switches there."""
+    nan = (math.nan, math.nan)
+    if "discharge_envelope" not in rec.wall:
+        return [nan] * len(rows)
+    s, envelope = rec.wall["discharge_envelope"][1], rec.wall["discharge_envelope"][4]
+    names = np.asarray(rec.wall_names) if rec.wall_names else np.full(len(s), "wall")
+    out = []
+    for row in rows:
+        if row["z_m"] >= boundary.fill_level:
+            out.append(nan)
+            continue
+        near = boundary.span_at(row["z_m"])
+        zone = np.flatnonzero((names == row["wall"]) & (np.abs(s - row["s_m"]) <= near)
+                              & np.isfinite(envelope))
+        if not len(zone):
+            out.append(nan)
+            continue
+        k = zone[np.argmax(envelope[zone])]
+        out.append((float(envelope[k]), float(s[k])))
+    return out
 
-    def at(stages):
-        values = [np.asarray(forces[s][2], float) for s in stages if s in forces]
-        if not values:
-            return math.nan, math.nan
-        return tuple(float(np.max([v[k] for v in values])) for k in range(2))
 
-    rest, flow = at(("filling",)), at(("early_discharge", "mid_discharge"))
-    return {"hopper_meridional_tension_N_m": rest[0],
-            "bin_wall_axial_compression_N_m": rest[1],
-            "transition_ring_compression_N": rest[0] * ring,
-            "hopper_meridional_tension_discharge_N_m": flow[0],
-            "bin_wall_axial_compression_discharge_N_m": flow[1],
-            "transition_ring_compression_discharge_N": flow[0] * ring}
+def _transition_forces(rows) -> dict:
+    """The transition's numbers of :func:`load_summary`: those of the corner rows'
+    (:func:`_insert_and_corner_loads`) transition of the (right) wall, NaN without one."""
+    at = next((r for r in rows if r["wall"] == "wall" and r["transition"]), None)
+    nan = math.nan
+    get = (lambda key, sign=1.0: sign * at[key]) if at is not None else (lambda *_: nan)
+    return {"hopper_meridional_tension_N_m": get("meridional_below_N_m"),
+            "bin_wall_axial_compression_N_m": get("meridional_above_N_m", -1.0),
+            "transition_ring_compression_N": get("ring_compression_N"),
+            "hopper_meridional_tension_discharge_N_m": get("meridional_below_discharge_N_m"),
+            "bin_wall_axial_compression_discharge_N_m":
+                get("meridional_above_discharge_N_m", -1.0),
+            "transition_ring_compression_discharge_N": get("ring_compression_discharge_N"),
+            "switch_peak_Pa": get("switch_peak_Pa"), "switch_peak_s_m": get("switch_peak_s_m")}
 
 
 # ---------------------------------------------------------------- stress pattern

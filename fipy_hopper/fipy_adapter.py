@@ -135,6 +135,15 @@ def UniformGrid2D(*args, **kwargs):
     return grid(*args, **kwargs)
 
 
+def UniformGrid3D(*args, **kwargs):
+    """``fipy.meshes.uniformGrid3D.UniformGrid3D`` (a module FiPy does not export)."""
+    try:
+        from fipy.meshes.uniformGrid3D import UniformGrid3D as grid
+    except ImportError:
+        raise _fail("fipy.meshes.uniformGrid3D.UniformGrid3D") from None
+    return grid(*args, **kwargs)
+
+
 def missing() -> list:
     """The private names of :data:`MESH_ATTRIBUTES` and :data:`TERM_METHODS` (and the module
     of :func:`UniformGrid2D`) that the installed FiPy lacks, checked on small meshes of both
@@ -148,6 +157,10 @@ def missing() -> list:
     except FiPyVersionError:
         gone.append("fipy.meshes.uniformGrid2D.UniformGrid2D")
         plane = None
+    try:
+        UniformGrid3D(dx=1.0, dy=1.0, dz=1.0, nx=1, ny=1, nz=1)
+    except FiPyVersionError:
+        gone.append("fipy.meshes.uniformGrid3D.UniformGrid3D")
     for mesh in (fipy.CylindricalGrid2D(dx=[1.0, 1.0], dy=[1.0, 1.0]), plane):
         for name in MESH_ATTRIBUTES:
             if mesh is not None and not hasattr(mesh, name):

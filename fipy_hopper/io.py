@@ -33,6 +33,7 @@ import math
 import os
 import platform
 import re
+import stat
 import subprocess
 import sys
 import tempfile
@@ -53,6 +54,7 @@ except ImportError:       # pragma: no cover
 __all__ = [
     "RunDirectory", "RunDirectoryError", "CheckpointError", "RunFileError", "read_checkpoint",
     "validate_checkpoint", "checkpoint_template", "checkpoint_size_limit", "check_run_files",
+    "check_checkpoint_times",
     "Manifest", "FieldWriter", "atomic_path",
     "atomic_write_text", "write_json", "write_timeseries", "write_wall_pressure", "read_csv",
     "environment_versions", "code_commit", "grid_points_and_quads", "cell_fields", "marker_file",
@@ -331,11 +333,18 @@ class RunDirectory:
     """The folder of one run, with the names of everything written into it.
 
     A new run refuses an existing directory that is not empty unless ``force=True``; with
-    ``force`` the files a previous run wrote there are removed first (other files are left
-    alone).  ``resume=True`` requires the directory of an unfinished run (its configuration
-    and checkpoint).  An empty path (the current directory by accident) is refused.
+    ``force`` the directory must be an earlier run's (it holds a ``manifest.json`` of
+    fipy-hopper), and only the files a run writes (:meth:`is_output`: the outputs, the
+    pictures, the snapshots in ``fields/`` and the temporary files of their writers) are
+    removed, after the directory and ``fields/`` are known to be writable (other files are
+    left alone).  Nothing is followed out of the directory: a ``fields`` or ``.lock`` that is
+    a symbolic link (or not a folder / a regular file), or an output name that is a folder,
+    is refused before anything changes.  ``resume=True`` requires the directory of an
+    unfinished run (its configuration and checkpoint).  An empty path (the current directory
+    by accident) is refused.
 
-    The directory is locked for the run: an exclusive ``fcntl.flock`` on ``DIR/.lock`` is taken
+    The directory is locked for the run: an exclusive ``fcntl.flock`` on ``DIR/.lock`` (opened
+    with ``O_NOFOLLOW``: never through a link) is taken
     before anything in it is removed or written, and held until :meth:`close` (or the end of a
     ``with`` block, or the object's garbage collection).  A second run, ``--force`` or
     ``--resume`` into a directory that a live process holds is refused; the kernel drops the
@@ -385,6 +394,7 @@ class RunDirectory:
         """The refusals that need no lock (taken again under it by :meth:`_open`)."""
         if self.path.exists() and not self.path.is_dir():
             raise RunDirectoryError(f"{_short(self.path)} exists and is not a directory")
+        self._refuse_foreign_entries()
         if resume:
             missing = [name for name in (self.CONFIG, self.CHECKPOINT)
                        if not (self.path / name).is_file()]
@@ -397,27 +407,98 @@ class RunDirectory:
             self._refuse_if_in_use()
             if not force:
                 self._refuse_not_empty()
+            self._refuse_not_a_run()
 
     def _open(self, force: bool, resume: bool) -> None:
         if resume:
             self._lock()
+            self._refuse_foreign_entries()
+            self._refuse_unwritable()
             self._remove_temporaries()
         else:
             self.path.mkdir(parents=True, exist_ok=True)
             self._lock()
+            self._refuse_foreign_entries()
             if self._contents():      # again under the lock: another run may have written
                 if not force:
                     self._refuse_not_empty()
+                self._refuse_not_a_run()
+                self._refuse_unwritable()      # before anything of the earlier run goes
                 self._remove_outputs()
         self.fields.mkdir(exist_ok=True)
 
+    def _refuse_foreign_entries(self) -> None:
+        """Refuse what a run would write through or cannot replace: a ``fields`` or ``.lock``
+        that is a symbolic link (or not a folder, not a regular file), an output's name that
+        is a folder."""
+        if not self.path.is_dir():
+            return
+        for name, want in ((self.FIELDS, "a folder"), (self.LOCK, "a regular file")):
+            try:
+                st = os.lstat(self.path / name)
+            except FileNotFoundError:
+                continue
+            if stat.S_ISLNK(st.st_mode):
+                raise RunDirectoryError(
+                    f"{_short(self.path / name)} is a symbolic link; a run writes its "
+                    f"{'snapshots' if name == self.FIELDS else 'lock'} there itself and never "
+                    f"through a link: remove the link (or choose another directory)")
+            if not (stat.S_ISDIR(st.st_mode) if name == self.FIELDS
+                    else stat.S_ISREG(st.st_mode)):
+                raise RunDirectoryError(f"{_short(self.path / name)} is not {want}, as a run "
+                                        "writes it: remove it (or choose another directory)")
+        for name in self.output_names():
+            if (self.path / name).is_dir() and not (self.path / name).is_symlink():
+                raise RunDirectoryError(f"{_short(self.path / name)} is a folder, not the file "
+                                        "a run writes there: move it (or choose another "
+                                        "directory)")
+
+    def _is_run(self) -> bool:
+        """True when the directory holds a ``manifest.json`` of fipy-hopper (a run wrote it)."""
+        manifest = self.path / self.MANIFEST
+        try:
+            data = Manifest.load(manifest).data if manifest.is_file() else None
+        except (RunFileError, OSError):
+            data = None
+        return isinstance(data, dict) and data.get("package") == "fipy_hopper"
+
+    def _refuse_not_a_run(self) -> None:
+        """``--force`` replaces an earlier run only: refuse a directory without a manifest of
+        fipy-hopper (a folder of other files, which no run wrote)."""
+        if not self._is_run():
+            raise RunDirectoryError(
+                f"{_short(self.path)} is not empty and is not a run directory of fipy-hopper "
+                f"(no {self.MANIFEST} of a run); --force replaces only an earlier run's "
+                "outputs: choose a new or empty directory")
+
+    def _refuse_unwritable(self) -> None:
+        """Refuse a directory (or its ``fields/``) the run cannot write into, before anything
+        in it is removed: a file is made and removed in each."""
+        for folder in (self.path, self.fields):
+            if not folder.is_dir():
+                continue
+            try:
+                fd, probe = tempfile.mkstemp(prefix=".probe.", suffix=".tmp", dir=folder)
+                os.close(fd)
+                os.unlink(probe)
+            except OSError as exc:
+                raise RunDirectoryError(
+                    f"cannot write in {_short(folder)}: {exc.strerror or exc}; nothing in "
+                    f"{_short(self.path)} was removed") from None
+
     def _contents(self) -> list:
-        """The directory's entries other than the lock file ([] if it does not exist)."""
+        """The directory's entries other than the lock file and an empty ``fields/`` (which
+        opening a run directory makes) ([] if it does not exist)."""
         if not self.path.is_dir():
             return []
-        return [item for item in self.path.iterdir() if item.name != self.LOCK]
+        return [item for item in self.path.iterdir() if item.name != self.LOCK and not (
+            item.name == self.FIELDS and item.is_dir() and not item.is_symlink()
+            and not any(item.iterdir()))]
 
     def _refuse_not_empty(self):
+        if not self._is_run():
+            raise RunDirectoryError(f"{_short(self.path)} exists, is not empty and is not a run "
+                                    "directory of fipy-hopper: choose a new or empty directory")
         raise RunDirectoryError(
             f"{_short(self.path)} exists and is not empty; choose another directory, add "
             "--force to overwrite it, or --resume to continue an interrupted run")
@@ -429,7 +510,7 @@ class RunDirectory:
             return
         lock = self.path / self.LOCK
         while True:
-            fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o644)
+            fd = _open_lock(lock, os.O_RDWR | os.O_CREAT)
             try:
                 fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
             except OSError as exc:
@@ -466,8 +547,8 @@ class RunDirectory:
         if fcntl is None or not lock.is_file():
             return
         try:
-            fd = os.open(lock, os.O_RDONLY)
-        except OSError:
+            fd = _open_lock(lock, os.O_RDONLY)
+        except (OSError, RunDirectoryError):
             return
         try:
             fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
@@ -528,16 +609,42 @@ class RunDirectory:
         from .plotting import PICTURES
         return cls.OUTPUTS + tuple(picture.name for picture in PICTURES)
 
+    #: the temporary files of the writers: :func:`atomic_path`'s ``.<stem>.XXXXXXXX.tmp<suffix>``
+    #: (``tempfile``'s eight characters), the checkpoint's and the writability probe's
+    _TEMPORARY = r"\.(?P<stem>.+)\.[a-z0-9_]{8}\.tmp(?P<suffix>\.\w+)?"
+    _OTHER_TEMPORARIES = re.compile(r"\.checkpoint-[a-z0-9_]{8}\.npz|\.probe\.[a-z0-9_]{8}\.tmp")
+    #: the files of ``fields/``: the snapshots, their markers, the index and the ParaView file
+    _FIELD_FILES = re.compile(r"(fields|markers)_\d{4,}\.vtu|fields\.pvd|snapshots\.csv")
+
+    @classmethod
+    def is_output(cls, name: str, in_fields: bool = False) -> bool:
+        """True when ``name`` is a file a run writes at the top of its directory (or in
+        ``fields/``): an output, a picture, a snapshot, or a temporary file of their writers.
+        Nothing else is ever removed from a run directory."""
+        if in_fields:
+            own = lambda n: bool(cls._FIELD_FILES.fullmatch(n))      # noqa: E731
+        else:
+            names = set(cls.output_names())
+            own = names.__contains__
+        if own(name):
+            return True
+        temp = re.fullmatch(cls._TEMPORARY, name)
+        if temp and own(temp["stem"] + (temp["suffix"] or "")):
+            return True
+        return bool(cls._OTHER_TEMPORARIES.fullmatch(name))
+
     def _remove_outputs(self) -> None:
-        for name in self.output_names():
-            with contextlib.suppress(FileNotFoundError):
-                (self.path / name).unlink()
-        if self.fields.is_dir():
-            for item in self.fields.iterdir():
-                if item.is_file() and (item.suffix in (".vtu", ".pvd") or item.name ==
-                                       "snapshots.csv" or ".tmp" in item.name):
-                    item.unlink()
-        self._remove_temporaries()
+        """Remove the earlier run's files (:meth:`is_output`) and nothing else; links are
+        removed, never followed."""
+        for folder, in_fields in ((self.path, False), (self.fields, True)):
+            if not folder.is_dir() or folder.is_symlink():
+                continue
+            with os.scandir(folder) as entries:
+                doomed = [e.path for e in entries if self.is_output(e.name, in_fields)
+                          and not e.is_dir(follow_symlinks=False)]
+            for path in doomed:
+                with contextlib.suppress(FileNotFoundError):
+                    os.unlink(path)
 
     def remove_profile(self) -> None:
         """Remove the profile of an earlier session (a resumed run, once its checkpoint has
@@ -546,12 +653,39 @@ class RunDirectory:
             (self.path / self.PROFILE).unlink()
 
     def _remove_temporaries(self) -> None:
-        """Temporary files left by a run killed in the middle of a write."""
-        for folder in (self.path, self.fields):
-            if folder.is_dir():
-                for item in folder.glob(".*.tmp*"):
+        """Temporary files left by a run killed in the middle of a write (its writers' only,
+        :meth:`is_output`; never through a link)."""
+        for folder, in_fields in ((self.path, False), (self.fields, True)):
+            if not folder.is_dir() or folder.is_symlink():
+                continue
+            for item in folder.glob(".*"):
+                if item.name not in (self.LOCK,) and self.is_output(item.name, in_fields) \
+                        and not item.is_dir():
                     with contextlib.suppress(OSError):
                         item.unlink()
+
+
+def _open_lock(path: Path, flags: int) -> int:
+    """Open a lock file without following a link (``O_NOFOLLOW``) or blocking on a FIFO
+    (``O_NONBLOCK``); :class:`RunDirectoryError` for a link or what is not a regular file."""
+    extra = getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_NONBLOCK", 0) | \
+        getattr(os, "O_CLOEXEC", 0)
+    try:
+        fd = os.open(path, flags | extra, 0o644)
+    except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            raise RunDirectoryError(f"{_short(path)} is a symbolic link; a run writes its lock "
+                                    "there itself and never through a link: remove the "
+                                    "link") from None
+        raise
+    st = os.fstat(fd)
+    if not stat.S_ISREG(st.st_mode) or st.st_nlink != 1:
+        os.close(fd)
+        what = "not a regular file" if not stat.S_ISREG(st.st_mode) else \
+            f"a hard link (the file has {st.st_nlink} names)"
+        raise RunDirectoryError(f"{_short(path)} is {what}, which a run's lock never is; a run "
+                                "writes its lock there itself: remove it")
+    return fd
 
 
 def _read_pid(fd: int) -> str:
@@ -1067,11 +1201,54 @@ def read_checkpoint(path: PathLike, state, cfg, dt: Optional[float] = None) -> t
     ``meta["state"]`` must be fields of ``state`` of the types of its values.
     """
     shapes, optional = checkpoint_template(state)
-    t_max, step_max = checkpoint_time_limit(cfg, cfg.time_step if dt is None else dt)
+    dt = cfg.time_step if dt is None else dt
+    t_max, step_max = checkpoint_time_limit(cfg, dt)
     scalars = {k: v for k, v in vars(state).items() if not isinstance(v, np.ndarray)}
-    return validate_checkpoint(path, shapes, checkpoint_size_limit(state, cfg),
-                               optional=optional, state_keys=list(vars(state)),
-                               state_types=scalars, t_max=t_max, step_max=step_max)
+    arrays, meta = validate_checkpoint(path, shapes, checkpoint_size_limit(state, cfg),
+                                       optional=optional, state_keys=list(vars(state)),
+                                       state_types=scalars, t_max=t_max, step_max=step_max)
+    check_checkpoint_times(meta, cfg, dt, f"checkpoint {_short(path)}")
+    return arrays, meta
+
+
+def check_checkpoint_times(meta: dict, cfg, dt: float, where: str = "checkpoint") -> None:
+    """The times and the masses of a checkpoint's metadata within this run's, so that the
+    resumed run stops as the uninterrupted one would (a NaN opening time never would).
+
+    ``t`` is the state's time and ``tol`` two steps (``dt``).  Filling: the next row of
+    ``loads.csv`` in ``[0, t + output_interval + tol]`` (the rest is set at the opening).
+    Discharge: the opening ``t_open`` in ``[0, t]``; the next sample and the next row in
+    ``[t_open, t + output_interval + tol]``; the end of the envelope window in
+    ``[t_open, t + load_window + tol]``; the initial mass finite and positive.  Either stage:
+    the mass books, when given, finite and positive.  :class:`CheckpointError` in one line
+    naming the file, the value and its allowed range."""
+    t, stage = meta["state"]["t"], meta["state"]["stage"]
+    run, tol = cfg.run, 2.0 * dt + 1e-9
+
+    def within(key, value, low, high, what="a time of this run"):
+        if not (is_number(value) and math.isfinite(value) and low <= value <= high):
+            raise CheckpointError(f"{where}: its {key} = {_short(value, 40)} is not {what} "
+                                  f"(allowed range [{low:.6g}, {high:.6g}], the "
+                                  f"checkpoint's {stage} at t = {t:.6g} s)")
+
+    def positive(key, value):
+        if not (is_number(value) and math.isfinite(value) and value > 0.0):
+            raise CheckpointError(f"{where}: its {key} = {_short(value, 40)} is not a mass of "
+                                  "this run (allowed range (0, inf) kg)")
+
+    if stage == "filling":
+        within("next_load_sample", meta.get("next_load_sample"), 0.0,
+               t + run.output_interval + tol)
+    else:
+        t_open = meta.get("t_open")
+        within("t_open", t_open, 0.0, t, "the opening time of this run's discharge")
+        for key, step in (("next_sample", run.output_interval),
+                          ("next_load_sample", run.output_interval),
+                          ("next_envelope", run.load_window_s)):
+            within(key, meta.get(key), t_open, t + step + tol)
+        positive("record's initial_mass", meta["record"].get("initial_mass"))
+    if meta.get("mass_books") is not None:
+        positive("mass_books", meta["mass_books"])
 
 
 def is_number(value) -> bool:

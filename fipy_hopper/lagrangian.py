@@ -36,7 +36,9 @@ Element
     ``Gamma`` on a rectangle, orthogonal to linear velocity fields on any quad).
 
 Time step
-    Central difference: ``v += dt (-f_int + f_hg + m g) / m``, contact, then (during filling)
+    Central difference: ``v += dt (-f_int + f_hg + m g) / m`` (in ``f_int`` the stress of a
+    flowing element carries the law's rate-dependent overstress, from the current velocities,
+    as in the Eulerian forces), contact, then (during filling)
     the Eulerian model's mass-proportional damping, applied after the contact as there, so
     that the walls, not the damping, hold what rests on them; the axis; the strain increment
     ``D dt`` and spin from the new velocity on the mid-step configuration ``x + v dt/2``;
@@ -103,11 +105,11 @@ from typing import Optional
 import numpy as np
 from numba import njit
 
-from . import geometry
+from .boundary import _wall_x_point, nearest_point
 from .config import HopperConfig
 from .dense_loose import close_loose_volume, separation_strain
-from .material import equivalent_plastic_strain
-from .model import GRAVITY, InstabilityError, runaway_speed
+from .material import ELASTIC, equivalent_plastic_strain
+from .model import GRAVITY, InstabilityError, ramped_gravity, runaway_speed
 
 __all__ = ["DistortionLimits", "LagrangianMesh", "LagrangianState",
            "LagrangianModel", "build_mesh", "element_gradients", "internal_force",
@@ -154,17 +156,20 @@ class LagrangianMesh:
         return np.asarray(j) * (self.n_cols + 1) + np.asarray(i)
 
 
-def build_mesh(geom, h: float) -> LagrangianMesh:
-    """The conforming structured mesh of the material filling ``geom`` to its fill level.
+def build_mesh(boundary, h: float) -> LagrangianMesh:
+    """The conforming structured mesh of the material filling a boundary (a cone or a flat
+    floor under a bin: :attr:`~fipy_hopper.boundary.Boundary.hopper_shape`) to its fill level.
 
     See the module docstring: ``round(R / h)`` columns between the axis and the wall, bin rows
     about ``h`` apart, cone rows graded to square elements, a node row at the transition.
     """
-    R, R0, hc = geom.bin_radius, geom.outlet_radius, geom.cone_height
+    shape = boundary.hopper_shape
+    R, R0, hc = shape.bin_x, shape.outlet_x, shape.transition_height
+    fill = boundary.fill_level - hc
     n_cols = max(2, int(round(R / h)))
     rows = [0.0]
     if hc > 0.0:
-        tan_t = math.tan(geom.half_angle)
+        tan_t = (R - R0) / hc
         n_cone = max(1, int(math.ceil(math.log(R / R0) / math.log1p(tan_t / n_cols) - 1e-9)))
         q = (R / R0) ** (1.0 / n_cone)
         r_rows = R0 * q ** np.arange(1, n_cone + 1)
@@ -172,12 +177,12 @@ def build_mesh(geom, h: float) -> LagrangianMesh:
         z_cone[-1] = hc
         rows.extend(z_cone.tolist())
     dz_bin = R / n_cols
-    n_bin = max(1, int(round(geom.fill_height / dz_bin)))
-    rows.extend((hc + geom.fill_height * np.arange(1, n_bin + 1) / n_bin).tolist())
+    n_bin = max(1, int(round(fill / dz_bin)))
+    rows.extend((hc + fill * np.arange(1, n_bin + 1) / n_bin).tolist())
     z_rows = np.asarray(rows)
     if hc > 0.0:
         frac = np.linspace(0.0, 1.0, n_cols + 1)
-        r_wall = geometry.wall_radius(z_rows, geom)
+        r_wall = boundary.wall_x(z_rows)
         R_nodes = frac[None, :] * r_wall[:, None]
     else:  # flat bin: a node column at the outlet radius, the floor beyond it
         n_out = min(max(1, int(round(n_cols * R0 / R))), n_cols - 1)
@@ -269,6 +274,26 @@ def element_quality(x, conn):
         A / edges.max(axis=1)
 
 
+def coulomb(vr, vz, n_r, n_z, mu, dvn):
+    """The velocity ``(vr, vz)`` after a contact that removes ``dvn`` of its normal part
+    (``n`` into the wall) and reduces its tangential speed by ``mu dvn``, not below zero: the
+    discrete form of ``|impulse_t| <= mu impulse_n``.  Scalars or arrays alike: the one
+    Coulomb rule of the Lagrangian contact (:func:`_contact_kernel`, compiled, and
+    :func:`contact_reference`); the Eulerian contact removes the whole normal speed the
+    same way (``stepping._project``)."""
+    vr = vr - dvn * n_r
+    vz = vz - dvn * n_z
+    vn = vr * n_r + vz * n_z
+    t_r = vr - vn * n_r
+    t_z = vz - vn * n_z
+    speed = np.sqrt(t_r * t_r + t_z * t_z)
+    scale = np.maximum(0.0, 1.0 - mu * dvn / (speed + (speed <= 0.0) * 1.0)) * (speed > 0.0)
+    return vn * n_r + scale * t_r, vn * n_z + scale * t_z
+
+
+_coulomb = njit(cache=True, error_model="numpy", inline="always")(coulomb)
+
+
 def contact_reference(x, v, dt, segments, passes=2, plate_segment=-1):
     """Numpy reference of :func:`_contact_kernel`: returns the new velocities and the velocity
     changes made by segment ``plate_segment``.
@@ -288,27 +313,21 @@ def contact_reference(x, v, dt, segments, passes=2, plate_segment=-1):
             gap = np.maximum(0.0, -((x - [ar, az]) @ n))
             dvn = v @ n - gap / dt
             hit = (t >= -1e-9) & (t <= 1.0 + 1e-9) & behind & (dvn > 0.0)
-            vv = v - np.where(hit, dvn, 0.0)[:, None] * n
-            vn = vv @ n
-            tang = vv - vn[:, None] * n
-            speed = np.linalg.norm(tang, axis=1)
-            scale = np.where(speed > 0.0, np.maximum(0.0, 1.0 - mu * np.where(hit, dvn, 0.0)
-                                                     / np.where(speed > 0, speed, 1.0)), 0.0)
-            v = np.where(hit[:, None], vn[:, None] * n + scale[:, None] * tang, v)
+            new = coulomb(v[:, 0], v[:, 1], nr, nz, mu, np.where(hit, dvn, 0.0))
+            v = np.where(hit[:, None], np.stack(new, axis=1), v)
             if k == plate_segment:
                 dv_plate += v - before
     return v, dv_plate
 
 
-def project_reference(x, geom, plate_closed):
+def project_reference(x, boundary, plate_closed):
     """Numpy reference of :func:`_project_kernel` (returns the new positions)."""
     x = x.copy()
     r, z = x[:, 0], x[:, 1]
-    plate = plate_closed & (z < 0.0) & (r <= geom.outlet_radius)
-    rw = geometry.wall_radius(z, geom)
+    plate = plate_closed & (z < 0.0) & (r <= boundary.outlet[1])
+    rw = boundary.wall_x(z)
     inside = ~plate & (r > rw + 1e-12 * np.maximum(1.0, rw))
-    far = 10.0 * max(geom.top, geom.bin_diameter, 1.0)
-    pr, pz, _ = geometry._nearest_on_polyline(r, z, geometry.wall_polyline(geom, far, far))
+    pr, pz, _, _, _ = boundary.nearest(r, z)
     x[inside, 0], x[inside, 1] = pr[inside], pz[inside]
     x[plate, 1] = 0.0
     return x
@@ -485,17 +504,7 @@ def _contact_kernel(x, v, dt, segments, n_segments, passes, plate_segment, dv_pl
                 dvn = vn - gap / dt
                 if dvn <= 0.0:
                     continue
-                vr = v[i, 0] - dvn * nr_
-                vz = v[i, 1] - dvn * nz_
-                vn2 = vr * nr_ + vz * nz_
-                tr = vr - vn2 * nr_
-                tz = vz - vn2 * nz_
-                speed = math.sqrt(tr * tr + tz * tz)
-                scale = 0.0
-                if speed > 0.0:
-                    scale = max(0.0, 1.0 - mu * dvn / speed)
-                new_r = vn2 * nr_ + scale * tr
-                new_z = vn2 * nz_ + scale * tz
+                new_r, new_z = _coulomb(v[i, 0], v[i, 1], nr_, nz_, mu, dvn)
                 if k == plate_segment:
                     dv_plate[i, 0] += new_r - v[i, 0]
                     dv_plate[i, 1] += new_z - v[i, 1]
@@ -504,10 +513,11 @@ def _contact_kernel(x, v, dt, segments, n_segments, passes, plate_segment, dv_pl
 
 
 @njit(cache=True, error_model="numpy")
-def _project_kernel(x, vertices, r0, tan_t, r_bin, plate_closed):
-    """Move nodes left inside the wall (round-off) onto the nearest wall point; nodes below a
-    closed outlet plate onto the plate.  ``tan_t = 0`` is a flat-bottomed bin.  Returns the
-    number of nodes moved."""
+def _project_kernel(x, a, b, rows, r0, plate_closed):
+    """Move nodes left inside the wall (round-off) onto the nearest wall point (the
+    boundary's segments ``a -> b``; the wall's ``x`` at a height from its ``rows``,
+    :func:`fipy_hopper.boundary.wall_x`); nodes below a closed outlet plate (``r <= r0``) onto
+    the plate.  Returns the number of nodes moved."""
     moved = 0
     for i in range(x.shape[0]):
         r = x[i, 0]
@@ -516,32 +526,12 @@ def _project_kernel(x, vertices, r0, tan_t, r_bin, plate_closed):
             x[i, 1] = 0.0
             moved += 1
             continue
-        if z <= 0.0:
-            rw = r0
-        elif tan_t == 0.0:      # flat-bottomed bin
-            rw = r_bin
-        else:
-            rw = min(r0 + z * tan_t, r_bin)
+        rw = _wall_x_point(z, rows, r0)
         if r <= rw + 1e-12 * max(1.0, rw):
             continue
-        best = np.inf
-        br = r
-        bzz = z
-        for k in range(vertices.shape[0] - 1):
-            ar, az = vertices[k, 0], vertices[k, 1]
-            abr = vertices[k + 1, 0] - ar
-            abz = vertices[k + 1, 1] - az
-            t = ((r - ar) * abr + (z - az) * abz) / (abr * abr + abz * abz)
-            t = min(1.0, max(0.0, t))
-            pr = ar + t * abr
-            pz = az + t * abz
-            d2 = (r - pr) ** 2 + (z - pz) ** 2
-            if d2 < best:
-                best = d2
-                br = pr
-                bzz = pz
-        x[i, 0] = br
-        x[i, 1] = bzz
+        px, pz, _ = nearest_point(r, z, a, b)
+        x[i, 0] = px
+        x[i, 1] = pz
         moved += 1
     return moved
 
@@ -575,6 +565,7 @@ class LagrangianState:
     halt_detail: str = ""          # which element, how, when
     halt_kind: str = ""            # inverted | aspect_ratio | min_angle
     halt_element: int = -1
+    flowing: np.ndarray = None     # (n_el,) bool: the last return was plastic (the overstress)
 
     def copy(self) -> "LagrangianState":
         return LagrangianState(**{k: (v.copy() if isinstance(v, np.ndarray) else v)
@@ -605,11 +596,14 @@ class LagrangianModel:
         self.erode_discharged = erode_discharged
         geom = cfg.hopper
         self.geom = geom
+        self.boundary = bnd = cfg.boundary
         self.erode_depth = float(erode_depth)
         self.h = self.cell_size = cfg.numerics.cell_size
-        self.mesh = build_mesh(geom, self.h)
+        self.mesh = build_mesh(bnd, self.h)
         self.n_cells = self.mesh.n_elements
         self.material = cfg.material.law()
+        #: the law has a rate dependence (an overstress in flowing elements)
+        self._rated = bool(self.material.rate_parameters()[0] != 0.0)
         self.rho = cfg.material.density
         self.c_p = self.material.p_wave_speed
         self.mu_wall = cfg.wall.friction_coefficient
@@ -635,25 +629,15 @@ class LagrangianModel:
                                                             cfg.numerics.dt_safety)
         column = max(geom.fill_level, self.h)
         self.fill_damping = math.pi * self.c_p / (2.0 * column)
-        # wall segments (tube: frictionless; cone or floor; bin) and the outlet plate
-        far = 10.0 * max(geom.top, geom.bin_diameter, 1.0)
-        self.vertices = geometry.wall_polyline(geom, far, far)
-        segs = []
-        for k in range(len(self.vertices) - 1):
-            a, b = self.vertices[k], self.vertices[k + 1]
-            ab = b - a
-            length = float(np.hypot(*ab))
-            if length == 0.0:
-                continue
-            n = np.array([ab[1], -ab[0]]) / length
-            mid = 0.5 * (a + b)
-            if not geometry.in_solid(mid[0] + 1e-9 * n[0], mid[1] + 1e-9 * n[1], geom):
-                n = -n
-            segs.append([a[0], a[1], b[0], b[1], n[0], n[1], 0.0 if k == 0 else self.mu_wall])
+        # the boundary's segments (tube: frictionless; cone or floor; bin) and the outlet plate
+        tab = bnd.table
+        self._kernel = bnd.kernel_arrays()      # segments a, b and the wall's rows of x(z)
+        self.outlet_radius = bnd.outlet[1]
+        segs = [[*tab.a[k], *tab.b[k], *tab.normal[k], 0.0 if tab.tube[k] else self.mu_wall]
+                for k in range(len(tab))]
         self.wall_segments = np.array(segs)
-        plate = [0.0, 0.0, geom.outlet_radius, 0.0, 0.0, -1.0, self.mu_wall]
+        plate = [0.0, 0.0, self.outlet_radius, 0.0, 0.0, -1.0, self.mu_wall]
         self.segments_closed = np.array(segs + [plate])
-        self._tan_t = 0.0 if geom.cone_height == 0.0 else math.tan(geom.half_angle)
         self._stations()
         self._force = np.zeros((m.n_nodes, 2))
         self._d_eps = np.zeros((m.n_elements, 4))
@@ -667,17 +651,17 @@ class LagrangianModel:
         the cone (or floor) and the bin wall divided into stretches of about half a cell;
         each station stands for its stretch (arc length ``s`` at its middle, normal into the
         wall there)."""
-        geom = self.geom
-        s_t = float(geometry.transition_arc_length(geom))
-        s_top = float(geometry.arc_length(geom.top, geom))
+        bnd = self.boundary
+        s_t = float(bnd.transition("wall").s)
+        s_top = float(bnd.chain("wall").length)
         n_cone = max(1, int(math.ceil(s_t / (0.5 * self.h))))
         n_bin = max(1, int(math.ceil((s_top - s_t) / (0.5 * self.h))))
         self._s_t, self._ds_cone, self._ds_bin = s_t, s_t / n_cone, (s_top - s_t) / n_bin
         s = np.concatenate([[0.0], (np.arange(n_cone) + 0.5) * self._ds_cone,
                             s_t + (np.arange(n_bin) + 0.5) * self._ds_bin])
-        _, _, n_r, n_z = geometry.wall_point(s, geom)
+        _, _, n_r, n_z = bnd.wall_point("wall", s)
         normal = np.stack([n_r, n_z], axis=1)
-        normal[0] = (-1.0, 0.0) if geom.outlet_radius > 0 else (0.0, -1.0)   # the tube
+        normal[0] = (-1.0, 0.0) if self.outlet_radius > 0 else (0.0, -1.0)   # the tube
         segment = np.concatenate([[0], np.ones(n_cone, int), np.full(n_bin, 2)])
         self._wall_stations = (s, normal, segment)
         self._n_cone = n_cone
@@ -692,13 +676,12 @@ class LagrangianModel:
                                active=np.ones(m.n_elements, dtype=bool), dt=self.dt0,
                                loose=np.zeros(m.n_elements),
                                wall_impulse=np.zeros((len(self._wall_stations[0]), 2)),
-                               plate_impulse=np.zeros((1, 2)), momentum_budget=np.zeros(4))
+                               plate_impulse=np.zeros((1, 2)), momentum_budget=np.zeros(4),
+                               flowing=np.zeros(m.n_elements, dtype=bool))
 
     def gravity(self, state: LagrangianState) -> float:
-        ramp = self.ramp_time
-        if state.stage == "filling" and ramp > 0:
-            return GRAVITY * min(1.0, state.t / ramp)
-        return GRAVITY
+        """Gravity (m/s^2, downward) at this time (:func:`~fipy_hopper.model.ramped_gravity`)."""
+        return ramped_gravity(state, self.ramp_time)
 
     def open_outlet(self, state: LagrangianState) -> None:
         """Remove the outlet plate: discharge starts."""
@@ -807,7 +790,14 @@ class LagrangianModel:
         plate's apart, the wall's added to the station nearest to the node's wall point."""
         dt = state.dt
         x, v, conn = state.x, state.v, self.mesh.conn
-        _force_kernel(x, v, conn, state.sigma, state.active, self.hg_scale, self._force)
+        stress = state.sigma
+        if self._rated and state.flowing is not None and state.flowing.any():
+            # the law's rate-dependent overstress in the flowing elements, as in the
+            # Eulerian forces (fipy_hopper.material.rate)
+            D, _ = strain_rate(x, conn, v)
+            stress = stress + self.material.overstress_reference(
+                state.sigma, D, state.flowing & state.active)
+        _force_kernel(x, v, conn, stress, state.active, self.hg_scale, self._force)
         damping = self.fill_damping if state.stage == "filling" else 0.0
         m = self.node_mass[:, None]
         v += dt * self._force / m
@@ -834,11 +824,12 @@ class LagrangianModel:
                                                        return_status=True)
         sig_new[~state.active] = 0.0
         state.sigma = sig_new
+        state.flowing = (status != ELASTIC) & state.active
         state.loose = np.where(state.active, loose + separation_strain(deps_p, status), 0.0)
         state.eps_p += equivalent_plastic_strain(deps_p)
         x += dt * v
-        _project_kernel(x, self.vertices, self.geom.outlet_radius, self._tan_t,
-                        self.geom.bin_radius, state.plate_closed)
+        a, b, rows = self._kernel[:3]
+        _project_kernel(x, a, b, rows, self.outlet_radius, state.plate_closed)
         x[self.axis_nodes, 0] = 0.0
         if self.erode_discharged and state.stage == "discharge":
             gone = np.all(x[conn, 1] < -self.erode_depth, axis=1) & state.active
@@ -873,13 +864,13 @@ class LagrangianModel:
     def _station(self, x: np.ndarray) -> np.ndarray:
         """The wall station (row of ``wall_impulse``) of the nearest wall point of each
         position ``x`` (n, 2)."""
-        pr, pz, seg = geometry._nearest_on_polyline(x[:, 0], x[:, 1], self.vertices)
-        s = geometry.arc_length_of_point(pr, pz, self.geom)
+        _, _, chain, _, s = self.boundary.nearest(x[:, 0], x[:, 1])
         cone = np.clip(np.floor(s / self._ds_cone), 0, self._n_cone - 1) + 1
         n_bin = len(self._wall_stations[0]) - 1 - self._n_cone
         above = np.clip(np.floor((s - self._s_t) / self._ds_bin), 0, n_bin - 1) \
             + 1 + self._n_cone
-        return np.where(seg == 0, 0, np.where(s < self._s_t, cone, above)).astype(int)
+        tube = self.boundary.chain_index("tube")
+        return np.where(chain == tube, 0, np.where(s < self._s_t, cone, above)).astype(int)
 
     # ------------------------------------------------------------------ measuring
     def wall_entries(self) -> tuple:
@@ -896,15 +887,15 @@ class LagrangianModel:
         element sizes of the cone or bin wall, below the fill level (the outer column's
         centroids are half an element off the wall, so no inner bound): the arc length of
         the nearest wall point, the element volume ``r_c A`` and its stress."""
-        geom, h, conn = self.geom, self.h, self.mesh.conn
+        bnd, h, conn = self.boundary, self.h, self.mesh.conn
         rc, zc = state.x[conn, 0].mean(axis=1), state.x[conn, 1].mean(axis=1)
-        d = geometry.signed_distance(rc, zc, geom)
-        pr, pz, seg = geometry._nearest_on_polyline(rc, zc, self.vertices)
-        band = (d <= 2.5 * h) & (seg >= 1) & (pz >= 0) & (pz < geom.fill_level) & state.active
+        d = bnd.signed_distance(rc, zc)
+        _, pz, chain, _, s = bnd.nearest(rc, zc)
+        band = ((d <= 2.5 * h) & (chain != bnd.chain_index("tube")) & (pz >= 0)
+                & (pz < bnd.fill_level) & state.active)
         idx = np.flatnonzero(band)
         _, _, A, r_el = element_gradients(state.x, conn)
-        s = geometry.arc_length_of_point(pr[idx], pz[idx], geom)
-        return s, (A * r_el)[idx], state.sigma[idx]
+        return s[idx], (A * r_el)[idx], state.sigma[idx]
 
     def contact_slip(self, state: LagrangianState) -> tuple:
         """``(slip, axis_speed)`` (m/s) per wall station: the mean slip speed down the wall of
@@ -913,7 +904,7 @@ class LagrangianModel:
         speed at the axis at the station's height (linear between the axis nodes)."""
         from . import diagnostics
         s_w, normal, _ = self._wall_stations
-        d = geometry.signed_distance(state.x[:, 0], state.x[:, 1], self.geom)
+        d = self.boundary.signed_distance(state.x[:, 0], state.x[:, 1])
         on = np.flatnonzero(np.abs(d) <= 0.1 * self.h)
         station = self._station(state.x[on])
         slip = diagnostics.entry_slip(state.v[on], normal[station])
@@ -921,7 +912,7 @@ class LagrangianModel:
         count = np.bincount(station, minlength=n)
         total = np.bincount(station, slip, minlength=n)
         mean = np.where(count > 0, total / np.maximum(count, 1), math.nan)
-        _, z_w, _, _ = geometry.wall_point(s_w, self.geom)
+        _, z_w, _, _ = self.boundary.wall_point("wall", s_w)
         axis = self.axis_nodes[np.argsort(state.x[self.axis_nodes, 1])]
         axis_speed = np.interp(z_w, state.x[axis, 1], -state.v[axis, 1])
         return mean, axis_speed
@@ -932,14 +923,15 @@ class LagrangianModel:
         the mean of its nodes'): at each height of the rule, the elements of the row within
         half a cell, 1 to 2.5 cells from the wall against those within 2 cells of the axis;
         the stagnant share by element volume in the cone."""
-        geom, h, conn = self.geom, self.h, self.mesh.conn
+        bnd, h, conn = self.boundary, self.h, self.mesh.conn
+        z_t = bnd.transition_height("wall")
         act = state.active
         rc, zc = state.x[conn, 0].mean(axis=1), state.x[conn, 1].mean(axis=1)
         down = -state.v[conn, 1].mean(axis=1)
-        d = geometry.signed_distance(rc, zc, geom)
+        d = bnd.signed_distance(rc, zc)
         ratios = []
         for frac in rule.heights:
-            row = act & (np.abs(zc - frac * geom.cone_height) <= 0.5 * h)
+            row = act & (np.abs(zc - frac * z_t) <= 0.5 * h)
             near_wall = row & (d >= h) & (d <= 2.5 * h)
             axis = row & (rc < 2.0 * h)
             if near_wall.any() and axis.any():
@@ -947,7 +939,7 @@ class LagrangianModel:
                 if v_axis > 1e-9:
                     ratios.append(float(np.mean(down[near_wall])) / v_axis)
         index = float(np.mean(ratios)) if ratios else math.nan
-        cone = act & (zc > 0) & (zc < geom.cone_height)
+        cone = act & (zc > 0) & (zc < z_t)
         if not cone.any():
             return index, math.nan
         _, _, A, r_el = element_gradients(state.x, conn)

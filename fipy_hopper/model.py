@@ -81,6 +81,14 @@ def runaway_speed(geom) -> float:
     return 50.0 * math.sqrt(GRAVITY * max(geom.top, 0.1))
 
 
+def ramped_gravity(state, ramp: float) -> float:
+    """Gravity (m/s^2, downward) of a model's state: rising linearly over ``ramp`` s during
+    filling, then :data:`GRAVITY` (every model's; the compiled steps carry its twin)."""
+    if state.stage == "filling" and ramp > 0:
+        return GRAVITY * min(1.0, state.t / ramp)
+    return GRAVITY
+
+
 class InstabilityError(RuntimeError):
     """The explicit solution went unstable (NaN or runaway velocity)."""
 
@@ -115,13 +123,9 @@ class State:
     wall_impulse: np.ndarray = None   # (n_contacts, 2)
     plate_impulse: np.ndarray = None  # (n_plate, 2)
     momentum_budget: np.ndarray = None  # (4,) see MOMENTUM_BUDGET
-
-    def __post_init__(self):
-        # states from before these fields existed (older checkpoints): dense, no pending motion
-        if self.loose is None:
-            self.loose = np.zeros_like(self.alpha)
-        if self.markers is not None and self.displacement is None:
-            self.displacement = np.zeros_like(self.v)
+    # 1.0 where the cell's last return was plastic, else 0.0 (nz, nr): the cells in which the
+    # law's rate-dependent overstress acts in the next step's forces (not transported)
+    flowing: np.ndarray = None
 
     def copy(self) -> "State":
         return State(**{k: (v.copy() if isinstance(v, np.ndarray) else v)
@@ -187,6 +191,16 @@ class HopperModel:
         self.bulk_viscosity = cfg.bulk_viscosity * self.rho * self.c_p * g.h
         self.dt = (self.material.stable_time_step(g.h, cfg.numerics.dt_safety)
                    * damped_step_factor(cfg.bulk_viscosity))
+        rate = getattr(self.material, "rate", None)
+        if rate is not None:
+            # the overstress is a viscosity of at most eta_I = delta_mu d sqrt(rho_s p) / I_0
+            # (material.rate); its explicit limit rho h^2 / (8 eta_I) at the hydrostatic
+            # pressure of the fill's depth lies far above the wave's step on every grid in use
+            # (at 5 mm, d = 1 mm and a 0.3 m fill 1.5e-3 s against 2.8e-5 s), but holds it
+            depth = max(cfg.hopper.fill_level, g.h)
+            eta = rate.viscosity_bound(self.rho * GRAVITY * depth)
+            if eta > 0.0:
+                self.dt = min(self.dt, self.rho * g.h ** 2 / (8.0 * eta))
         self.mu_wall = cfg.wall.friction_coefficient
         #: the boundary (fipy_hopper.boundary): the walls, inserts and the section as data
         self.boundary = cfg.boundary
@@ -286,8 +300,10 @@ class HopperModel:
         n = g.nz * g.nr
         # compiled steps (fipy_hopper.stepping): contacts grouped by node row, list order kept
         # the walls and the plate of every node in contact, grouped by node and row
-        self.contact_groups = momentum.contact_groups(self.contact_list, self.plate_list,
-                                                      g.nz + 1)
+        # ... with each wall's tributary length at its node, which shares a corner node's
+        # impulse among its walls (stepping._contact_node)
+        self.contact_groups = momentum.contact_groups(
+            self.contact_list, self.plate_list, g.nz + 1, weights=self.contact_weights())
         self._face_sign = np.ascontiguousarray(self.face_sign, dtype=float)
         self._work = (np.empty((n, 3), np.int64), np.empty((n, 3), np.int64),
                       np.empty(n + 1, np.int64), np.zeros((8, g.nz, g.nr)), np.zeros(g.nz + 1),
@@ -298,6 +314,8 @@ class HopperModel:
         self._carried = (np.empty((len(TRANSPORTED), n)),
                          np.empty((len(TRANSPORTED), len(g.face_aperture))))
         self._prm = self.material.kernel_parameters()
+        #: the law's rate parameters (``law.rate_parameters()``: zeros for the plain law)
+        self._rate = np.ascontiguousarray(self.material.rate_parameters(), dtype=float)
         self._no_displacement = np.zeros((2, 1, 1))
         self._no_cycles = np.zeros(0, dtype=np.int64)      # material_steps: no phase timing
         self.threads = int(threads) if threads else resources.thread_limit()
@@ -317,7 +335,7 @@ class HopperModel:
                      sigma=np.zeros((g.nz, g.nr, 4)), eps_p=np.zeros((g.nz, g.nr)),
                      layer=layer, face_flux_sum=np.zeros(len(g.face_aperture)),
                      loose=np.zeros((g.nz, g.nr)),
-                     markers=self._seed_markers(alpha, layer),
+                     markers=self._seed_markers(alpha, layer), flowing=np.zeros((g.nz, g.nr)),
                      displacement=np.zeros((2, g.nz + 1, g.nr + 1)),
                      **self._measurements())
 
@@ -356,11 +374,8 @@ class HopperModel:
                                                                + state.v[1] ** 2)))
 
     def gravity(self, state: State) -> float:
-        """Gravity (m/s^2, downward) at this time: ramped linearly during filling."""
-        ramp = self.ramp_time
-        if state.stage == "filling" and ramp > 0:
-            return GRAVITY * min(1.0, state.t / ramp)
-        return GRAVITY
+        """Gravity (m/s^2, downward) at this time (:func:`ramped_gravity`)."""
+        return ramped_gravity(state, self.ramp_time)
 
     def open_outlet(self, state: State) -> None:
         """Open the outlet: discharge starts.  The plate goes at once, or over
@@ -424,6 +439,26 @@ class HopperModel:
                 f"non-finite material fraction or stress at step {state.step}, t = "
                 f"{state.t:.6g} s, cell r = {g.r_cells[i]:.4g} m, z = {g.z_cells[j]:.4g} m")
 
+    def contact_weights(self) -> tuple:
+        """The tributary length (m) of every wall and plate entry at its node: the length of
+        the entry's segment inside the node's dual cell (the square of side ``h`` around it),
+        0 for a tube (frictionless, a guard of the free fall that the material leaves) and
+        for a convex corner's own normal (a vertex).  ``(wall (n_contacts,), plate
+        (n_plate,))``; they share a corner node's impulse among its walls
+        (:func:`fipy_hopper.stepping._contact_node`)."""
+        g, tab = self.grid, self.boundary.table
+        j, i, _, _ = self.contact_list
+        row = self.contact_segment
+        seg = np.maximum(row, 0)
+        wall = _length_in_boxes(g.r_nodes[i], g.z_nodes[j], 0.5 * g.h, tab.a[seg], tab.b[seg])
+        wall = np.where((row < 0) | tab.tube[seg], 0.0, wall)
+        pj, pi, _, _ = self.plate_list
+        x_left, x_right = self.boundary.outlet
+        a = np.tile([x_left, 0.0], (len(pj), 1))
+        b = np.tile([x_right, 0.0], (len(pj), 1))
+        plate = _length_in_boxes(g.r_nodes[pi], g.z_nodes[pj], 0.5 * g.h, a, b)
+        return wall, plate
+
     def wall_entries(self) -> tuple:
         """``(s, normal, segment)`` of every entry of ``contact_list`` (the rows of
         ``State.wall_impulse``): the arc length along its chain of the node's wall point on
@@ -480,12 +515,16 @@ class HopperModel:
         """``(slip, axis_speed)`` (m/s) of every entry of ``contact_list``: the slip speed
         down the wall of the entry's node (its velocity in ``state.v``, after the step's
         contact) and the downward speed of the node of the same row on the centreline (the
-        axis)."""
+        axis; beside an insert on it, the material's nearest node column:
+        :func:`~fipy_hopper.diagnostics.axis_columns`)."""
         from . import diagnostics
         j, i, normals, _ = self.contact_list
         side = self.boundary.table.side[self.contact_owner]
+        if not hasattr(self, "_axis_columns"):
+            self._axis_columns = diagnostics.axis_columns(self.grid, self.boundary,
+                                                          self.centre_column)
         return (diagnostics.entry_slip(state.v[:, j, i].T, normals, side),
-                -state.v[1, j, self.centre_column])
+                -state.v[1, j, self._axis_columns[j]])
 
     def flow_mode_measures(self, state: State, rule) -> tuple:
         from . import diagnostics
@@ -521,9 +560,6 @@ class HopperModel:
         """
         if max_steps < 1:
             return 0
-        if state.wall_impulse is None:     # a state from before the load measurements
-            for key, value in self._measurements().items():
-                setattr(state, key, value)
         if self.backend == "numpy":
             for n in range(max_steps):
                 due = self._step_numpy(state)
@@ -555,7 +591,8 @@ class HopperModel:
             num.transport_cfl, num.max_transport_interval, row_nodes, node_i, node_ptr,
             normal, mu, kind, entry, state.plate_closed, self._opening(state), self.node_offset,
             state.wall_impulse, state.plate_impulse, state.momentum_budget, self._work,
-            self.viscosity, self.bulk_viscosity, self._rate_trace, self.threads,
+            self.viscosity, self.bulk_viscosity, self._rate_trace, state.flowing, self._rate,
+            self.threads,
             self._no_cycles if profile is None else profile.cycles)
         if profile is not None:
             profile.compiled_seconds += time.perf_counter() - started
@@ -597,6 +634,8 @@ class HopperModel:
         sig_new, deps_p, status = self._material_update(sigma.reshape(-1, 4), d_skeleton)
         loose = np.where(loaded, loose + dense_loose.separation_strain(deps_p, status), 0.0)
         sig_new[~loaded] = 0.0
+        state.flowing = np.where(loaded & (status != material.ELASTIC), 1.0,
+                                 0.0).reshape(state.alpha.shape)
         state.eps_p += np.where(loaded, material.equivalent_plastic_strain(deps_p),
                                 0.0).reshape(state.eps_p.shape)
         state.loose = loose.reshape(state.alpha.shape)
@@ -612,22 +651,26 @@ class HopperModel:
         return self._transport_due(state, u_n)
 
     def _material_update(self, sigma: np.ndarray, d_eps: np.ndarray):
-        """The law's stress update of the backend: ``(sigma_new, d_eps_p, status)``."""
-        law = self.material
-        update = law.update if self.backend == "numba" else law.update_reference
-        return update(sigma, d_eps, return_status=True)
+        """The law's reference stress update (the numpy path's; the compiled steps update
+        the stress themselves): ``(sigma_new, d_eps_p, status)``."""
+        return self.material.update_reference(sigma, d_eps, return_status=True)
 
     def _nodal_update_numpy(self, state: State, m: np.ndarray, damping: float) -> np.ndarray:
         """Reference (numpy) nodal update: forces, velocity, damping, contact, axis."""
         g, dt = self.grid, self.dt
         stress = state.sigma
-        if self.viscosity > 0.0 or self.bulk_viscosity > 0.0:
-            # the grid and the bulk viscosity: sigma + 2 eta D + eta_b tr(D) I in loaded cells
+        rated = self._rate[0] != 0.0
+        if self.viscosity > 0.0 or self.bulk_viscosity > 0.0 or rated:
+            # the grid viscosity, the law's overstress where flowing and the bulk viscosity:
+            # sigma + 2 eta D + 2 eta_I D' + eta_b tr(D) I in loaded cells
             D, _ = momentum.strain_rate(state.v, self.r_c, g.h)
             loaded = (state.alpha >= self.cfg.numerics.alpha_min)[..., None]
             viscous = state.sigma
             if self.viscosity > 0.0:
                 viscous = viscous + 2.0 * self.viscosity * D
+            if rated:
+                viscous = viscous + self.material.overstress_reference(
+                    state.sigma, D, state.flowing != 0.0)
             if self.bulk_viscosity > 0.0:
                 p_b = self.bulk_viscosity * (D[..., 0] + D[..., 1] + D[..., 2])
                 viscous = viscous + np.stack([p_b, p_b, p_b, np.zeros_like(p_b)], axis=-1)
@@ -794,6 +837,21 @@ class HopperModel:
         state.layer = layer
         state.loose = loose
         self._mass, self._mass_of = mass_new, new_alpha
+
+
+def _length_in_boxes(x, z, half, a, b) -> np.ndarray:
+    """Length (m) of each segment ``a``-``b`` (n, 2) inside the square of half-side ``half``
+    around ``(x, z)`` (Liang-Barsky clipping)."""
+    d = b - a
+    lo, hi = np.zeros(len(x)), np.ones(len(x))
+    for p, q in ((-d[:, 0], a[:, 0] - (x - half)), (d[:, 0], (x + half) - a[:, 0]),
+                 (-d[:, 1], a[:, 1] - (z - half)), (d[:, 1], (z + half) - a[:, 1])):
+        parallel = p == 0.0
+        t = q / np.where(parallel, 1.0, p)
+        lo = np.where(~parallel & (p < 0), np.maximum(lo, t), lo)
+        hi = np.where(~parallel & (p > 0), np.minimum(hi, t), hi)
+        hi = np.where(parallel & (q < 0), -1.0, hi)          # parallel and outside
+    return np.maximum(hi - lo, 0.0) * np.hypot(d[:, 0], d[:, 1])
 
 
 def _contact_list(passes):

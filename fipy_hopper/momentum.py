@@ -298,21 +298,29 @@ def dual_momentum_kernel(v, mass_old, mass_new, flux_z, flux_r, rho, light_mass,
     return outflow, stopped
 
 
-def contact_groups(contact_list, plate_list, n_rows):
+def contact_groups(contact_list, plate_list, n_rows, weights=None):
     """The wall and plate contacts grouped by node for :func:`contact_nodes` and the compiled
-    step: ``(row_nodes (n_rows + 1,), node_j, node_i, node_ptr, normal (K, 2), mu, kind,
+    step: ``(row_nodes (n_rows + 1,), node_j, node_i, node_ptr, normal (K, 3), mu, kind,
     entry)``.  Nodes are in row-major order; a node's constraints keep the order of the lists
-    (wall entries, then plate entries); ``kind`` is 0 for a wall entry, 1 for a plate entry,
+    (wall entries, then plate entries); ``normal[k]`` is ``(n_r, n_z, w)``: the unit normal
+    into the wall and the wall's tributary length at the node, ``weights = (wall weights,
+    plate weights)`` (default: 1 for every entry), which shares a corner's impulse among its
+    walls (``stepping._contact_node``); ``kind`` is 0 for a wall entry, 1 for a plate entry,
     ``entry`` the index in its list."""
     wj, wi, wn, wmu = contact_list
     pj, pi, pn, pmu = plate_list
+    if weights is None:
+        weights = (np.ones(len(wj)), np.ones(len(pj)))
     j = np.concatenate([wj, pj])
     i = np.concatenate([wi, pi])
     kind = np.concatenate([np.zeros(len(wj), np.int8), np.ones(len(pj), np.int8)])
     entry = np.concatenate([np.arange(len(wj)), np.arange(len(pj))]).astype(np.int64)
     order = np.lexsort((i, j))                      # stable: list order within a node
     j, i, kind, entry = j[order], i[order], kind[order], entry[order]
-    normal = np.ascontiguousarray(np.concatenate([wn, pn])[order])
+    normal = np.concatenate([np.asarray(wn, float).reshape(-1, 2),
+                             np.asarray(pn, float).reshape(-1, 2)])
+    weight = np.concatenate([np.asarray(weights[0], float), np.asarray(weights[1], float)])
+    normal = np.ascontiguousarray(np.column_stack([normal, weight])[order])
     mu = np.ascontiguousarray(np.concatenate([wmu, pmu])[order])
     first = np.concatenate([[True], (j[1:] != j[:-1]) | (i[1:] != i[:-1])])
     starts = np.flatnonzero(first)
@@ -322,13 +330,31 @@ def contact_groups(contact_list, plate_list, n_rows):
     return row_nodes, node_j, node_i, node_ptr, normal, mu, kind, entry
 
 
+def _project_rows(vr, vz, n_r, n_z, mu):
+    """``stepping._project`` of arrays of nodes, the same operations in the same order (the
+    velocity after the one-wall contact, for nodes that press into the wall)."""
+    vn = vr * n_r + vz * n_z
+    pr = vr - vn * n_r
+    pz = vz - vn * n_z
+    tn = pr * n_r + pz * n_z
+    t_r = pr - tn * n_r
+    t_z = pz - tn * n_z
+    speed = np.sqrt(t_r * t_r + t_z * t_z)
+    moving = speed > 0.0
+    scale = np.where(moving, np.maximum(0.0, 1.0 - mu * vn / np.where(moving, speed, 1.0)),
+                     0.0)
+    return (pr - t_r) + scale * t_r, (pz - t_z) + scale * t_z
+
+
 def contact_nodes(v, mass, groups, plate_closed, wall_impulse, plate_impulse):
     """Reference (numpy, vectorised over the nodes) of the compiled contact of every node with
-    all its walls (``stepping._contact_node``), in place: the velocity closest to the free one
-    that presses into no wall (one wall: :func:`apply_wall_contact`'s contact, with friction;
-    a corner pressed from both sides: rest), and each constraint's impulse ``m dv`` added to
-    ``wall_impulse`` / ``plate_impulse``.  ``plate_closed``: whether the plate holds, for all
-    nodes (a bool) or per node of ``groups`` (an array: the outlet opening)."""
+    all its walls (``stepping._contact_node``, whose docstring gives the rule: one wall, the
+    impulse Coulomb contact; a corner, its walls as one patch whose impulse is shared among
+    them by their tributary lengths with the same mobilised friction), in place, with each
+    constraint's impulse ``m dv`` added to ``wall_impulse`` / ``plate_impulse``: the same
+    operations in the same order as the compiled contact, so the same numbers to the bit.
+    ``plate_closed``: whether the plate holds, for all nodes (a bool) or per node of
+    ``groups`` (an array: the outlet opening)."""
     _, node_j, node_i, node_ptr, normal, mu, kind, entry = groups
     n_nodes = len(node_j)
     if n_nodes == 0:
@@ -341,54 +367,115 @@ def contact_nodes(v, mass, groups, plate_closed, wall_impulse, plate_impulse):
     index = np.where(present, index, 0)
     plate_on = np.asarray(plate_closed, dtype=bool)
     active = present & ((kind[index] == 0) | (plate_on[:, None] if plate_on.ndim else plate_on))
-    n = normal[index]                                          # (Q, K, 2)
+    n_r, n_z, w = normal[index, 0], normal[index, 1], normal[index, 2]   # (Q, K)
+    m_k = mu[index]
     vel = v[:, node_j, node_i].T                               # (Q, 2)
-    vn = np.einsum("qkc,qc->qk", n, vel)
+    vr, vz = vel[:, 0], vel[:, 1]
+    m = mass[node_j, node_i]
+    rows = np.arange(n_nodes)
+    vn = vr[:, None] * n_r + vz[:, None] * n_z                 # (Q, K)
     pressing = active & (vn > 0.0)
-    proj = vel[:, None, :] - vn[..., None] * n                 # (Q, K, 2)
-    tol = 1e-14 * np.abs(vel).sum(axis=1)
-    other = np.einsum("qkc,qlc->qkl", proj, n)                 # proj_k . n_l
+    pressed = pressing.any(axis=1)
+    new = vel.copy()
+    # the patch of the weighted walls, N and T, summed in the constraints' order
+    weighted = active & (w > 0.0)
+    big_r, big_z = np.zeros(n_nodes), np.zeros(n_nodes)
+    fri_r, fri_z = np.zeros(n_nodes), np.zeros(n_nodes)
+    last = np.full(n_nodes, -1)
+    for k in range(k_max):
+        on = weighted[:, k]
+        wm = w[:, k] * m_k[:, k]
+        big_r = np.where(on, big_r - w[:, k] * n_r[:, k], big_r)
+        big_z = np.where(on, big_z - w[:, k] * n_z[:, k], big_z)
+        fri_r = np.where(on, fri_r - wm * n_z[:, k], fri_r)
+        fri_z = np.where(on, fri_z + wm * n_r[:, k], fri_z)
+        last = np.where(on, k, last)
+    j0r, j0z = -(m * vr), -(m * vz)
+    det = big_r * fri_z - big_z * fri_r
+    size = (np.abs(big_r) + np.abs(big_z)) * (np.abs(fri_r) + np.abs(fri_z))
+    patch = pressed & (weighted.sum(axis=1) >= 2) & (np.abs(det) > 1e-9 * size)
+    safe = np.where(patch, det, 1.0)
+    a = np.where(patch, (j0r * fri_z - j0z * fri_r) / safe, 0.0)
+    b = np.where(patch, (big_r * j0z - big_z * j0r) / safe, 0.0)
+    held = patch & (a >= 0.0) & (np.abs(b) <= a)               # 2: the patch holds the node
+    # the old rule's wall: the closest frictionless projection that presses no other wall
+    proj_r = vr[:, None] - vn * n_r                            # (Q, K)
+    proj_z = vz[:, None] - vn * n_z
+    tol = 1e-14 * (np.abs(vr) + np.abs(vz))
+    other = proj_r[:, :, None] * n_r[:, None, :] + proj_z[:, :, None] * n_z[:, None, :]
     off = active[:, None, :] & ~np.eye(k_max, dtype=bool)[None]
     feasible = ~np.any(off & (other > tol[:, None, None]), axis=2)
     gap = np.where(pressing & feasible, vn, np.inf)
     best = np.argmin(gap, axis=1)
-    single = np.isfinite(gap[np.arange(n_nodes), best])
-    corner = pressing.any(axis=1) & ~single
-    m = mass[node_j, node_i]
-    new = vel.copy()
-    # one wall: the contact with friction (apply_wall_contact on the chosen normal)
-    bn = n[np.arange(n_nodes), best]                           # (Q, 2)
-    best_mu = mu[index[np.arange(n_nodes), best]]
-    one = apply_wall_contact(vel.T.copy()[:, :, None], bn.T[:, :, None], single[:, None],
-                             best_mu[:, None])
-    new[single] = one[:, single, 0].T
-    new[corner] = 0.0
+    single = np.isfinite(gap[rows, best])
+    # 3: the slide along that wall with the impulse on the patch cone's edge
+    s = np.where(b > 0.0, 1.0, -1.0)
+    e_r, e_z = big_r + s * fri_r, big_z + s * fri_z
+    bn_r, bn_z = n_r[rows, best], n_z[rows, best]
+    push = -(e_r * bn_r + e_z * bn_z)
+    tries = (patch & ~held & (b != 0.0) & single & (w[rows, best] > 0.0) & (push > 0.0))
+    c = np.where(tries, (vr * bn_r + vz * bn_z) / np.where(tries, push, 1.0), 0.0)
+    wr, wz = vr + c * e_r, vz + c * e_z
+    u, u_new = vz * bn_r - vr * bn_z, wz * bn_r - wr * bn_z
+    after = wr[:, None] * n_r + wz[:, None] * n_z
+    others = active & (slot[None, :] != best[:, None])
+    slides = (tries & (u * u_new >= 0.0) & (np.abs(u_new) <= np.abs(u))
+              & ~np.any(others & (after > tol[:, None]), axis=1))
+    # 4: the one-wall contact, or rest pressed from both sides
+    one = pressed & single & ~held & ~slides
+    corner = pressed & ~single & ~held & ~slides
+    p_r, p_z = _project_rows(vr, vz, bn_r, bn_z, mu[index[rows, best]])
+    new[one, 0], new[one, 1] = p_r[one], p_z[one]
+    new[slides, 0], new[slides, 1] = wr[slides], wz[slides]
+    new[held | corner] = 0.0
     impulse = m[:, None] * (new - vel)
-    chosen = index[np.arange(n_nodes), best]
-    _add_impulse(single, chosen, impulse, kind, entry, wall_impulse, plate_impulse)
-    if corner.any():
+    _add_impulse(one, index[rows, best], impulse, kind, entry, wall_impulse, plate_impulse)
+    # the patch's shares: w_k (lam (-n_k) + lam_t mu_k t_k), the last weighted wall the rest
+    share = held | slides
+    lam = np.where(held, a, m * c)
+    lam_t = np.where(held, b, s * (m * c))
+    rest = np.where(held[:, None], np.stack([j0r, j0z], axis=1), impulse)
+    for k in range(k_max):
+        on = share & weighted[:, k] & (last != k)
+        f = lam_t * m_k[:, k]
+        part = np.stack([w[:, k] * (-(lam * n_r[:, k]) - f * n_z[:, k]),
+                         w[:, k] * (f * n_r[:, k] - lam * n_z[:, k])], axis=1)
+        _add_impulse(on, index[:, k], part, kind, entry, wall_impulse, plate_impulse)
+        rest = np.where(on[:, None], rest - part, rest)
+    _add_impulse(share, index[rows, np.maximum(last, 0)], rest, kind, entry, wall_impulse,
+                 plate_impulse)
+    if corner.any():                 # rest, J0 split between the first pair that spans it
         q = np.flatnonzero(corner)
-        d = -vel[q]                                            # (C, 2)
+        jq = np.stack([j0r[q], j0z[q]], axis=1)
+        tol = -1e-12 * (np.abs(j0r[q]) + np.abs(j0z[q]))
+        s_first = np.where(b[q] < 0.0, -1.0, 1.0)
         done = np.zeros(len(q), bool)
-        for a_k in range(k_max):
-            for b_k in range(a_k + 1, k_max):
-                na, nb = n[q, a_k], n[q, b_k]
-                det = na[:, 0] * nb[:, 1] - na[:, 1] * nb[:, 0]
-                ok = (active[q, a_k] & active[q, b_k] & (np.abs(det) >= 1e-12) & ~done)
-                safe = np.where(ok, det, 1.0)
-                a = (d[:, 0] * nb[:, 1] - d[:, 1] * nb[:, 0]) / safe
-                b = (na[:, 0] * d[:, 1] - na[:, 1] * d[:, 0]) / safe
-                small = -1e-12 * np.abs(d).sum(axis=1)
-                ok &= (a >= small) & (b >= small)
-                for k_slot, lam in ((a_k, a), (b_k, b)):
-                    part = (m[q] * lam)[:, None] * n[q, k_slot]
-                    _add_impulse(ok, index[q, k_slot], part, kind, entry, wall_impulse,
+        for p in range(3):
+            s_p = s_first if p == 0 else (np.zeros(len(q)) if p == 1 else -s_first)
+            for a_k in range(k_max):
+                fa = s_p * m_k[q, a_k]
+                ea_r = -n_r[q, a_k] - fa * n_z[q, a_k]
+                ea_z = fa * n_r[q, a_k] - n_z[q, a_k]
+                for b_k in range(a_k + 1, k_max):
+                    fb = s_p * m_k[q, b_k]
+                    eb_r = -n_r[q, b_k] - fb * n_z[q, b_k]
+                    eb_z = fb * n_r[q, b_k] - n_z[q, b_k]
+                    det2 = ea_r * eb_z - ea_z * eb_r
+                    ok = (active[q, a_k] & active[q, b_k] & (np.abs(det2) >= 1e-12) & ~done)
+                    safe2 = np.where(ok, det2, 1.0)
+                    la = (jq[:, 0] * eb_z - jq[:, 1] * eb_r) / safe2
+                    lb = (ea_r * jq[:, 1] - ea_z * jq[:, 0]) / safe2
+                    ok &= (la >= tol) & (lb >= tol)
+                    part = np.stack([la * ea_r, la * ea_z], axis=1)
+                    _add_impulse(ok, index[q, a_k], part, kind, entry, wall_impulse,
                                  plate_impulse)
-                done |= ok
+                    _add_impulse(ok, index[q, b_k], jq - part, kind, entry, wall_impulse,
+                                 plate_impulse)
+                    done |= ok
         if not done.all():                       # round-off: to the wall pressed hardest
-            rest = ~done
+            left = ~done
             hardest = np.argmax(np.where(active[q], vn[q], -np.inf), axis=1)
-            _add_impulse(rest, index[q, hardest], m[q, None] * d, kind, entry, wall_impulse,
+            _add_impulse(left, index[q, hardest], jq, kind, entry, wall_impulse,
                          plate_impulse)
     v[:, node_j, node_i] = new.T
     return v

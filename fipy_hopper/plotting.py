@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -407,15 +408,11 @@ def discharge_curves(run):
     steady = summary.get(result_key("steady_discharge_rate_kg_s", axisymmetric))
     if steady is not None:
         ax_w.axhline(steady, color="C0", ls=":", label=f"steady rate {steady:.3g} kg/s{per}")
-    rho, d0 = cfg.material.density, cfg.hopper.outlet_diameter
-    if axisymmetric:
-        bev = float(theory.beverloo_rate(rho, d0)
-                    * theory.rose_tanaka_factor(cfg.hopper.half_angle_deg))
-        label = f"Beverloo x Rose-Tanaka {bev:.3g} kg/s (C = 0.58, k d = 0)"
-    else:
-        bev = float(theory.beverloo_slot_rate(rho, d0))
-        label = f"Beverloo, slot {bev:.3g} kg/s per m (C' = 1.03, k d = 0)"
-    ax_w.axhline(bev, color="k", ls="--", label=label)
+    bev = summary.get(result_key("beverloo_rate_kg_s", axisymmetric))
+    if bev is not None and math.isfinite(bev):      # only for the silos it describes
+        label = (f"Beverloo x Rose-Tanaka {bev:.3g} kg/s (C = 0.58, k d = 0)" if axisymmetric
+                 else f"Beverloo, slot {bev:.3g} kg/s per m (C' = 1.03, k d = 0)")
+        ax_w.axhline(bev, color="k", ls="--", label=label)
     ax_w.set_xlabel("time since the outlet opened (s)")
     ax_w.set_ylabel(f"discharge rate (kg/s{per})")
     ax_w.set_ylim(bottom=0.0)
@@ -442,19 +439,22 @@ def theory_wall_pressure(cfg: HopperConfig, n: int = 120) -> dict:
     (the slender-silo form, Janssen with K_m; ``C_b = 1``).  A wedge gets the plane forms:
     Janssen for a long bin of width B and the slices with ``S = 1``.  A silo the classic
     theories do not cover (:attr:`HopperGeometry.classic`: several slopes, inserts, a full
-    section) gets Janssen on its wall's top vertical stretch only.  Returns
-    ``{name: (s, p_n)}``; a curve the theory refuses (a frictionless wall; for EN, a bottom
-    flatter than 85 deg) is left out.
+    section) gets Janssen on its wall's top vertical stretch only (with the bin's width at
+    the transition), and none without one.  Returns ``{name: (s, p_n)}``; a curve the theory
+    refuses (a frictionless wall; for EN, a bottom flatter than 85 deg) is left out.
     """
     geom, mat, wall = cfg.hopper, cfg.material, cfg.wall
+    bnd = cfg.boundary
+    if bnd.transition("wall") is None or bnd.fill_level <= bnd.transition_height("wall"):
+        return {}
     phi, phi_w = mat.friction_angle_deg, wall.friction_angle_deg
-    rho, D = mat.density, geom.bin_diameter
+    z_t = bnd.transition_height("wall")
+    rho, D, fill = mat.density, bnd.span_at(z_t), bnd.fill_level - z_t
     K = float(theory.k_jaky(phi))
     K_m = float(theory.k_en1991(phi))
     mu = math.tan(math.radians(phi_w))
-    bnd = cfg.boundary
-    s_t = bnd.arc_at_height("wall", geom.cone_height)
-    s_fill = bnd.arc_at_height("wall", geom.fill_level)
+    s_t = bnd.transition_s("wall")
+    s_fill = bnd.arc_at_height("wall", bnd.fill_level)
     curves = {}
     # a wedge: the plane forms (Janssen for a long bin of width B, Walker's plane slice, S = 1)
     plane = not geom.axisymmetric
@@ -465,28 +465,29 @@ def theory_wall_pressure(cfg: HopperConfig, n: int = 120) -> dict:
         s_bin = np.linspace(s_t, s_fill, n)
         curves[f"Janssen, {bin_name} (K = 1 - sin phi)"] = (
             s_bin, np.asarray(wall_pressure(s_fill - s_bin, rho, D, K, mu)))
-        sigma_vt = float(vertical(geom.fill_height, rho, D, K, mu))
+        sigma_vt = float(vertical(fill, rho, D, K, mu))
     except ValueError:
-        sigma_vt = rho * theory.G * geom.fill_height
-    if not geom.classic:           # EN 1991-4's hoppers: a cone under a bin only
+        sigma_vt = rho * theory.G * fill
+    shape = bnd.hopper_shape
+    if not geom.classic or shape.half_angle_deg >= 90.0:   # EN 1991-4's hoppers: a cone
         curves.update(_stacked_walker(cfg, sigma_vt, slices, hopper_name, n))
         return curves
     s_cone = np.linspace(0.0, s_t, n)
-    theta = geom.half_angle
-    x = s_cone * math.cos(theta) + geom.outlet_radius / math.tan(theta)
-    h = geom.bin_radius / math.tan(theta)
+    theta = math.radians(shape.half_angle_deg)
+    x = s_cone * math.cos(theta) + shape.outlet_x / math.tan(theta)
+    h = shape.bin_x / math.tan(theta)
     x = np.clip(x, 0.0, h)
     for mode in ("filling", "discharge"):
         try:
-            p = theory.walker_hopper_wall_pressure(x, h, geom.half_angle_deg, rho, phi, phi_w,
+            p = theory.walker_hopper_wall_pressure(x, h, shape.half_angle_deg, rho, phi, phi_w,
                                                    sigma_vt, mode=mode, S=slices)
             curves[f"Walker, {hopper_name}, {mode}"] = (s_cone, np.asarray(p))
         except ValueError:
             pass
         try:
-            p_vft = float(vertical(geom.fill_height, rho, D, K_m, mu))
-            en = theory.en1991_hopper_pressures(x, h, geom.half_angle_deg, rho * theory.G, K_m,
-                                                mu, p_vft, mode=mode, phi_i=phi, S=slices)
+            p_vft = float(vertical(fill, rho, D, K_m, mu))
+            en = theory.en1991_hopper_pressures(x, h, shape.half_angle_deg, rho * theory.G,
+                                                K_m, mu, p_vft, mode=mode, phi_i=phi, S=slices)
             curves[f"EN 1991-4, {hopper_name}, {mode}"] = (s_cone, np.asarray(en.p_n))
         except ValueError:
             pass
@@ -508,7 +509,8 @@ def _stacked_walker(cfg: HopperConfig, sigma_vt: float, slices: int, hopper_name
     wall = cfg.boundary.chain("wall")
     a, b = wall.ends()
     sv = wall.s_vertices
-    below = [k for k in range(wall.n_segments) if b[k, 1] <= geom.cone_height + 1e-12]
+    below = [k for k in range(wall.n_segments)
+             if b[k, 1] <= cfg.boundary.transition_height("wall") + 1e-12]
     curves = {}
     for mode in ("filling", "discharge"):
         top = sigma_vt
@@ -536,6 +538,28 @@ def _stacked_walker(cfg: HopperConfig, sigma_vt: float, slices: int, hopper_name
     return curves
 
 
+def _few_curves(curves: dict, most: int = 8) -> dict:
+    """Walker's stretch-by-stretch curves (:func:`_stacked_walker`) as one curve per mode
+    (stretches apart by a NaN) when there are more than ``most`` stretches: a wall drawn as
+    thousands of points would otherwise make thousands of lines and legend entries, which
+    take minutes to draw."""
+    stretch = re.compile(r"(Walker, .+) stretch \d+, (\w+)")
+    groups = {}
+    for name in curves:
+        match = stretch.fullmatch(name)
+        if match:
+            groups.setdefault(f"{match[1]} stretches, {match[2]}", []).append(name)
+    out = dict(curves)
+    for merged, names in groups.items():
+        if len(names) > most:
+            parts = sorted((curves[n] for n in names), key=lambda c: float(np.min(c[0])))
+            out[merged] = tuple(np.concatenate([np.append(np.asarray(c[k], float), np.nan)
+                                                for c in parts]) for k in (0, 1))
+            for name in names:
+                del out[name]
+    return out
+
+
 def wall_pressure(run):
     """The wall loads of a run against Janssen (bin), Walker (cone) and EN 1991-4.
 
@@ -547,8 +571,10 @@ def wall_pressure(run):
     (solid filling, dashed discharge), EN 1991-4's hopper loads (dash-dot) and its bin
     discharge load ``C_h`` x Janssen (dotted black).  Right: the overpressure factor
     (envelope / at rest) per bin with EN 1991-4's discharge factor for the bin wall, and the
-    switch peak against Walker's switch pressure.  A run without a discharge envelope (a
-    fill-only run, ``end_time = 0``) gets the left panel alone.
+    switch peak against Walker's switch pressure.  A run without a discharge (a fill-only
+    run, ``end_time = 0``) gets the left panel alone, with the theories at rest only.  A full
+    section's left wall is drawn dashed on the same axis (its ``s`` from its own lip); the
+    inserts' pressure, along each insert from its lowest point, in a panel of their own.
     """
     run = Path(run)
     cfg = _config(run)
@@ -558,19 +584,28 @@ def wall_pressure(run):
     s_all = np.asarray(table.get("s_m", []), dtype=float)
     p_all = np.asarray(table.get("p_n_Pa", []), dtype=float)
     walls = np.asarray(table.get("wall", np.full(len(stages), "wall")), dtype=str)
-    others = [w for w in dict.fromkeys(walls.tolist()) if w != "wall"]
+    inserts = {c.name for c in cfg.boundary.inserts}
+    others = [w for w in dict.fromkeys(walls.tolist()) if w != "wall" and w not in inserts]
+    on_inserts = [w for w in dict.fromkeys(walls.tolist()) if w in inserts]
     main = walls == "wall"           # the (right) wall; the others drawn dashed
     table = {k: (np.asarray(v)[main] if np.ndim(v) else v) for k, v in table.items()}
     other = (stages, s_all, p_all, walls)
     stages, s_all, p_all = stages[main], s_all[main], p_all[main]
     filled, envelope = stages == "filling", stages == "discharge_envelope"
+    discharged = any(st != "filling" for st in stages)
     overpressure = filled.any() and envelope.any() and filled.sum() == envelope.sum()
+    rows = 2 if on_inserts else 1
     if overpressure:
-        fig = _figure(11.0, 4.4)
-        ax, ax_f = fig.subplots(1, 2, width_ratios=(3, 2))
+        fig = _figure(11.0, 4.4 * rows)
+        grid = fig.subplots(rows, 2, width_ratios=(3, 2), squeeze=False)
+        ax, ax_f = grid[0]
     else:
-        fig = _figure(6.6, 4.4)
-        ax, ax_f = fig.subplots(1, 1), None
+        fig = _figure(6.6, 4.4 * rows)
+        grid = fig.subplots(rows, 1, squeeze=False)
+        ax, ax_f = grid[0][0], None
+    ax_i = grid[1][0] if on_inserts else None
+    if on_inserts and overpressure:
+        grid[1][1].set_axis_off()
     for stage in dict.fromkeys(stages.tolist()):
         sel = stages == stage
         if stage == "discharge_envelope":
@@ -599,8 +634,24 @@ def wall_pressure(run):
             if sel.any():
                 ax.plot(o_s[sel], o_p[sel] / 1e3, style, color=f"C{5 + k % 4}", lw=1.2,
                         label=f"{name}, {'at rest' if stage == 'filling' else 'envelope'} "
-                              f"(s along it)")
-    curves = theory_wall_pressure(cfg)
+                              f"(s from its lip)")
+    for k, name in enumerate(on_inserts):
+        for stage, style in (("filling", "o-"), ("discharge_envelope", "-")):
+            sel = (o_walls == name) & (o_stages == stage)
+            if sel.any():
+                ax_i.plot(o_s[sel], o_p[sel] / 1e3, style, color=f"C{5 + k % 4}", ms=3,
+                          lw=1.2 if stage == "filling" else 2.0,
+                          label=f"{name}, {'at rest' if stage == 'filling' else 'envelope'}")
+    if ax_i is not None:
+        ax_i.set_xlabel("arc length along each insert from its lowest point, s (m)")
+        ax_i.set_ylabel("normal pressure p_n (kPa)")
+        ax_i.set_xlim(left=0.0)
+        ax_i.set_ylim(bottom=0.0)
+        ax_i.legend(loc="best", fontsize=6.5)
+        ax_i.set_title("Inserts (no closed form)", fontsize=10)
+    curves = _few_curves(theory_wall_pressure(cfg))
+    if not discharged:               # a fill-only run: the theories at rest only
+        curves = {k: v for k, v in curves.items() if not k.endswith("discharge")}
     for name, (s, p) in curves.items():
         colour, ls = next((v for k, v in styles.items() if name.startswith(k)),
                           (("C0", "-") if name.endswith("filling") else ("C3", "--"))
@@ -608,13 +659,14 @@ def wall_pressure(run):
         ax.plot(s, p / 1e3, ls, color=colour, lw=1.2, label=name)
     c_h = theory.en1991_discharge_factors()[0]
     for name, (s, p) in curves.items():
-        if name.startswith("Janssen"):
+        if name.startswith("Janssen") and discharged:
             ax.plot(s, c_h * p / 1e3, ":", color="k", lw=1.2,
                     label=f"EN 1991-4 discharge, bin (C_h = {c_h:g} x Janssen)")
-    s_t = cfg.boundary.arc_at_height("wall", cfg.hopper.cone_height)
-    for a in (ax, ax_f) if overpressure else (ax,):
-        a.axvline(s_t, color="0.5", lw=0.8, ls=":")
-    ax.text(s_t, 0.0, " transition", va="bottom", fontsize=8, color="0.4")
+    s_t = cfg.boundary.transition_s("wall")
+    if cfg.boundary.transition("wall") is not None:
+        for a in (ax, ax_f) if overpressure else (ax,):
+            a.axvline(s_t, color="0.5", lw=0.8, ls=":")
+        ax.text(s_t, 0.0, " transition", va="bottom", fontsize=8, color="0.4")
     ax.set_xlabel("arc length along the wall from the outlet lip, s (m)")
     ax.set_ylabel("normal wall pressure p_n (kPa)")
     ax.set_xlim(left=0.0)
@@ -652,11 +704,14 @@ def wall_forces(run):
     ``meridional_force_N_m``.
 
     Left: the hoop force at rest, at the discharge stages and from the discharge envelope,
-    with Janssen's ``p_n R`` in the bin (``K = 1 - sin(phi)``).  Right: the meridional force:
-    the hopper's tension (hung from the transition) and the bin wall's compression (standing
-    on it), with Janssen's ``-n_z`` in the bin for the measured wall K (the fill's) and the
-    transition's totals of ``summary.json``.  A wedge's plates have no hoop force.  Returns
-    None when the table has no forces (a run directory written before they were).
+    with Janssen's ``p_n R`` in the bin.  Right: the meridional force: the hopper's tension
+    (hung from the transition) and the bin wall's compression (standing on it), with
+    Janssen's ``-n_z`` in the bin and the transition's totals of ``summary.json``.  Both of
+    Janssen's curves take one ``K``, named in their labels: the one measured at the bin wall
+    at rest (``wall_k_bin``, the ``K`` of the summary's Janssen numbers), else Jaky's
+    ``1 - sin(phi)``; for a silo the classic theories cover only.  A wedge's plates have no
+    hoop force.  Returns None when the table has no forces (a run directory written before
+    they were).
     """
     run = Path(run)
     table = read_csv(run / RunDirectory.WALL_PRESSURE)
@@ -684,25 +739,28 @@ def wall_forces(run):
         ax_h.plot(s_all[sel], hoop[sel], marker + "-", color=colour, ms=4, lw=0.8, label=label)
         ax_m.plot(s_all[sel], meridional[sel], marker + "-", color=colour, ms=4, lw=0.8,
                   label=label)
-    s_t = cfg.boundary.arc_at_height("wall", geom.cone_height)
-    s_fill = cfg.boundary.arc_at_height("wall", geom.fill_level)
+    bnd = cfg.boundary
+    s_t = bnd.transition_s("wall")
+    s_fill = bnd.arc_at_height("wall", bnd.fill_level)
     mu = math.tan(math.radians(cfg.wall.friction_angle_deg))
     plane = not geom.axisymmetric
     if mu > 0 and s_fill > s_t and geom.classic:
         s_bin = np.linspace(s_t, s_fill, 120)
         depth = s_fill - s_bin
-        if not plane:
-            K = float(theory.k_jaky(mat.friction_angle_deg))
-            p = theory.janssen_wall_pressure(depth, mat.density, geom.bin_diameter, K, mu)
-            ax_h.plot(s_bin, np.asarray(p) * geom.bin_radius / scale, "k-", lw=1.2,
-                      label="Janssen p_n R (K = 1 - sin phi)")
+        D = 2.0 * bnd.hopper_shape.bin_x
         K_w = summary.get("wall_k_bin")
-        K_w = K_w if K_w is not None and np.isfinite(K_w) else float(
-            theory.k_jaky(mat.friction_angle_deg))
+        measured = K_w is not None and np.isfinite(K_w)
+        K_w = K_w if measured else float(theory.k_jaky(mat.friction_angle_deg))
+        which = (f"K = {K_w:.2f} measured at the bin wall at rest" if measured
+                 else f"K = 1 - sin phi = {K_w:.2f}")
+        if not plane:
+            p = theory.janssen_wall_pressure(depth, mat.density, D, K_w, mu)
+            ax_h.plot(s_bin, np.asarray(p) * 0.5 * D / scale, "k-", lw=1.2,
+                      label=f"Janssen p_n R ({which})")
         axial = theory.janssen_plane_wall_axial_force if plane else theory.janssen_wall_axial_force
-        n_z = axial(depth, mat.density, geom.bin_diameter, K_w, mu)
+        n_z = axial(depth, mat.density, D, K_w, mu)
         ax_m.plot(s_bin, -np.asarray(n_z) / scale, "k-", lw=1.2,
-                  label=f"Janssen -n_z (measured K = {K_w:.2f})")
+                  label=f"Janssen -n_z ({which})")
     for key, sign, marker, label in (
             ("hopper_meridional_tension_N_m", 1.0, "^", "hopper tension at the transition"),
             ("bin_wall_axial_compression_N_m", -1.0, "v", "bin wall compression there")):
@@ -711,7 +769,8 @@ def wall_forces(run):
             ax_m.plot([s_t], [sign * value / scale], marker, color="k", ms=8, mfc="none",
                       label=f"{label}, at rest")
     for a in (ax_h, ax_m):
-        a.axvline(s_t, color="0.5", lw=0.8, ls=":")
+        if bnd.transition("wall") is not None:
+            a.axvline(s_t, color="0.5", lw=0.8, ls=":")
         a.set_xlabel("arc length along the wall from the outlet lip, s (m)")
         a.set_xlim(left=0.0)
     ax_m.axhline(0.0, color="0.6", lw=0.8)
@@ -751,13 +810,21 @@ def _stage_snapshots(entries):
 def stress_pattern(run):
     """Trajectories of the major principal stress over the mobilised friction, at rest and in
     discharge: the active state of the fill (sigma1 near vertical) and the passive, arched
-    state of the flow (sigma1 across it), from the stresses of the field snapshots."""
+    state of the flow (sigma1 across it), from the stresses of the field snapshots.  The
+    material present (``alpha > 1/2``) but stress-free (at the apex: loose, or a free surface
+    in flow) is drawn grey, apart from the empty cells (white), so the free surface shows
+    where it is."""
+    import textwrap
+
+    from matplotlib.colors import ListedColormap
+    from matplotlib.patches import Patch
+
     from . import diagnostics
 
     run = Path(run)
     cfg = _config(run)
     chosen = _stage_snapshots(snapshots(run))
-    fig = _figure(3.2 * max(len(chosen), 1) + 1.2, 6.0)
+    fig = _figure(max(3.2 * max(len(chosen), 1) + 1.2, 5.6), 6.0)
     axes = np.atleast_1d(fig.subplots(1, max(len(chosen), 1)))
     folder = run / RunDirectory.FIELDS
     mesh_artist = None
@@ -772,7 +839,10 @@ def stress_pattern(run):
         pattern = diagnostics.stress_pattern(sigma, cfg.material.cohesion,
                                              cfg.material.friction_angle_deg)
         present = cell["alpha"] > 0.5
-        mob = np.ma.masked_where(~present, pattern["sin_phi_mob"])
+        ax.pcolormesh(r_nodes, z_nodes, np.ma.masked_where(~present, np.ones(shape)),
+                      cmap=ListedColormap(["0.82"]), vmin=0, vmax=1, shading="flat")
+        mob = np.ma.masked_where(~present | ~np.isfinite(pattern["sin_phi_mob"]),
+                                 pattern["sin_phi_mob"])
         mesh_artist = ax.pcolormesh(r_nodes, z_nodes, mob, cmap="magma_r", vmin=0.0,
                                     vmax=math.sin(math.radians(cfg.material.friction_angle_deg)),
                                     shading="flat")
@@ -792,12 +862,17 @@ def stress_pattern(run):
         ax.set_ylim(z_nodes[0], min(z_nodes[-1], cfg.hopper.fill_level * 1.08))
         ax.set_aspect("equal")
         ax.set_title(title, fontsize=10)
-        ax.set_xlabel("r (m)")
+        ax.set_xlabel("r (m)" if cfg.hopper.axisymmetric else "x (m)")
     axes[0].set_ylabel("z (m)")
+    axes[0].legend(handles=[Patch(color="0.82", label="material, stress-free"),
+                            Patch(facecolor="w", edgecolor="0.5", label="empty")],
+                   loc="upper right", fontsize=7)
     if mesh_artist is not None:
         fig.colorbar(mesh_artist, ax=list(axes), shrink=0.8,
                      label="mobilised friction sin phi_mob = (s1 - s3)/(s1 + s3 + 2c cot phi)")
-    fig.suptitle("Major principal stress trajectories (lines) over the mobilised friction",
+    width = fig.get_figwidth()
+    fig.suptitle("\n".join(textwrap.wrap("Major principal stress trajectories (lines) over "
+                                         "the mobilised friction", int(11 * width))),
                  fontsize=10)
     return fig
 
@@ -829,7 +904,7 @@ def lagrangian_mesh(run):
         for line in walls:
             ax.plot(line[:, 0], line[:, 1], "k-", lw=1.5)
         ax.set_aspect("equal")
-        ax.set_xlim(0.0, 1.05 * cfg.hopper.bin_radius)
+        ax.set_xlim(0.0, 1.05 * cfg.boundary.x_extent[1])
         ax.set_ylim(-cfg.hopper.outlet_diameter, cfg.hopper.fill_level * 1.05)
         ax.set_xlabel("r (m)")
         ax.set_ylabel("z (m)")

@@ -46,21 +46,35 @@ def wall_bins(cfg, cell_size: float) -> int:
 
 def wall_entry_bound(cfg, cell_size: float) -> int:
     """At most how many wall contact entries the grid of ``cfg`` has: a node is in contact
-    when it lies behind the wall or less than half a cell in front of it, so in each row of
-    nodes only those beyond the narrowest wall radius within half a cell of the row, less
-    half a cell and one more for the sampling, can be; and a row and a column of nodes more
-    for the corners, whose nodes hold two walls."""
+    when it lies behind a wall or an insert or less than half a cell in front of it, so in
+    each row of nodes only those beyond the (right) wall's narrowest ``x`` within half a cell
+    of the row (and in a full section those short of the left wall's widest), less half a cell
+    and one more for the sampling, can be, and those in each insert's outline grown by as
+    much; and a row and a column of nodes more for the corners, whose nodes hold two walls
+    (the boundary's :meth:`~fipy_hopper.boundary.Boundary.wall_x`)."""
     import numpy as np
 
-    from .geometry import wall_radius
+    from .config import grid_columns
 
+    bnd = cfg.boundary
     h, reach = cell_size, 0.5 * cell_size
     nr, n_below, n_above = grid_rows(cfg.hopper, cfg.numerics, h)
+    x0, _ = grid_columns(cfg.hopper, h)
+    x_nodes = x0 + h * np.arange(nr + 1)
     z_nodes = h * (np.arange(n_below + n_above + 1) - n_below)
     window = z_nodes[:, None] + reach * np.linspace(-1.0, 1.0, 9)[None, :]
-    narrowest = wall_radius(window, cfg.hopper).min(axis=1)
-    first = np.searchsorted(h * np.arange(nr + 1), narrowest - reach - h)
-    return int(np.sum(nr + 1 - first)) + 2 * (nr + n_below + n_above + 2)
+    first = np.searchsorted(x_nodes, bnd.wall_x(window).min(axis=1) - reach - h)
+    count = int(np.sum(nr + 1 - first))
+    if not bnd.section.half:
+        last = np.searchsorted(x_nodes, bnd.wall_x(window, "left_wall").max(axis=1)
+                               + reach + h, side="right")
+        count += int(np.sum(last))
+    for insert in bnd.inserts:
+        poly = np.asarray(insert.polygon, dtype=float)
+        lo, hi = poly.min(axis=0) - reach - h, poly.max(axis=0) + reach + h
+        count += int(np.sum((x_nodes >= lo[0]) & (x_nodes <= hi[0]))
+                     * np.sum((z_nodes >= lo[1]) & (z_nodes <= hi[1])))
+    return count + 2 * (nr + n_below + n_above + 2)
 
 
 def memory_estimate(cfg, cell_size: Optional[float] = None) -> float:

@@ -73,9 +73,19 @@ from .protocol import halt_reason
 #: The flow has stopped (stop reason ``"at_rest"``) when, later than ``AT_REST_AFTER`` s after
 #: the outlet is fully open (``run.opening_time`` after the opening began), every sample of
 #: the last ``AT_REST_WINDOW`` s had a discharge rate below ``AT_REST_RATE`` of the initial
-#: mass per second: a heel on a shallow cone, an arch over the outlet, a rathole (named by
-#: :class:`fipy_hopper.diagnostics.OutcomeRule`).
+#: mass per second (an arch over the outlet, a rathole: little ever moves out), or below
+#: ``AT_REST_SHARE`` of the steady discharge rate so far (:func:`~fipy_hopper.diagnostics.
+#: steady_rate`) with the material at rest, its rms speed
+#: (:func:`~fipy_hopper.diagnostics.material_speed`) below ``AT_REST_SPEED`` of the outlet's
+#: free-fall speed ``sqrt(g B_0)`` (``B_0`` the outlet's width or diameter): the heel of a flat
+#: floor or a shallow cone, whose dead zones creep on and would never drain below
+#: ``empty_fraction`` (measured on a flat-bottomed slot silo at 1 cm: the heel drains at a
+#: rate falling as about 1/t, 5 % of the steady rate 6 s after the opening, its material's
+#: rms speed then 1.6 mm/s against 7.7 mm/s for 1 % of sqrt(g B_0)).  The summary names
+#: which (:class:`fipy_hopper.diagnostics.OutcomeRule`) and what is left
+#: (``remaining_mass_kg``, ``heap_angle_deg``).
 AT_REST_AFTER, AT_REST_WINDOW, AT_REST_RATE = 0.5, 0.25, 1e-3
+AT_REST_SHARE, AT_REST_SPEED = 0.05, 0.01
 #: Stages whose wall loads are measured from the moment this fraction of the mass is left
 #: (the default :class:`StageMark` s).
 STAGE_MARKS = {"early_discharge": 0.9, "mid_discharge": 0.5}
@@ -216,6 +226,8 @@ class RunRecord:
     wall_slip_fraction: list = field(default_factory=list)   # -, share of the hopper wall
     # per sample, the wall slip ratio of each stretch of hopper wall (diagnostics.hopper_rows)
     wall_slip_stretches: list = field(default_factory=list)
+    # per sample, the wall slip fraction of each stretch of hopper wall
+    wall_slip_stretch_fractions: list = field(default_factory=list)
     # rows (s, r, z, slip / axis speed) of the loaded hopper-wall contacts at the last sample
     # of the flow-mode window (wall_slip.csv, the flow-pattern picture)
     wall_slip_profile: list = field(default_factory=list)
@@ -268,6 +280,7 @@ class Simulation:
         self.flow_rule = flow_rule
         self.outcome_rule = outcome_rule
         self._rest_samples = 0           # samples that the last check found at rest (0: flowing)
+        self._rest_rate = math.nan       # kg/s: the rate below which it found them at rest
         self.record = RunRecord()
         #: what runs at the checks (simulated-time schedules, in order): the stability check
         #: first, then the callbacks (field writers, studies' probes: :meth:`add_callback`)
@@ -424,8 +437,9 @@ class Simulation:
             t_dis = st.t - self.t_open
             mass = m.mass_in_hopper(st)
             self._discharge_windows(mass, m0)
-            resting = t_dis > AT_REST_AFTER + run.opening_time and self._at_rest()
-            self._rest_samples = len(rec.rate) if resting else 0
+            self._rest_rate = (self._at_rest() if t_dis > AT_REST_AFTER + run.opening_time
+                               else math.nan)
+            self._rest_samples = len(rec.rate) if math.isfinite(self._rest_rate) else 0
             reason = ""
             for rule in self.stop_rules:
                 applies = rule.applies(self, t_dis, mass)
@@ -474,27 +488,41 @@ class Simulation:
         return bool(self.record.rest_balance) and not self.record.fill_at_rest
 
     # -------------------------------------------------------------- measuring
-    def _at_rest(self) -> bool:
-        rec = self.record
-        n = max(1, int(round(AT_REST_WINDOW / self.model.cfg.run.output_interval)))
+    def _at_rest(self) -> float:
+        """The rate (kg/s) below which every sample of the last :data:`AT_REST_WINDOW` s
+        lies, if the flow has stopped by either rule of :data:`AT_REST_AFTER` (little moves
+        out; or the discharge has dwindled to a creep with the material at rest), else NaN."""
+        rec, m = self.record, self.model
+        n = max(1, int(round(AT_REST_WINDOW / m.cfg.run.output_interval)))
         if len(rec.rate) < n:
-            return False
-        recent = np.asarray(rec.rate[-n:])
-        return bool(np.all(np.abs(recent) < AT_REST_RATE * max(rec.initial_mass, 1e-9)))
+            return math.nan
+        recent = np.abs(np.asarray(rec.rate[-n:]))
+        little = AT_REST_RATE * max(rec.initial_mass, 1e-9)
+        if np.all(recent < little):
+            return little
+        if not recent.max() < AT_REST_SHARE * np.nanmax(rec.rate):   # the steady rate's bound
+            return math.nan
+        dwindled = AT_REST_SHARE * diagnostics.steady_rate(rec.t, rec.mass_in_hopper,
+                                                           rec.rate)[0]
+        if not np.all(recent < dwindled):
+            return math.nan
+        x0, x1 = m.cfg.boundary.outlet
+        width = (x1 - x0) * (2.0 if m.cfg.boundary.section.half else 1.0)
+        speed = diagnostics.material_speed(m, self.state)
+        return dwindled if speed < AT_REST_SPEED * math.sqrt(GRAVITY * width) else math.nan
 
     def flow_stopped_time(self) -> float:
         """When the flow stopped (s after the opening), NaN if it had not by the end of the
-        run: if the last check of the discharge found the flow at rest (the ``at_rest`` rule,
+        run: if the last check of the discharge found the flow at rest (:meth:`_at_rest`,
         :data:`AT_REST_AFTER`; evaluated whatever ``end_time``), the end of the last sample
-        interval before that check with a rate of at least ``AT_REST_RATE`` of the initial
-        mass per second, or 0 if there was none (the outlet opened on an arch).  The sample
-        taken when the run stops is left out: its interval can be a few steps, over which the
-        elastic sway of an arch moves more than the rule's rate."""
+        interval before that check with a rate of at least the rate it found the flow below,
+        or 0 if there was none (the outlet opened on an arch).  The sample taken when the run
+        stops is left out: its interval can be a few steps, over which the elastic sway of an
+        arch moves more than the rule's rate."""
         rec, n = self.record, self._rest_samples
         if not n:
             return math.nan
-        fast = np.flatnonzero(np.abs(np.asarray(rec.rate[:n]))
-                              >= AT_REST_RATE * max(rec.initial_mass, 1e-9))
+        fast = np.flatnonzero(np.abs(np.asarray(rec.rate[:n])) >= self._rest_rate)
         return float(rec.t[fast[-1]]) if len(fast) else 0.0
 
     def _eta(self, t_dis: float, mass: float) -> str:
@@ -530,7 +558,12 @@ class Simulation:
         mass = m.mass_in_hopper(st)
         rate = 0.0
         if rec.t:
-            rate = (st.discharged - rec.discharged[-1]) / (t - rec.t[-1])
+            # the mass is booked at the transports, every few steps: over an interval much
+            # shorter than output_interval (the sample taken when the run stops) a rate
+            # would be a lump's, not the flow's; it is not given
+            span = t - rec.t[-1]
+            rate = ((st.discharged - rec.discharged[-1]) / span
+                    if span >= 0.5 * m.cfg.run.output_interval else math.nan)
         rec.t.append(t)
         rec.mass_in_hopper.append(mass)
         rec.discharged.append(st.discharged)
@@ -539,10 +572,11 @@ class Simulation:
         rec.mass_flow_index.append(index)
         rec.stagnant_fraction.append(stagnant)
         previous = self._readings.get("sample")     # the wall's impulse at the last sample
-        slip, share, ratios, profile = diagnostics.wall_slip_measures(
+        slip, share, ratios, shares, profile = diagnostics.wall_slip_measures(
             m, st, previous["wall"] if previous is not None else None, self.flow_rule)
         rec.wall_slip_ratio.append(slip)
         rec.wall_slip_stretches.append([float(r) for r in ratios])
+        rec.wall_slip_stretch_fractions.append([float(f) for f in shares])
         rec.wall_slip_fraction.append(share)
         if len(rec.t) > 1 and _before_flow_window_end(t, mass, rec.initial_mass) \
                 and len(profile):
@@ -743,14 +777,9 @@ class Simulation:
         wall, wall_stress, wall_forces, wall_raw = {}, {}, {}, {}
         for stage, t_stage in meta["wall_times"].items():
             wall[stage] = (t_stage,) + tuple(arrays.pop(f"wall__{stage}__{k}") for k in range(5))
-            if f"wallraw__{stage}__0" in arrays:
-                wall_raw[stage] = tuple(arrays.pop(f"wallraw__{stage}__{k}") for k in range(2))
-            if f"wallstress__{stage}__0" in arrays:
-                wall_stress[stage] = tuple(arrays.pop(f"wallstress__{stage}__{k}")
-                                           for k in range(2))
-            if f"wallforces__{stage}__0" in arrays:   # not written by older checkpoints
-                wall_forces[stage] = tuple(arrays.pop(f"wallforces__{stage}__{k}")
-                                           for k in range(3))
+            wall_raw[stage] = tuple(arrays.pop(f"wallraw__{stage}__{k}") for k in range(2))
+            wall_stress[stage] = tuple(arrays.pop(f"wallstress__{stage}__{k}") for k in range(2))
+            wall_forces[stage] = tuple(arrays.pop(f"wallforces__{stage}__{k}") for k in range(3))
         self._readings = {}
         for name, scalars in meta.get("readings", {}).items():
             reading = dict(scalars)
@@ -766,9 +795,10 @@ class Simulation:
         self.state = type(self.state)(**meta["state"], **arrays)
         self.record = RunRecord(**meta["record"], wall=wall, wall_stress=wall_stress,
                                 wall_forces=wall_forces, wall_raw=wall_raw)
-        for name in ("bin_lateral_stress_ratio", "wall_slip_ratio", "wall_slip_fraction"):
-            values = getattr(self.record, name)          # not recorded by older checkpoints
-            values[:0] = [math.nan] * (len(self.record.t) - len(values))
+        n = len(self.record.wall_slip_stretches[-1]) if self.record.wall_slip_stretches else 0
+        for name in ("wall_slip_stretch_fractions",):    # a per-sample measure this version
+            values = getattr(self.record, name)          # adds: not measured before it
+            values[:0] = [[math.nan] * n] * (len(self.record.t) - len(values))
         self.t_open = meta["t_open"]
         self.next_sample = meta["next_sample"]
         self.next_load_sample = meta.get("next_load_sample", math.nan)
@@ -835,8 +865,7 @@ class Simulation:
                 ok = same_kind(value, like) and not (isinstance(like, int) and value < 0)
             if not ok:
                 fail(f"its record's {key} is not {type(like).__name__} of the run's kind")
-        lengths = {len(record.get(k, [])) for k in series[:-1]}
-        if len(lengths) > 1 or len(record.get(series[-1], [])) > max(lengths):
+        if len({len(record.get(k, [])) for k in series}) > 1:
             fail("its record's time series have different lengths")
         n_bins = len(self.wall_sampler.centres)
         stages = set(WALL_STAGES) | {mark.name for mark in self.stage_marks}
@@ -844,6 +873,11 @@ class Simulation:
         for stage, t_stage in meta["wall_times"].items():
             if stage not in stages or not is_number(t_stage):
                 fail(f"its wall samples name an unknown stage {str(stage)[:40]!r}")
+            for name, count in (("wall", 5), ("wallraw", 2), ("wallstress", 2),
+                                ("wallforces", 3)):
+                for k in range(count):
+                    if f"{name}__{stage}__{k}" not in arrays:
+                        fail(f"array '{name}__{stage}__{k}' is missing")
             shapes.update({f"wall__{stage}__{k}": (n_bins,) for k in range(5)})
             shapes.update({f"wallstress__{stage}__{k}": (n_bins,) for k in range(2)})
             shapes.update({f"wallraw__{stage}__{k}": (n_bins,) for k in range(2)})
@@ -871,6 +905,9 @@ class Simulation:
                        if present for k in range(3)})
         shapes["envelope"] = shapes["envelope_raw"] = (n_bins,)
         state_arrays = set(vars(self.state))
+        for key, value in vars(self.state).items():
+            if isinstance(value, np.ndarray) and key not in arrays:
+                fail(f"array {key!r} of the state is missing")
         for key, array in arrays.items():
             if key in state_arrays:
                 continue
@@ -880,6 +917,11 @@ class Simulation:
                 fail(f"array {key[:60]!r} has shape {array.shape}, expected {shapes[key]}")
         if not all(is_number(t) for t in meta["schedules"]):
             fail("its schedule times are not numbers")
+        for s, t_next in zip(self.schedules, meta["schedules"]):     # when each runs next
+            high = meta["state"]["t"] + s.interval + 2.0 * self.model.dt + 1e-9
+            if not (math.isfinite(t_next) and 0.0 <= t_next <= high):
+                fail(f"its schedule time {t_next!r} is not a time of this run (allowed "
+                     f"range [0, {high:.6g}] s)")
 
     # -------------------------------------------------------------- results
     def summary(self) -> dict:
@@ -889,17 +931,21 @@ class Simulation:
         t = np.asarray(rec.t)
         masses = np.asarray(rec.mass_in_hopper)
         m0 = rec.initial_mass
-        window = (masses <= 0.9 * m0) & _before_flow_window_end(t, masses, m0)
-        index, stagnant, slip, share = (
-            _window_median(getattr(rec, name), window) for name in (
-                "mass_flow_index", "stagnant_fraction", "wall_slip_ratio", "wall_slip_fraction"))
+        window, window_name = flow_mode_window(t, masses, m0)
+        index, stagnant = (_window_median(getattr(rec, name), window)
+                           for name in ("mass_flow_index", "stagnant_fraction"))
+        stretches = diagnostics.stretch_calls(
+            m.cfg, [r for r, w in zip(rec.wall_slip_stretches, window) if w],
+            [f for f, w in zip(rec.wall_slip_stretch_fractions, window) if w], self.flow_rule)
+        calls = diagnostics.flow_call(stretches)
+        slip, share = calls["wall_slip_ratio"], calls["wall_slip_fraction"]
         remaining = m.mass_in_hopper(st)
         if np.isfinite(m0) and m0 > 0:
             balance = abs(remaining + st.discharged - m0) / m0
             left = remaining / m0
         else:
             balance = left = math.nan
-        mode = diagnostics.classify_flow_mode(slip, self.flow_rule) if len(t) else "none"
+        mode = calls["flow_mode"] if len(t) else "none"
         stopped = self.flow_stopped_time()
         channel, height = math.nan, math.nan
         if math.isfinite(stopped):
@@ -912,6 +958,8 @@ class Simulation:
             "flow_mode": mode,
             "wall_slip_ratio": slip,
             "wall_slip_fraction": share,
+            "flow_mode_window": window_name,
+            "flow_mode_samples": int(np.sum(window)),
             "mass_flow_index": index,
             "stagnant_fraction": stagnant,
             "initial_mass_kg": m0 if np.isfinite(m0) else m.mass_in_hopper(st),
@@ -919,6 +967,8 @@ class Simulation:
             "remaining_mass_fraction": left,
             "flow_stopped_time_s": stopped,
             "rathole_diameter_m": channel if mode == "rathole" else math.nan,
+            "heap_angle_deg": (diagnostics.heap_angle(m, st) if math.isfinite(stopped)
+                               else math.nan),
             "discharged_kg": st.discharged,
             "mass_balance_error": balance,
             "discharge_time_s": float(t[-1]) if len(t) else 0.0,
@@ -935,20 +985,34 @@ class Simulation:
             "hourglass_coefficient": m.cfg.numerics.hourglass_coefficient,
             "grid_viscosity": m.cfg.numerics.grid_viscosity,
             "bulk_viscosity": m.cfg.bulk_viscosity,
+            "rate_dependence": m.cfg.material.rate_dependence,
+            "grain_diameter_m": m.cfg.material.grain_diameter,
         }
-        out["hopper_stretches"] = diagnostics.stretch_calls(
-            m.cfg, [np.asarray(r, float) for r, w in zip(rec.wall_slip_stretches, window)
-                    if w], self.flow_rule)
+        out["hopper_stretches"] = stretches
         out.update(diagnostics.load_summary(self))
         out.update(m.summary_extras(st))
         return out
 
 
+def flow_mode_window(t, mass, m0) -> tuple:
+    """``(window, name)``: which time-series samples the flow-mode numbers are medians over
+    (a boolean per sample) and what they are.  ``"mass_left"``: the samples at least 0.1 s
+    after the opening with 90 % to 40 % of the initial mass ``m0`` left; where none is (a
+    short run), ``"short_run"``: every sample at least 0.1 s after the opening (the opening's
+    transient left out); ``"none"`` when there is none of those either (the flow-mode numbers
+    are then NaN and the calls ``"unknown"``)."""
+    t, mass = np.asarray(t, float), np.asarray(mass, float)
+    window = (mass <= 0.9 * m0) & _before_flow_window_end(t, mass, m0)
+    if window.any():
+        return window, "mass_left"
+    window = t > 0.1
+    return window, ("short_run" if window.any() else "none")
+
+
 def _window_median(values, window) -> float:
-    """The median of a per-sample measure over the samples of ``window`` (all but the first
-    when the window is empty), NaN samples left out; NaN when none is finite."""
-    values = np.asarray(values, float)
-    chosen = values[window] if window.any() else values[1:]
+    """The median of a per-sample measure over the samples of ``window``, NaN samples left
+    out; NaN when none is finite."""
+    chosen = np.asarray(values, float)[window]
     return float(np.nanmedian(chosen)) if np.isfinite(chosen).any() else math.nan
 
 

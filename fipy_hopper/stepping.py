@@ -7,20 +7,22 @@ numpy reference's (``HopperModel(..., backend="numpy")``), with the same arithme
 same order, so that each number is the same to the last bit as that of the sequence of
 compiled kernels it replaces:
 
-1. nodal forces ``-f_int(alpha (sigma + 2 eta D + eta_b tr(D) I)) + f_hg`` (``eta``,
-   ``eta_b``: the grid and the bulk viscosity; ``tr(D)``, in every step of a call but its
-   first, as the previous step's strain pass computed it from the same velocities): each
-   cell's corner forces, then
+1. nodal forces ``-f_int(alpha (sigma + 2 eta D + 2 eta_I D' + eta_b tr(D) I)) + f_hg``
+   (``eta``, ``eta_b``: the grid and the bulk viscosity; ``2 eta_I D'`` the law's
+   rate-dependent overstress in the cells whose last return was plastic; ``tr(D)``, in every
+   step of a call but its first, as the previous step's strain pass computed it from the same
+   velocities): each cell's corner forces, then
    each node's sum of its four cells' in the order in which a cell-by-cell scatter adds them;
    velocity ``v += dt (f / m - g e_z)``, mass-proportional damping, light nodes at rest;
    then, node row by node row, the wall contacts in the order of the model's contact list,
    the outlet plate and the axis (``v_r = 0``);
 2. per *loaded* cell (``alpha >= alpha_min``): the Q1 strain increment and spin, the Jaumann
    rotation, the open-volume divergence as volumetric strain, the closing of loose volume
-   (first pass, over runs of cells along a row), then the elastic predictor, the Mohr-Coulomb
-   return (the fast lockstep solve of :mod:`fipy_hopper.material.return_fast` for a block of up to
-   ``BLOCK`` cells, the robust return for the points it does not accept) and the plastic and
-   loose strains (second pass);
+   (first pass, over runs of cells along a row), then the law's compiled point update on a
+   block of up to ``BLOCK`` cells (:func:`fipy_hopper.material.return_fast.update_points`: the
+   elastic predictor and the Mohr-Coulomb return, the fast lockstep solve with the robust
+   return for the points it does not accept; the step does not write the law out again) and
+   the plastic and loose strains and the flowing flag (second pass);
 3. face velocities, the face-flux integral of the transport, the nodal displacement of the
    markers and the transport rule (the material has crossed ``transport_cfl`` of a cell, or
    ``max_transport_interval`` steps have passed).
@@ -57,12 +59,13 @@ from numba.extending import intrinsic
 
 from .material import mohr_coulomb as mc
 from .material import return_fast as fast
+from .material import rate as rate_law
 from .material import return_robust as robust
 
 #: largest number of loaded cells in a block of the Mohr-Coulomb solve
 BLOCK = fast._BLOCK
 
-_PLASTIC, _APEX = mc.PLASTIC, mc.APEX
+_ELASTIC, _PLASTIC, _APEX = mc.ELASTIC, mc.PLASTIC, mc.APEX
 
 _jit = numba.njit(cache=True, error_model="numpy")
 _jit_parallel = numba.njit(cache=True, error_model="numpy", parallel=True)
@@ -94,14 +97,14 @@ else:
 
 @_jit
 def _runs(alpha, alpha_min, sigma, loose, v, contrib, carry_runs, load_runs, block_ptr,
-          threads=1, mass=None, light_mass=0.0):
+          threads=1, mass=None, light_mass=0.0, flowing=None):
     """Runs of carrying (``alpha != 0``; given the node masses ``mass``, also a corner node
     heavier than ``light_mass``) and of loaded cells, the loaded runs cut into blocks
     of at most ``BLOCK`` cells (``block_ptr``: first run of each block, and the end), as
     many as a multiple of the number of threads and of nearly equal size, so that the
     threads' shares of the stress update are even (:func:`_stress_update`).  Zeroes
-    stress and loose strain where not loaded, corner forces where nothing is carried and the
-    velocity of node rows outside the material.  Returns ``(carry runs, load runs, blocks,
+    stress, loose strain and ``flowing`` (if given) where not loaded, corner forces where
+    nothing is carried and the velocity of node rows outside the material.  Returns ``(carry runs, load runs, blocks,
     first node row, end node row)``."""
     nz, nr = alpha.shape
     loaded = 0
@@ -133,6 +136,8 @@ def _runs(alpha, alpha_min, sigma, loose, v, contrib, carry_runs, load_runs, blo
                 sigma[j, i, 2] = 0.0
                 sigma[j, i, 3] = 0.0
                 loose[j, i] = 0.0
+                if flowing is not None:
+                    flowing[j, i] = 0.0
             if i < nr and not carries:
                 for k in range(8):
                     contrib[k, j, i] = 0.0
@@ -172,17 +177,24 @@ def _runs(alpha, alpha_min, sigma, loose, v, contrib, carry_runs, load_runs, blo
 
 @_jit_parallel
 def _cell_forces(carry_runs, n_carry, alpha, sigma, v, open_volume, r_c, h, hg_base, contrib,
-                 viscosity, bulk_viscosity, alpha_min, rate_trace, trace_fresh, threads=1):
+                 viscosity, bulk_viscosity, alpha_min, rate_trace, trace_fresh, flowing, rate,
+                 threads=1):
     """Corner forces ``-f_int + f_hg`` of the carrying cells into ``contrib`` (8, nz, nr):
     (r, z) at SW, SE, NE, NW, as ``momentum.internal_force`` and ``hourglass_force`` sum them.
-    With ``viscosity`` ``eta > 0`` or ``bulk_viscosity`` ``eta_b > 0`` (Pa s) the stress of a
-    loaded cell (``alpha >= alpha_min``) is ``sigma + 2 eta D + eta_b tr(D) I``, ``D`` its
-    strain rate (``momentum.strain_rate``).  With ``trace_fresh`` (``v`` has not changed since
-    the strain pass of :func:`_strain_run` wrote ``rate_trace``, (nz, nr), 1/s) and no grid
-    viscosity, ``tr(D)`` is read from ``rate_trace``: the same number, computed once."""
+    The stress of a loaded cell (``alpha >= alpha_min``) in them is ``sigma + 2 eta D + 2 eta_I
+    D' + eta_b tr(D) I``, ``D`` its strain rate (``momentum.strain_rate``) and ``D'`` its
+    deviator, with the grid viscosity ``eta`` and the bulk viscosity ``eta_b`` (Pa s; 0: none)
+    and, where the cell is ``flowing`` (its last return was plastic), the law's rate-dependent
+    overstress ``2 eta_I D'`` (:func:`fipy_hopper.material.rate.overstress_factor` with the
+    law's rate parameters ``rate``; none when ``rate[0]``, the grain size, is 0), added in
+    this order.  With ``trace_fresh`` (``v`` has not changed since the strain pass of
+    :func:`_strain_run` wrote ``rate_trace``, (nz, nr), 1/s) and no grid viscosity or
+    overstress in the cell, ``tr(D)`` is read from ``rate_trace``: the same number, computed
+    once."""
     g = 1.0 / (2.0 * h)
     two_eta = 2.0 * viscosity
-    viscous = viscosity > 0.0 or bulk_viscosity > 0.0
+    rated = rate[0] != 0.0
+    viscous = viscosity > 0.0 or bulk_viscosity > 0.0 or rated
     for t in prange(threads):       # thread t: runs t, t + T, ... (short and long rows alike)
         for run in range(t, n_carry, threads):
             j, i0, i1 = carry_runs[run, 0], carry_runs[run, 1], carry_runs[run, 2]
@@ -194,7 +206,8 @@ def _cell_forces(carry_runs, n_carry, alpha, sigma, v, open_volume, r_c, h, hg_b
                 t_tt = sigma[j, i, 2]
                 t_rz = sigma[j, i, 3]
                 if viscous and a >= alpha_min:
-                    if trace_fresh and viscosity == 0.0:
+                    over = rated and flowing[j, i] != 0.0
+                    if trace_fresh and viscosity == 0.0 and not over:
                         trace = rate_trace[j, i]
                     else:
                         vr_sw, vr_se = v[0, j, i], v[0, j, i + 1]
@@ -205,13 +218,23 @@ def _cell_forces(carry_runs, n_carry, alpha, sigma, v, open_volume, r_c, h, hg_b
                         d_zz = g * (vz_nw + vz_ne - vz_sw - vz_se)
                         d_tt = 0.25 * (vr_sw + vr_se + vr_ne + vr_nw) / r_c[i]
                         trace = (d_rr + d_zz) + d_tt
+                        dvr_dz = g * (vr_nw + vr_ne - vr_sw - vr_se)
+                        dvz_dr = g * (vz_se + vz_ne - vz_sw - vz_nw)
+                        d_rz = 0.5 * (dvr_dz + dvz_dr)
                         if viscosity > 0.0:
-                            dvr_dz = g * (vr_nw + vr_ne - vr_sw - vr_se)
-                            dvz_dr = g * (vz_se + vz_ne - vz_sw - vz_nw)
                             t_rr = t_rr + two_eta * d_rr
                             t_zz = t_zz + two_eta * d_zz
                             t_tt = t_tt + two_eta * d_tt
-                            t_rz = t_rz + two_eta * (0.5 * (dvr_dz + dvz_dr))
+                            t_rz = t_rz + two_eta * d_rz
+                        if over:
+                            p = -(sigma[j, i, 0] + sigma[j, i, 1] + sigma[j, i, 2]) / 3.0
+                            e_rr, e_zz, e_tt, gamma_dot = rate_law.deviatoric_rate(
+                                d_rr, d_zz, d_tt, d_rz)
+                            f = rate_law.overstress_factor(p, gamma_dot, rate)
+                            t_rr = t_rr + f * e_rr
+                            t_zz = t_zz + f * e_zz
+                            t_tt = t_tt + f * e_tt
+                            t_rz = t_rz + f * d_rz
                     if bulk_viscosity > 0.0:
                         p_b = bulk_viscosity * trace
                         t_rr = t_rr + p_b
@@ -257,44 +280,147 @@ def _project(vr, vz, n_r, n_z, mu):
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
+def _book(k, kind, entry, contact_impulse, plate_impulse, jr, jz):
+    """Add the impulse ``(jr, jz)`` to constraint ``k``'s entry (wall or plate)."""
+    if kind[k] == 1:
+        plate_impulse[entry[k], 0] += jr
+        plate_impulse[entry[k], 1] += jz
+    else:
+        contact_impulse[entry[k], 0] += jr
+        contact_impulse[entry[k], 1] += jz
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def _book_shares(k0, k1, normal, mu, kind, entry, plate_closed, last, lam, lam_t, total_r,
+                 total_z, contact_impulse, plate_impulse):
+    """Book the compound contact's impulse: to every weighted wall ``k`` (``w_k > 0``) but
+    ``last``, ``w_k (lam (-n_k) + lam_t mu_k t_k)``; to ``last`` the rest of ``(total_r,
+    total_z)``, so that the shares add up to the node's impulse."""
+    rest_r, rest_z = total_r, total_z
+    for k in range(k0, k1):
+        if (kind[k] == 1 and not plate_closed) or normal[k, 2] <= 0.0 or k == last:
+            continue
+        n_r, n_z, w = normal[k, 0], normal[k, 1], normal[k, 2]
+        f = lam_t * mu[k]
+        jr = w * (-(lam * n_r) - f * n_z)
+        jz = w * (f * n_r - lam * n_z)
+        _book(k, kind, entry, contact_impulse, plate_impulse, jr, jz)
+        rest_r = rest_r - jr
+        rest_z = rest_z - jz
+    _book(last, kind, entry, contact_impulse, plate_impulse, rest_r, rest_z)
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
 def _contact_node(v, j, i, mass, k0, k1, normal, mu, kind, entry, plate_closed,
                   contact_impulse, plate_impulse):
     """Contact of node (j, i) with all its walls (constraints ``k0 <= k < k1``; a plate
     constraint, ``kind == 1``, only while ``plate_closed``), in place, and the impulse ``m dv``
-    of each constraint added to its entry.
+    of each constraint added to its entry.  ``normal[k] = (n_r, n_z, w)``: the unit normal
+    into the wall and the wall's tributary length ``w`` at the node (the length of the wall in
+    the node's dual cell; 0 for a tube, for a convex corner's own normal).
 
-    The velocity is the closest to the free one that presses into no wall: unchanged if it
-    presses into none; else the one-wall contact (:func:`_project`, with friction) against the
-    wall whose frictionless projection is closest among those that then press into no other
-    wall; else (a corner that the velocity presses into from both sides) rest, with the
-    impulse split between the two walls whose normals span it.  One wall: the one-wall
-    contact, as before corners were treated.  (Projecting onto the walls one after the other
-    is not this: at the outlet lip, with the plate closed, it turned the weight pressing on
-    the cone and the plate into a steady inward slide of the lip's node, which squeezed the
-    material out of the lip's cells during the fill.)"""
+    One wall: :func:`_project`, the impulse Coulomb contact.  A node at a corner (two or more
+    walls, e.g. the cone and the bin wall at the transition, a ledge, an insert's corner, the
+    lip with the plate) is resolved against its walls together, as one patch of wall made of
+    their tributary lengths.  With ``t_k = (-n_z, n_r)`` each wall's friction cone
+    ``F_k = {lam (-n_k) + f t_k : |f| <= mu_k lam}``, the patch's normal and friction
+    directions are
+
+        N = sum_k w_k (-n_k),   T = sum_k w_k mu_k t_k    (the walls with w_k > 0),
+
+    and its impulses ``J = A N + B T``, ``|B| <= A``, split into one per wall,
+
+        J_k = w_k (A (-n_k) + B mu_k t_k)  in F_k:
+
+    the normal impulses share the patch by the walls' lengths (the same mean pressure on
+    both sides of the corner, as a continuous stress gives across a shallow corner) and the
+    friction is mobilised alike on every wall (``|B| / A`` of Coulomb's limit on each, so
+    ``|J_t,k| <= mu_k J_n,k`` holds on every wall, each in its own frame).  Then, with
+    ``J0 = -m v`` the impulse that stops the node:
+
+    1. no wall pressed (``v.n_k <= 0``): free;
+    2. ``J0 = A N + B T`` with ``|B| <= A``: the patch holds the node, ``v' = 0``, ``J = J0``;
+    3. else the node slides along the wall ``k*`` of the old rule (the closest frictionless
+       projection that presses no other wall) with the impulse on the patch cone's edge
+       that resists the slide, ``J = lam (N + s T)`` (``s`` the sign of ``B``), ``lam`` such
+       that ``v'.n_k* = 0``: accepted when it presses no other wall and slows the slide
+       without reversing it (``|v' . t_k*| <= |v . t_k*|``, so ``|v'| <= |v|``: it
+       dissipates; where another wall's normal would push along the slide, e.g. sliding away
+       from a 90 deg corner, it is refused);
+    4. otherwise (one weighted wall, frictionless walls, or 3 refused), the rule the patch
+       generalises: the one-wall contact against ``k*`` (all of the impulse to it), or, with
+       no such wall, rest with the impulse split between the two walls whose normals span it.
+
+    Why this split: a node at a corner stands for a patch of both walls, and at rest its
+    impulse's split is statically indeterminate (any ``J_a in F_a``, ``J0 - J_a in F_b``).
+    Giving the whole impulse to one wall (the rule before) left the bin wall's first cell
+    above the transition without its share, and the first bin converged at first order;
+    sharing the impulse vector by length broke Coulomb on the bin wall, because that node's
+    impulse sat on the cone's limit (its friction cone's edge, where no share is
+    admissible).  Here the patch's own cone (2) lies inside both walls' cones by construction
+    and the node slides (3) when the patch, not the cone alone, cannot hold it: at rest the
+    corner's impulse settles on the patch cone's edge, where both walls are at their limit
+    and each carries its length's share.  (Projecting onto the walls one after the other is
+    not a corner contact: at the outlet lip, with the plate closed, it turned the weight
+    pressing on the cone and the plate into a steady inward slide of the lip's node, which
+    squeezed the material out of the lip's cells during the fill; 4 keeps the lip's rest.)"""
     vr, vz = v[0, j, i], v[1, j, i]
     if k1 - k0 == 1 and (kind[k0] == 0 or plate_closed):     # one wall: the usual contact
         if vr * normal[k0, 0] + vz * normal[k0, 1] > 0.0:
             wr, wz = _project(vr, vz, normal[k0, 0], normal[k0, 1], mu[k0])
             v[0, j, i], v[1, j, i] = wr, wz
             m = mass[j, i]
-            if kind[k0] == 1:
-                plate_impulse[entry[k0], 0] += m * (wr - vr)
-                plate_impulse[entry[k0], 1] += m * (wz - vz)
-            else:
-                contact_impulse[entry[k0], 0] += m * (wr - vr)
-                contact_impulse[entry[k0], 1] += m * (wz - vz)
+            _book(k0, kind, entry, contact_impulse, plate_impulse, m * (wr - vr),
+                  m * (wz - vz))
         return
+    # the patch of the weighted walls, N and T
+    pressing = 0
+    weighted = 0
+    last = -1
+    big_r = 0.0
+    big_z = 0.0
+    fri_r = 0.0
+    fri_z = 0.0
+    for k in range(k0, k1):
+        if kind[k] == 1 and not plate_closed:
+            continue
+        if vr * normal[k, 0] + vz * normal[k, 1] > 0.0:
+            pressing += 1
+        w = normal[k, 2]
+        if w > 0.0:
+            wm = w * mu[k]
+            big_r = big_r - w * normal[k, 0]
+            big_z = big_z - w * normal[k, 1]
+            fri_r = fri_r - wm * normal[k, 1]
+            fri_z = fri_z + wm * normal[k, 0]
+            weighted += 1
+            last = k
+    if pressing == 0:
+        return
+    m = mass[j, i]
+    j0r = -(m * vr)
+    j0z = -(m * vz)
+    det = big_r * fri_z - big_z * fri_r
+    size = (abs(big_r) + abs(big_z)) * (abs(fri_r) + abs(fri_z))
+    patch = weighted >= 2 and abs(det) > 1e-9 * size
+    a = 0.0
+    b = 0.0
+    if patch:
+        a = (j0r * fri_z - j0z * fri_r) / det
+        b = (big_r * j0z - big_z * j0r) / det
+        if a >= 0.0 and abs(b) <= a:                           # 2: the patch holds it
+            v[0, j, i], v[1, j, i] = 0.0, 0.0
+            _book_shares(k0, k1, normal, mu, kind, entry, plate_closed, last, a, b, j0r, j0z,
+                         contact_impulse, plate_impulse)
+            return
     best = -1
     best_gap = np.inf
-    pressing = 0
     for k in range(k0, k1):
         if kind[k] == 1 and not plate_closed:
             continue
         vn = vr * normal[k, 0] + vz * normal[k, 1]
         if vn <= 0.0:
             continue
-        pressing += 1
         fr, fz = vr - vn * normal[k, 0], vz - vn * normal[k, 1]
         tol = 1e-14 * (abs(vr) + abs(vz))
         feasible = True
@@ -306,42 +432,70 @@ def _contact_node(v, j, i, mass, k0, k1, normal, mu, kind, entry, plate_closed,
                 break
         if feasible and vn < best_gap:
             best, best_gap = k, vn
-    if pressing == 0:
-        return
-    m = mass[j, i]
-    if best >= 0:
+    if patch and b != 0.0 and best >= 0 and normal[best, 2] > 0.0:    # 3: slide, the patch
+        s = 1.0 if b > 0.0 else -1.0
+        e_r = big_r + s * fri_r
+        e_z = big_z + s * fri_z
+        n_r, n_z = normal[best, 0], normal[best, 1]
+        push = -(e_r * n_r + e_z * n_z)
+        if push > 0.0:
+            c = (vr * n_r + vz * n_z) / push
+            wr = vr + c * e_r
+            wz = vz + c * e_z
+            u = vz * n_r - vr * n_z                  # v . t_k*, before and after
+            u_new = wz * n_r - wr * n_z
+            ok = u * u_new >= 0.0 and abs(u_new) <= abs(u)
+            tol = 1e-14 * (abs(vr) + abs(vz))
+            for q in range(k0, k1):
+                if q == best or (kind[q] == 1 and not plate_closed):
+                    continue
+                if wr * normal[q, 0] + wz * normal[q, 1] > tol:
+                    ok = False
+            if ok:
+                v[0, j, i], v[1, j, i] = wr, wz
+                lam = m * c
+                _book_shares(k0, k1, normal, mu, kind, entry, plate_closed, last, lam,
+                             s * lam, m * (wr - vr), m * (wz - vz), contact_impulse,
+                             plate_impulse)
+                return
+    if best >= 0:                                              # 4: one wall
         wr, wz = _project(vr, vz, normal[best, 0], normal[best, 1], mu[best])
         v[0, j, i], v[1, j, i] = wr, wz
-        if kind[best] == 1:
-            plate_impulse[entry[best], 0] += m * (wr - vr)
-            plate_impulse[entry[best], 1] += m * (wz - vz)
-        else:
-            contact_impulse[entry[best], 0] += m * (wr - vr)
-            contact_impulse[entry[best], 1] += m * (wz - vz)
+        _book(best, kind, entry, contact_impulse, plate_impulse, m * (wr - vr), m * (wz - vz))
         return
-    # a corner: the node stops; -v = a n_a + b n_b with a, b >= 0 for a pair of walls
+    # ... or a corner pressed from both sides: rest, J0 split between two walls k, q as
+    # J0 = l_k e_k + l_q e_q, l >= 0, e = -n + s mu t: both at the limit of their friction on
+    # the side the impulse left the patch cone (s = sign B), else frictionless, else the
+    # other side; the first pair that spans J0
     v[0, j, i], v[1, j, i] = 0.0, 0.0
-    dr, dz = -vr, -vz
-    for a_k in range(k0, k1):
-        if kind[a_k] == 1 and not plate_closed:
-            continue
-        for b_k in range(a_k + 1, k1):
-            if kind[b_k] == 1 and not plate_closed:
+    s_first = -1.0 if b < 0.0 else 1.0
+    tol = -1e-12 * (abs(j0r) + abs(j0z))
+    for p in range(3):
+        s = s_first if p == 0 else (0.0 if p == 1 else -s_first)
+        for a_k in range(k0, k1):
+            if kind[a_k] == 1 and not plate_closed:
                 continue
-            det = normal[a_k, 0] * normal[b_k, 1] - normal[a_k, 1] * normal[b_k, 0]
-            if abs(det) < 1e-12:
-                continue
-            a = (dr * normal[b_k, 1] - dz * normal[b_k, 0]) / det
-            b = (normal[a_k, 0] * dz - normal[a_k, 1] * dr) / det
-            if a >= -1e-12 * (abs(dr) + abs(dz)) and b >= -1e-12 * (abs(dr) + abs(dz)):
-                for k, lam in ((a_k, a), (b_k, b)):
-                    if kind[k] == 1:
-                        plate_impulse[entry[k], 0] += m * lam * normal[k, 0]
-                        plate_impulse[entry[k], 1] += m * lam * normal[k, 1]
-                    else:
-                        contact_impulse[entry[k], 0] += m * lam * normal[k, 0]
-                        contact_impulse[entry[k], 1] += m * lam * normal[k, 1]
-                return
+            fa = s * mu[a_k]
+            ea_r = -normal[a_k, 0] - fa * normal[a_k, 1]
+            ea_z = fa * normal[a_k, 0] - normal[a_k, 1]
+            for b_k in range(a_k + 1, k1):
+                if kind[b_k] == 1 and not plate_closed:
+                    continue
+                fb = s * mu[b_k]
+                eb_r = -normal[b_k, 0] - fb * normal[b_k, 1]
+                eb_z = fb * normal[b_k, 0] - normal[b_k, 1]
+                det = ea_r * eb_z - ea_z * eb_r
+                if abs(det) < 1e-12:
+                    continue
+                la = (j0r * eb_z - j0z * eb_r) / det
+                lb = (ea_r * j0z - ea_z * j0r) / det
+                if la >= tol and lb >= tol:
+                    jr = la * ea_r
+                    jz = la * ea_z
+                    _book(a_k, kind, entry, contact_impulse, plate_impulse, jr, jz)
+                    _book(b_k, kind, entry, contact_impulse, plate_impulse, j0r - jr,
+                          j0z - jz)
+                    return
     # no pair spans the stop (round-off): all of it to the wall pressed hardest
     k = k0
     most = -np.inf
@@ -351,12 +505,7 @@ def _contact_node(v, j, i, mass, k0, k1, normal, mu, kind, entry, plate_closed,
         vn = vr * normal[q, 0] + vz * normal[q, 1]
         if vn > most:
             k, most = q, vn
-    if kind[k] == 1:
-        plate_impulse[entry[k], 0] += m * dr
-        plate_impulse[entry[k], 1] += m * dz
-    else:
-        contact_impulse[entry[k], 0] += m * dr
-        contact_impulse[entry[k], 1] += m * dz
+    _book(k, kind, entry, contact_impulse, plate_impulse, j0r, j0z)
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -525,13 +674,16 @@ def _strain_run(j, i0, i1, out, v, sigma, loose, r_c, r_nodes, strain_dims, h, d
 
 
 @_jit
-def _stress_block(r0, r1, load_runs, v, sigma, loose, eps_p, r_c, r_nodes, strain_dims, h, dt,
-                  kappa, zface_aperture, rface_aperture, prm, cst, rate_trace):
+def _stress_block(r0, r1, load_runs, v, sigma, loose, eps_p, flowing, r_c, r_nodes, strain_dims,
+                  h, dt, kappa, zface_aperture, rface_aperture, prm, cst, rate_trace):
     """Stress update of the loaded cells of the runs ``r0 <= run < r1`` (one block), in place:
-    :func:`_strain_run`, then the elastic predictor, the return and the plastic and loose
-    strains as ``material.return_fast._update_kernel``, ``separation_strain`` and
-    ``equivalent_plastic_strain``."""
-    lam, mu, K, E, nu, sp, cp, tp, tpsi, c, a, e, rc3 = mc._unpack(prm)
+    :func:`_strain_run`, then the law's compiled point update
+    (:func:`fipy_hopper.material.return_fast.update_points`: the elastic predictor and the
+    Mohr–Coulomb return), then the model's closures around it: the loose strain of a return to
+    the apex (``dense_loose.separation_strain``), the equivalent plastic strain and
+    ``flowing`` (1 where the return was plastic, else 0: the cells in which the law's
+    rate-dependent overstress acts in the next step's forces)."""
+    E, nu, mu = prm[3], prm[4], prm[1]
     n = 0
     for run in range(r0, r1):
         n += load_runs[run, 2] - load_runs[run, 1]
@@ -547,75 +699,29 @@ def _stress_block(r0, r1, load_runs, v, sigma, loose, eps_p, r_c, r_nodes, strai
             cell_j[q] = j
             cell_i[q] = i
             q += 1
-    plastic = np.empty(n, dtype=np.int64)
-    pos = np.empty(n, dtype=np.int8)
-    trial = np.empty((6, n))
-    S = np.empty((4, n))
-    m = 0
+    out = np.empty((8, n))
+    status = np.empty(n, dtype=np.int8)
+    fast.update_points(scratch, n, prm, cst, out, status)
     for q in range(n):
         j, i = cell_j[q], cell_i[q]
-        rr, zz, tt, rz = mc._elastic_trial_nb(scratch[0, q], scratch[1, q], scratch[2, q],
-                                              scratch[3, q], scratch[4, q], scratch[5, q],
-                                              scratch[6, q], scratch[7, q], lam, mu)
-        mid = 0.5 * (rr + zz)
-        dd = 0.5 * (rr - zz)
-        rad = mc._radius_nb(dd, rz)
-        la, lb = mid + rad, mid - rad
-        if tt >= la:
-            ps, s1, s2, s3 = 0, tt, la, lb
-        elif tt >= lb:
-            ps, s1, s2, s3 = 1, la, tt, lb
-        else:
-            ps, s1, s2, s3 = 2, la, lb, tt
-        f = ((s1 - s3) + (s1 + s3) * sp) / (2.0 * cp) - c
+        sigma[j, i, 0] = out[0, q]
+        sigma[j, i, 1] = out[1, q]
+        sigma[j, i, 2] = out[2, q]
+        sigma[j, i, 3] = out[3, q]
         loose[j, i] = scratch[8, q]
-        if not f > 0.0:
-            sigma[j, i, 0] = rr
-            sigma[j, i, 1] = zz
-            sigma[j, i, 2] = tt
-            sigma[j, i, 3] = rz
+        if status[q] == _ELASTIC:
+            flowing[j, i] = 0.0
             continue
-        if rad > 0.0:
-            cw, sw = dd / rad, rz / rad
-        else:
-            cw, sw = 1.0, 0.0
-        plastic[m] = q
-        pos[m] = ps
-        trial[0, m], trial[1, m], trial[2, m], trial[3, m] = rr, zz, tt, rz
-        trial[4, m], trial[5, m] = cw, sw
-        S[0, m], S[1, m], S[2, m], S[3, m] = s1, s2, s3, f
-        m += 1
-    W = np.empty((fast._W_ROWS, m))
-    flags = np.empty((fast._F_ROWS, m), dtype=np.bool_)
-    fast._fast_block(m, S, W, flags, cst)
-    for k in range(m):
-        q = plastic[k]
-        j, i = cell_j[q], cell_i[q]
-        if flags[fast._F_OK, k]:
-            n1, n2, n3, status = W[fast._W_N1, k], W[fast._W_N2, k], W[fast._W_N3, k], _PLASTIC
-        else:
-            n1, n2, n3, status = robust._return_sorted(S[0, k], S[1, k], S[2, k], prm)
-        if pos[k] == 0:
-            na, nb_, ntt = n2, n3, n1
-        elif pos[k] == 1:
-            na, nb_, ntt = n1, n3, n2
-        else:
-            na, nb_, ntt = n1, n2, n3
-        rr, zz, tt, rz = trial[0, k], trial[1, k], trial[2, k], trial[3, k]
-        nrr, nzz, nrz = mc._rebuild_inplane_nb(na, nb_, trial[4, k], trial[5, k])
-        sigma[j, i, 0] = nrr
-        sigma[j, i, 1] = nzz
-        sigma[j, i, 2] = ntt
-        sigma[j, i, 3] = nrz
-        e0, e1, e2, e3 = mc._compliance_nb(rr - nrr, zz - nzz, tt - ntt, rz - nrz, E, nu, mu)
-        if status == _APEX:
+        flowing[j, i] = 1.0
+        e0, e1, e2, e3 = out[4, q], out[5, q], out[6, q], out[7, q]
+        if status[q] == _APEX:
             loose[j, i] += max(e0 + e1 + e2, 0.0)
         eps_p[j, i] += math.sqrt(2.0 / 3.0 * (e0 ** 2 + e1 ** 2 + e2 ** 2 + 2.0 * e3 ** 2))
 
 
 @_jit_parallel
-def _stress_update(block_ptr, n_blocks, load_runs, v, sigma, loose, eps_p, r_c, r_nodes,
-                   strain_dims, h, dt, kappa, zface_aperture, rface_aperture, prm, cst,
+def _stress_update(block_ptr, n_blocks, load_runs, v, sigma, loose, eps_p, flowing, r_c,
+                   r_nodes, strain_dims, h, dt, kappa, zface_aperture, rface_aperture, prm, cst,
                    rate_trace, threads=1):
     """:func:`_stress_block` for every block; thread ``t`` of ``T`` takes the blocks ``t, t +
     T, ...``: the blocks go up the hopper, so each thread has its share of the cone (where the
@@ -623,7 +729,7 @@ def _stress_update(block_ptr, n_blocks, load_runs, v, sigma, loose, eps_p, r_c, 
     for t in prange(threads):
         for b in range(t, n_blocks, threads):
             _stress_block(block_ptr[b], block_ptr[b + 1], load_runs, v, sigma, loose, eps_p,
-                          r_c, r_nodes, strain_dims, h, dt, kappa, zface_aperture,
+                          flowing, r_c, r_nodes, strain_dims, h, dt, kappa, zface_aperture,
                           rface_aperture, prm, cst, rate_trace)
 
 
@@ -690,7 +796,8 @@ def material_steps(max_steps, clock, v, mass, alpha, sigma, loose, eps_p, face_f
                    ramp_time, damping, light_mass, alpha_min, transport_cfl,
                    max_transport_interval, row_nodes, node_i, node_ptr, normal, mu, kind,
                    entry, plate_closed, opening, node_r, contact_impulse, plate_impulse, budget,
-                   work, viscosity, bulk_viscosity, rate_trace, threads, phase_cycles):
+                   work, viscosity, bulk_viscosity, rate_trace, flowing, rate, threads,
+                   phase_cycles):
     """Up to ``max_steps`` material steps, in place.
 
     The symmetry is data: ``r_c`` is the radius of the hoop terms (the cell-centre radius;
@@ -708,7 +815,10 @@ def material_steps(max_steps, clock, v, mass, alpha, sigma, loose, eps_p, face_f
     grid viscosity ``eta`` and the bulk viscosity ``eta_b`` (Pa s; 0: none) of
     :func:`_cell_forces`; ``rate_trace`` (nz, nr): the trace of each loaded cell's strain rate
     from the strain pass, which the next step's bulk viscosity reads (any contents: the
-    first step of a call computes it).  ``threads``: the number of numba threads (``numba.
+    first step of a call computes it).  ``flowing`` (nz, nr): 1 where the cell's last return
+    was plastic (written by the stress update, read by the next step's forces) and ``rate``:
+    the law's rate parameters (``law.rate_parameters()``; zeros: none) of the rate-dependent
+    overstress of :func:`_cell_forces`.  ``threads``: the number of numba threads (``numba.
     get_num_threads()``; the work is shared out by it, the results do not depend on it).
     ``phase_cycles``: empty, or ``PHASES`` counters to which the cycles (:func:`read_cycles`)
     spent in each phase are added; reading the counter changes nothing else.
@@ -722,7 +832,7 @@ def material_steps(max_steps, clock, v, mass, alpha, sigma, loose, eps_p, face_f
     cst = fast._fast_constants(prm)
     n_carry, n_load, n_blocks, j0, j1 = _runs(alpha, alpha_min, sigma, loose, v, contrib,
                                               carry_runs, load_runs, block_ptr, threads, mass,
-                                              light_mass)
+                                              light_mass, flowing)
     j0, j1 = _moving_rows(j0, j1, mass, v, light_mass)
     jf = max(j0 - 1, 0)         # the r-faces below the lowest node row with material move too
     if timed:
@@ -732,7 +842,8 @@ def material_steps(max_steps, clock, v, mass, alpha, sigma, loose, eps_p, face_f
         gravity = g_full * min(1.0, t / ramp_time) if ramp_time > 0.0 else g_full
         c0 = read_cycles() if timed else 0
         _cell_forces(carry_runs, n_carry, alpha, sigma, v, open_volume, r_c, h, hg_base,
-                     contrib, viscosity, bulk_viscosity, alpha_min, rate_trace, n > 0, threads)
+                     contrib, viscosity, bulk_viscosity, alpha_min, rate_trace, n > 0, flowing,
+                     rate, threads)
         c1 = read_cycles() if timed else 0
         _node_update(j0, j1, v, mass, contrib, gravity, dt, damping, light_mass, row_nodes,
                      node_i, node_ptr, normal, mu, kind, entry, plate_closed,
@@ -743,9 +854,9 @@ def material_steps(max_steps, clock, v, mass, alpha, sigma, loose, eps_p, face_f
             budget[1] += row_budget[j, 1]
             budget[2] += row_budget[j, 2]
         c2 = read_cycles() if timed else 0
-        _stress_update(block_ptr, n_blocks, load_runs, v, sigma, loose, eps_p, r_c, r_nodes,
-                       strain_dims, h, dt, kappa, zface_aperture, rface_aperture, prm, cst,
-                       rate_trace, threads)
+        _stress_update(block_ptr, n_blocks, load_runs, v, sigma, loose, eps_p, flowing, r_c,
+                       r_nodes, strain_dims, h, dt, kappa, zface_aperture, rface_aperture, prm,
+                       cst, rate_trace, threads)
         c3 = read_cycles() if timed else 0
         _faces(jf, j1, v, dt, face_sign, open_face, face_flux_sum, displacement, with_markers,
                row_speed)

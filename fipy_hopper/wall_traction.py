@@ -43,6 +43,8 @@ import numpy as np
 from scipy import sparse
 from scipy.interpolate import BSpline
 
+from .boundary import Segment
+
 #: degree of the traction's B-spline (cubic: support 4 knot spans, C2)
 DEGREE = 3
 #: Gauss-Legendre points per knot span and bin piece: exact for the degree-4 integrands
@@ -50,72 +52,14 @@ DEGREE = 3
 _GAUSS = np.polynomial.legendre.leggauss(3)
 
 
-@dataclass(frozen=True)
-class WallStretch:
-    """A straight stretch of wall from ``start`` to ``end`` (``(r, z)`` in m), arc length
-    ``s_start`` (m) at ``start`` along its wall (its chain), ``name`` of that wall, whether
-    its area is per radian of an axisymmetric wall (``c = r``) or per metre of a plane one
-    (``c = 1``), ``segment``, the index of the wall segment whose contact entries it
-    collects, and ``side``: +1 when the solid lies to the right of the direction from
-    ``start`` to ``end`` (a wall followed up from its lip), -1 to the left (a left wall, an
-    insert followed counter-clockwise)."""
-
-    start: tuple
-    end: tuple
-    s_start: float
-    axisymmetric: bool
-    name: str = "wall"
-    segment: int = 0
-    side: int = 1
-
-    @property
-    def length(self) -> float:
-        return float(math.hypot(self.end[0] - self.start[0], self.end[1] - self.start[1]))
-
-    @property
-    def s_end(self) -> float:
-        return self.s_start + self.length
-
-    @property
-    def tangent(self) -> np.ndarray:
-        """Unit tangent from ``start`` to ``end``."""
-        d = np.subtract(self.end, self.start, dtype=float)
-        return d / np.hypot(*d)
-
-    @property
-    def normal(self) -> np.ndarray:
-        """Unit normal into the wall: the tangent turned clockwise, or anticlockwise for
-        ``side = -1``."""
-        t = self.tangent
-        return self.side * np.array([t[1], -t[0]])
-
-    def point(self, s):
-        """``(r, z)`` of the wall point at arc length ``s`` (m)."""
-        u = (np.asarray(s, float) - self.s_start)
-        t = self.tangent
-        return self.start[0] + u * t[0], self.start[1] + u * t[1]
-
-    def weight(self, s):
-        """The area weight ``c(s)``: the radius ``r(s)`` (m) per radian, or 1 (plane)."""
-        s = np.asarray(s, float)
-        return self.point(s)[0] if self.axisymmetric else np.ones_like(s)
-
-    def area(self, a, b):
-        """Wall area ``int_a^b c ds`` (m^2 per radian; m^2 per metre of a plane wall),
-        0 where ``b <= a``."""
-        a, b = np.asarray(a, float), np.asarray(b, float)
-        mid = 0.5 * (a + b)
-        return np.where(b > a, (b - a) * self.weight(mid), 0.0)
-
-
-def bin_edges(stretch: WallStretch, width: float) -> np.ndarray:
+def bin_edges(stretch: Segment, width: float) -> np.ndarray:
     """Edges (m of arc length) of the stretch's equal bins of about ``width`` m (at least
     one)."""
     n = max(1, int(round(stretch.length / width)))
     return np.linspace(stretch.s_start, stretch.s_end, n + 1)
 
 
-def knots(stretch: WallStretch, spacing: float) -> np.ndarray:
+def knots(stretch: Segment, spacing: float) -> np.ndarray:
     """The clamped knot vector of the traction's B-spline on the stretch: equal spans of about
     ``spacing`` m (at least one), the end knots repeated ``DEGREE + 1`` times."""
     n = max(1, int(round(stretch.length / spacing)))
@@ -156,7 +100,7 @@ class StretchRecovery:
     (n_bins, n_entries, sparse): 1 where the entry's wall point lies in the bin; ``bin_area``
     (n_bins,).  ``entries``: the rows of the wall's entries that belong to the stretch."""
 
-    stretch: WallStretch
+    stretch: Segment
     entries: np.ndarray
     knot_vector: np.ndarray
     edges: np.ndarray
@@ -167,7 +111,7 @@ class StretchRecovery:
     bin_area: np.ndarray
 
     @classmethod
-    def build(cls, stretch: WallStretch, entries, s_entries, bin_width: float,
+    def build(cls, stretch: Segment, entries, s_entries, bin_width: float,
               knot_spacing: float | None = None) -> "StretchRecovery":
         """Maps for the entries (row indices ``entries``, arc lengths ``s_entries``) of the
         stretch, bins of about ``bin_width`` m and knots every ``knot_spacing`` m, but not
@@ -214,16 +158,3 @@ class StretchRecovery:
     def evaluate(self, force: np.ndarray, s) -> np.ndarray:
         """The recovered traction at arc lengths ``s`` (Pa)."""
         return design(self.knot_vector, s) @ self.coefficients(force)
-
-    @property
-    def breakpoints(self) -> np.ndarray:
-        """The distinct knots (m of arc length): the ends of the spline's spans."""
-        return self.knot_vector[DEGREE:len(self.knot_vector) - DEGREE]
-
-    def mean_over(self, force: np.ndarray, a: float, b: float) -> float:
-        """The recovered traction's mean over ``[a, b]`` (within the stretch) by area (Pa)."""
-        inside = self.breakpoints[(self.breakpoints > a) & (self.breakpoints < b)]
-        s_q, w_q, _ = _pieces(inside, np.array([a, b], float))
-        c_q = (self.stretch.weight(s_q) * w_q).ravel()
-        values = design(self.knot_vector, s_q) @ self.coefficients(force)
-        return float(np.sum(c_q * values) / np.sum(c_q))

@@ -91,17 +91,15 @@ def _config(config: dict):
 
 def estimated_cost(config: dict) -> float:
     """Cells times steps of a case (a relative cost, used to start the longest cases first)."""
-    from fipy_hopper import theory
-
     cfg = _config(config)
-    geom, num, mat = cfg.hopper, cfg.numerics, cfg.material
+    geom, num = cfg.hopper, cfg.numerics
     h = num.cell_size
-    cells = (geom.bin_radius / h) * (geom.top + num.free_fall_depth * geom.outlet_diameter) / h
+    x_min, x_max = geom.x_extent
+    cells = ((x_max - x_min) / h) * (geom.top + num.free_fall_depth * geom.outlet_diameter) / h
     dt = cfg.time_step
     if cfg.run.end_time == "empty":
-        rate = float(theory.beverloo_rate(mat.density, geom.outlet_diameter)
-                     * theory.rose_tanaka_factor(geom.half_angle_deg))
-        t_end = min(cfg.run.max_time, 1.3 * mat.density * geom.fill_volume() / rate)
+        from fipy_hopper.api import expected_quantities   # any shape: Beverloo where it applies
+        t_end = min(cfg.run.max_time, 1.3 * expected_quantities(cfg)["expected_discharge_time_s"])
     else:
         t_end = float(cfg.run.end_time)
     return cells * (t_end + max(cfg.ramp_time, 0.1)) / dt

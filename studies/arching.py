@@ -500,6 +500,7 @@ class _Grid:
         self.r_cells = 0.5 * (snap["r_nodes"][1:] + snap["r_nodes"][:-1])
         self.z_nodes = snap["z_nodes"]
         self.z_cells = 0.5 * (snap["z_nodes"][1:] + snap["z_nodes"][:-1])
+        self.kappa = snap["open_fraction"]
 
 
 class _Holder:

@@ -11,7 +11,12 @@ Usage::
 
     fipy-hopper demo --out hopper_run --force
     python studies/demo_picture.py hopper_run         # write the PNG and the README's caption
-    python studies/demo_picture.py --check            # exit 1 if the caption is not the PNG's
+    python studies/demo_picture.py --check            # exit 1 if the caption is not the PNG's,
+                                                      # or the PNG is older than the code it draws
+
+The picture is stale when a commit after the one recorded in it changed what it draws: the
+plotting or the wall loads (:data:`DRAWN_BY`); ``--check`` then says which commit, in one
+line, so that the picture is regenerated with the change that alters it.
 """
 
 from __future__ import annotations
@@ -32,6 +37,10 @@ README = ROOT / "README.md"
 COMMAND = "python studies/demo_picture.py"
 WIDTH = 1000          # px: the width of the picture, the two drawings one above the other
 KEYS = ("fipy_hopper:commit", "fipy_hopper:date", "fipy_hopper:command")
+#: The code the picture draws with: a commit that changes one of these after the picture's
+#: commit makes it stale (the pictures themselves; the wall loads and their recovery).
+DRAWN_BY = ("fipy_hopper/plotting.py", "fipy_hopper/wall_traction.py",
+            "fipy_hopper/diagnostics.py")
 
 
 def compose(run_dir: Path, out: Path = PICTURE, width: int = WIDTH) -> dict:
@@ -92,18 +101,55 @@ def readme_text(root: Path = ROOT) -> str:
                       caption(fields_of(root / PICTURE.relative_to(ROOT))), COMMAND)
 
 
+def stale_reason(root: Path = ROOT, picture: Path = PICTURE, paths=DRAWN_BY):
+    """Why the picture is older than the code it draws, in one line, or None: the last commit
+    after the one recorded in the picture (``fipy_hopper:commit``) that changed one of
+    ``paths``; an unrecorded or unknown commit, or no git, is a reason too (it cannot be
+    told)."""
+    import subprocess
+
+    recorded = fields_of(picture)["fipy_hopper:commit"]
+    name = picture.relative_to(root) if picture.is_relative_to(root) else picture
+
+    def git(*args):
+        return subprocess.run(["git", "-C", str(root), *args], capture_output=True,
+                              text=True, check=False)
+
+    if recorded in ("", "not recorded"):
+        return f"{name} records no commit: regenerate it"
+    try:
+        known = git("rev-parse", "--verify", "--quiet", f"{recorded}^{{commit}}")
+    except OSError:
+        return f"cannot tell whether {name} is up to date: git is not available"
+    if known.returncode != 0:
+        return f"{name} was made at git {recorded}, which this checkout does not hold"
+    log = git("log", "-1", "--format=%h %s", f"{recorded}..HEAD", "--", *paths)
+    if log.returncode != 0:
+        return f"cannot tell whether {name} is up to date: git log failed"
+    if not log.stdout.strip():
+        return None
+    changed = git("log", "-1", "--format=", "--name-only", f"{recorded}..HEAD", "--", *paths)
+    files = ", ".join(f for f in changed.stdout.split() if f in paths)
+    commit, subject = (log.stdout.strip().split(" ", 1) + [""])[:2]
+    return (f"{name} (git {recorded}) is older than git {commit}, which changed {files} "
+            f"(\"{subject[:60]}\"): run fipy-hopper demo --out hopper_run --force and "
+            f"{COMMAND} hopper_run")
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("run_dir", nargs="?", type=Path,
                         help="a finished run of the demo (default: only refill the caption)")
     parser.add_argument("--check", action="store_true",
-                        help="write nothing; exit 1 if the caption is not the picture's")
+                        help="write nothing; exit 1 if the caption is not the picture's or "
+                             "the picture is older than the code that draws it")
     args = parser.parse_args(argv)
     if args.check:
-        same = README.read_text(encoding="utf-8") == readme_text()
-        print("up to date" if same else f"README.md's caption is not the picture's: run "
-              f"{COMMAND}")
-        return 0 if same else 1
+        reason = (None if README.read_text(encoding="utf-8") == readme_text() else
+                  f"README.md's caption is not the picture's: run {COMMAND}")
+        reason = reason or stale_reason()
+        print(reason or "up to date")
+        return 1 if reason else 0
     if args.run_dir is not None:
         fields = compose(args.run_dir)
         print(f"written {PICTURE.relative_to(ROOT)} ({PICTURE.stat().st_size // 1024} KB, "

@@ -17,7 +17,8 @@ in this shallow bed (fill/diameter = 0.5, below Beverloo's 1.2) its simulated ra
 steadily while the stagnant zones grow (measured at 5 mm, D0 = 0.06 m: 2.6 kg/s at 0.3 s,
 2.0 at 0.8 s, 1.4 at 2 s), so it has no plateau; its ``steady_rate_spread`` says so.
 
-The correlations (:mod:`fipy_hopper.theory`): Beverloo with ``d = 0`` (C = 0.58), Beverloo
+The correlations (:mod:`fipy_hopper.theory`): Beverloo (C = 0.58, k = 1.5, the material's
+grain size ``d`` = 1 mm), Beverloo
 times the Rose-Tanaka factor (beta = 45 deg), Johanson (conical, m = 1; a mass-flow rate, so
 compared only inside Jenike's mass-flow region, theta < theta_c(phi, phi_w)) and Brown's
 minimum-energy rate.  The steady rate of a run is ``summary.json``
@@ -65,6 +66,8 @@ DEFAULTS = {
     "wall_friction": 15.0,                       # phi_w (deg)
     "density": 1500.0,                           # kg/m3
     "youngs_modulus": 5.0e6,                     # Pa
+    "grain_diameter": 0.001,                     # d (m): the default grain size
+    "beverloo_k": 1.5,                           # Beverloo's k for the correlations
     "cell_size": 0.005,                          # m
     "end_time": 0.8,                             # s of discharge
     "rose_tanaka_beta": 45.0,                    # deg
@@ -82,7 +85,8 @@ def setup(quick: bool = False, **options) -> dict:
                        "bin_height": opts["fill_height"] + 0.02},
             "material": {"friction_angle_deg": opts["friction_angle"],
                          "density": opts["density"],
-                         "youngs_modulus": opts["youngs_modulus"]},
+                         "youngs_modulus": opts["youngs_modulus"],
+                         "grain_diameter": opts["grain_diameter"]},
             "wall": {"friction_angle_deg": opts["wall_friction"]},
             "numerics": {"cell_size": opts["cell_size"]},
             "run": {"end_time": opts["end_time"], "output_interval": 0.02,
@@ -113,7 +117,7 @@ def correlations(d0, theta, opts, johanson_everywhere=False) -> dict:
     mass-flow rate: NaN outside Jenike's mass-flow region (theta >= theta_c) unless
     ``johanson_everywhere``, and always for a flat bottom."""
     rho = opts["density"]
-    bev = float(theory.beverloo_rate(rho, d0))
+    bev = float(theory.beverloo_rate(rho, d0, k=opts["beverloo_k"], d=opts["grain_diameter"]))
     mass_flow = theta < jenike_theta_c(opts)       # False when theta_c is NaN
     out = {"beverloo_kg_s": bev,
            "beverloo_rose_tanaka_kg_s": bev * float(theory.rose_tanaka_factor(
@@ -125,7 +129,12 @@ def correlations(d0, theta, opts, johanson_everywhere=False) -> dict:
     return out
 
 
-CORRELATIONS = {"beverloo_kg_s": "Beverloo (d = 0, C = 0.58)",
+def effective(d0, opts):
+    """Beverloo's effective outlet ``D0 - k d`` (m) of the study's grains."""
+    return d0 - opts["beverloo_k"] * opts["grain_diameter"]
+
+
+CORRELATIONS = {"beverloo_kg_s": "Beverloo (C = 0.58, k = 1.5, d = the material's)",
                 "beverloo_rose_tanaka_kg_s": "Beverloo x Rose-Tanaka (beta = 45)",
                 "johanson_kg_s": "Johanson (cone)",
                 "brown_kg_s": "Brown (minimum energy)"}
@@ -139,8 +148,8 @@ def analyse(rows: list, options: dict) -> tuple:
         w = r.get("steady_discharge_rate_kg_s")
         for key in CORRELATIONS:
             r["diff_" + key.replace("_kg_s", "_pct")] = _sweep.pct(w, r[key])
-        r["beverloo_C_equivalent"] = (w / (rho * math.sqrt(g) * r["outlet_diameter_m"] ** 2.5)
-                                      if _sweep.finite(w) else math.nan)
+        r["beverloo_C_equivalent"] = (w / (rho * math.sqrt(g) * effective(
+            r["outlet_diameter_m"], options) ** 2.5) if _sweep.finite(w) else math.nan)
     fits = []
     for theta in options["outlet_half_angles"]:
         sel = sorted([r for r in rows if r["half_angle_deg"] == float(theta)
@@ -153,7 +162,8 @@ def analyse(rows: list, options: dict) -> tuple:
         d0 = np.array([r["outlet_diameter_m"] for r in sel])
         w = np.array([r["steady_discharge_rate_kg_s"] for r in sel])
         a, n = fit_power_law(d0, w)
-        c_fit = float(np.exp(np.mean(np.log(w / (rho * math.sqrt(g) * d0 ** 2.5)))))
+        c_fit = float(np.exp(np.mean(np.log(
+            w / (rho * math.sqrt(g) * effective(d0, options) ** 2.5)))))
         factor = float(theory.rose_tanaka_factor(theta, options["rose_tanaka_beta"]))
         slope, intercept = np.polyfit(d0, w ** 0.4, 1)
         offset = -intercept / slope

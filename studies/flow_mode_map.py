@@ -425,7 +425,9 @@ def write_outputs(out, rows, numbers, options, setting, argv=None) -> list:
     findings = [
         f"{numbers['agreeing']} of {numbers['classified']} classified cases agree with "
         f"Jenike's boundary (delta = phi = {options['friction_angle']:g} deg): "
-        f"agreement fraction {frac:.2f}.",
+        f"agreement fraction {frac:.2f} (in-sample: the rule's threshold, a wall slip ratio "
+        f"of 0.2, was placed in the gap these cases leave; the cases on other cells were "
+        f"not used to place it).",
         f"Away from the boundary (|theta - theta_c| > 5 deg, or phi_w >= phi): "
         f"{frac_clear:.2f} of {numbers['clear_cases']} cases agree.",
         f"Simulated: {numbers['mass_cases']} mass, {numbers['funnel_cases']} funnel; Jenike: "

@@ -2,11 +2,11 @@
 
 The funnel-flow hopper of ``robustness.py`` (the reference hopper with a 60 deg cone and
 phi_w = 25 deg, E = 5 MPa) and the reference hopper itself (20 deg, phi_w = 15 deg, mass flow)
-are discharged for ``end_time`` (3 s) at the cell sizes ``cell_sizes`` (7.5, 5 and 3.75 mm),
-each as the package runs by default (``plain``) and with a viscosity of fixed size
-(``viscous``: ``numerics.grid_viscosity`` b = 0.25 over ``numerics.viscosity_length`` l = 5 mm,
-``eta = b rho sqrt(g l) l = 0.41 Pa s`` on every grid, the order of a 1 mm sand's rate
-dependence in the mu(I) law).  Measured from each run directory:
+are discharged for ``end_time`` (3 s) at the cell sizes ``cell_sizes`` (7.5 to 1.875 mm),
+each with the package's default law (``default``: the mu(I) rate dependence with the grain
+size d = 1 mm) and, for the funnel, with the plain rate-independent law of the published method
+(``rate_independent``: ``material.rate_dependence = "none"``, no length).  Measured from each
+run directory:
 
 * the rate ``W(t)`` (``timeseries.csv``) and the mass discharged in ``end_time``;
 * the mean rate over ``early`` (0.5-1.5 s) and ``late`` (2.5 s to the end) from the
@@ -51,8 +51,9 @@ TITLE = "Funnel flow under refinement: the flow channel's edge and the rate"
 _REF = HopperConfig()
 DEFAULTS = {
     "hoppers": {"funnel": (60.0, 25.0), "reference": (20.0, 15.0)},   # (theta, phi_w) deg
-    "variants": {"plain": {}, "viscous": {"grid_viscosity": 0.25, "viscosity_length": 0.005}},
-    "cell_sizes": (0.0075, 0.005, 0.00375),
+    "variants": {"default": {}, "rate_independent": {"rate_dependence": "none"}},
+    "funnel_only_variants": ("rate_independent",),
+    "cell_sizes": (0.0075, 0.005, 0.00375, 0.0025, 0.001875),
     "end_time": 3.0, "field_interval": 0.25,
     "early": (0.5, 1.5), "late_from": 2.5,
     "edge_time": 1.0, "edge_top": 0.25, "core_rows_from": 0.1,
@@ -60,7 +61,7 @@ DEFAULTS = {
     "fill_height": _REF.hopper.fill_height, "bin_height": _REF.hopper.bin_height,
     "case_plots": False,
 }
-QUICK = {"hoppers": {"funnel": (60.0, 25.0)}, "variants": {"plain": {}},
+QUICK = {"hoppers": {"funnel": (60.0, 25.0)}, "variants": {"default": {}},
          "cell_sizes": (0.01, 0.0075), "end_time": 0.6, "field_interval": 0.2,
          "early": (0.2, 0.4), "late_from": 0.4, "edge_time": 0.4, "bin_diameter": 0.16,
          "fill_height": 0.1, "bin_height": 0.12, "edge_top": 0.1, "core_rows_from": 0.05}
@@ -70,17 +71,19 @@ def setup(quick: bool = False, **options) -> dict:
     """The cases and options (``{"options", "cases", "setting"}``); unknown options raise."""
     opts = _sweep.resolve_options(DEFAULTS, options, QUICK if quick else None)
     cases = []
-    for (hopper, (theta, wall)), (variant, numerics), h in (
+    for (hopper, (theta, wall)), (variant, material), h in (
             (a, b, c) for a in opts["hoppers"].items() for b in opts["variants"].items()
             for c in opts["cell_sizes"]):
+        if hopper != "funnel" and variant in opts["funnel_only_variants"]:
+            continue
         config = {"hopper": {"bin_diameter": opts["bin_diameter"],
                              "outlet_diameter": opts["outlet_diameter"],
                              "half_angle_deg": float(theta),
                              "fill_height": opts["fill_height"],
                              "bin_height": opts["bin_height"]},
-                  "material": {"youngs_modulus": 5.0e6},
+                  "material": {"youngs_modulus": 5.0e6, **material},
                   "wall": {"friction_angle_deg": float(wall)},
-                  "numerics": {"cell_size": float(h), **numerics},
+                  "numerics": {"cell_size": float(h)},
                   "run": {"end_time": opts["end_time"], "output_interval": 0.05,
                           "field_interval": opts["field_interval"]}}
         cases.append(_sweep.make_case(
@@ -113,7 +116,7 @@ def channel_of(run_dir, options):
     """``(rows of channel.csv, edge angle (deg), core_open_s)`` from a run's snapshots."""
     from fipy_hopper import plotting
 
-    rows, angle, core_open = [], math.nan, math.nan
+    rows, angle, core_open, widths = [], math.nan, math.nan, []
     entries = [e for e in plotting.snapshots(run_dir) if e["stage"] == "discharge"]
     best = min(entries, key=lambda e: abs(e["discharge_time_s"] - options["edge_time"]),
                default=None)
@@ -132,12 +135,16 @@ def channel_of(run_dir, options):
             band &= z <= z[filled[-1]]
         if math.isnan(core_open) and band.any() and np.all(snap["alpha"][band, 0] <= 0.5):
             core_open = float(t)
+        if options["early"][0] <= t <= options["late_from"]:
+            sel = (z > 0) & (z <= options["edge_top"]) & np.isfinite(tenth) & np.isfinite(half)
+            widths += list(tenth[sel] - half[sel])
         if e is best:
             sel = (z > 0) & (z <= options["edge_top"]) & np.isfinite(tenth)
             if sel.sum() >= 3:
                 slope = np.polyfit(z[sel], tenth[sel], 1)[0]
                 angle = math.degrees(math.atan(slope))
-    return rows, angle, core_open
+    width = float(np.median(widths)) if widths else math.nan
+    return rows, angle, core_open, width
 
 
 def mean_rate(t, discharged, start, end):
@@ -149,11 +156,17 @@ def mean_rate(t, discharged, start, end):
     return float((np.interp(end, t, m) - np.interp(start, t, m)) / (end - start))
 
 
+def _grain_diameter(run_dir) -> float:
+    """The grain diameter (m) of a run's configuration."""
+    from fipy_hopper.config import HopperConfig
+    return HopperConfig.from_toml(Path(run_dir) / "config.toml").material.grain_diameter
+
+
 def groups(rows):
     """``{(hopper, variant): rows from the coarsest to the finest cells}``."""
     out = {}
     for r in rows:
-        out.setdefault((r.get("hopper", "funnel"), r.get("variant", "plain")), []).append(r)
+        out.setdefault((r.get("hopper", "funnel"), r.get("variant", "default")), []).append(r)
     return {k: sorted(v, key=lambda r: -r["cell_size_mm"]) for k, v in out.items()}
 
 
@@ -176,7 +189,10 @@ def analyse(rows, options):
         r["discharged_in_run_kg"] = float(out[-1])
         r["early_rate_kg_s"] = mean_rate(t, out, *options["early"])
         r["late_rate_kg_s"] = mean_rate(t, out, options["late_from"], options["end_time"])
-        edges, r["edge_angle_deg"], r["core_open_s"] = channel_of(r["run_dir"], options)
+        edges, r["edge_angle_deg"], r["core_open_s"], r["edge_width_m"] = channel_of(
+            r["run_dir"], options)
+        grain = _grain_diameter(r["run_dir"])
+        r["edge_width_grains"] = r["edge_width_m"] / grain if grain > 0 else math.nan
         channel += [{"case": r["case"], "cell_size_mm": r["cell_size_mm"], **e} for e in edges]
     numbers = {}
     for (hopper, variant), members in groups(rows).items():
@@ -188,6 +204,8 @@ def analyse(rows, options):
                 _r(abs(b[key] - a[key]) / abs(b[key]), 4) if _sweep.finite(a.get(key))
                 and _sweep.finite(b.get(key)) else None for a, b in zip(done, done[1:])]
         entry["edge_angle_deg"] = [_r(r["edge_angle_deg"], 1) for r in done]
+        entry["edge_width_mm"] = [_r(1000 * r["edge_width_m"], 1) for r in done]
+        entry["edge_width_grains"] = [_r(r["edge_width_grains"], 1) for r in done]
         entry["core_open_s"] = [_r(r["core_open_s"], 2) for r in done]
         numbers[f"{hopper}_{variant}"] = entry
     return numbers, channel
@@ -230,11 +248,12 @@ def write_outputs(out, rows, numbers, channel, options, setting, argv=None):
     _sweep.write_rows_csv(out / "results.csv", rows, first=(
         "case", "hopper", "variant", "cell_size_mm", "steady_discharge_rate_kg_s",
         "discharged_in_run_kg", "early_rate_kg_s", "late_rate_kg_s", "edge_angle_deg",
-        "core_open_s", "error"))
+        "edge_width_m", "edge_width_grains", "core_open_s", "error"))
     _sweep.write_rows_csv(out / "channel.csv", channel)
     _sweep.save(plot(rows, channel, options), out / "funnel_channel.png")
     figures = [{"file": "funnel_channel.png",
-                "caption": "The funnel hopper, plain and with the viscosity of fixed size: "
+                "caption": "The funnel hopper with the default law (mu(I), d = 1 mm) and the "
+                           "rate-independent one: "
                            "W(t) at each cell size (left) and the flow channel's edge, where "
                            "the speed falls to a tenth (solid) and half (dashed) of the axis's, "
                            f"at the snapshot nearest {options['edge_time']:g} s (right)."}]
@@ -256,6 +275,11 @@ def write_outputs(out, rows, numbers, channel, options, setting, argv=None):
                 f"{options['late_from']:g} s {listed('late_rate_kg_s')} kg/s (changes "
                 f"{listed('late_rate_kg_s_changes', 100, '.1f')} %)")
         if name.startswith("funnel"):
+            text += (f"; the channel's edge (from half to a tenth of the axis speed, median "
+                     f"over the rows to {options['edge_top']:g} m and the snapshots "
+                     f"{options['early'][0]:g}-{options['late_from']:g} s) is "
+                     f"{listed('edge_width_mm', 1, '.1f')} mm wide = "
+                     f"{listed('edge_width_grains', 1, '.1f')} grains of its d")
             text += (f"; the channel's edge (a tenth of the axis speed) leans "
                      f"{listed('edge_angle_deg', 1, '.1f')} deg from the vertical at "
                      f"{options['edge_time']:g} s, and the axis column has emptied from the "
@@ -264,12 +288,14 @@ def write_outputs(out, rows, numbers, channel, options, setting, argv=None):
         findings.append(text + ".")
     table = {"title": "Runs", "columns": ["hopper", "variant", "cell (mm)", "steady W (kg/s)",
                                          "out (kg)", "early W (kg/s)", "late W (kg/s)",
-                                         "edge angle (deg)", "core open (s)"],
+                                         "edge angle (deg)", "edge width (mm)",
+                                         "core open (s)"],
              "rows": [[r.get("hopper"), r.get("variant"), r["cell_size_mm"],
                        _r(r.get("steady_discharge_rate_kg_s"), 4),
                        _r(r.get("discharged_in_run_kg"), 3), _r(r.get("early_rate_kg_s"), 4),
                        _r(r.get("late_rate_kg_s"), 4), _r(r.get("edge_angle_deg"), 1),
-                       _r(r.get("core_open_s"), 2)] for r in rows]}
+                       _r(1000 * r["edge_width_m"], 1) if _sweep.finite(r.get("edge_width_m"))
+                       else None, _r(r.get("core_open_s"), 2)] for r in rows]}
     settings = {k: (list(v) if isinstance(v, tuple) else v) for k, v in options.items()}
     sizes = " to ".join(f"{1000 * h:g}" for h in sorted(options["cell_sizes"], reverse=True))
     headline = f"Steady-rate changes from {sizes} mm: " + "; ".join(

@@ -166,12 +166,14 @@ def _agreement(section: Section, table: str) -> tuple:
     own = [r for r, c in zip(rows, cells) if c == main]
     check = [r for r, c in zip(rows, cells) if c != main]
     agree = sum(r["agrees"] == "yes" for r in own)
-    text = f"{agree} of {len(own)} cases agree"
+    text = (f"{agree} of {len(own)} cases agree (in-sample: the rule's one threshold, a wall "
+            f"slip ratio of 0.2, was placed in the gap these cases leave)")
     values = {"agree": agree, "cases": len(own)}
     if check:
         held = sum(r["agrees"] == "yes" for r in check)
         finer = ", ".join(sorted(set(cells) - {main}))
-        text += f" ({held} of {len(check)} again on {finer} mm cells)"
+        text += (f"; {held} of {len(check)} again on {finer} mm cells, which the threshold "
+                 f"was not placed on")
         values.update(grid_check_agree=held, grid_check_cases=len(check))
     return text, values
 

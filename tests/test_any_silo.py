@@ -11,6 +11,7 @@ import pytest
 
 import fipy_hopper as fh
 from fipy_hopper.config import HopperConfig
+from fipy_hopper.model import HopperModel
 
 RUN = {"output_interval": 0.02, "field_interval": 0.1, "markers_per_side": 1}
 
@@ -97,18 +98,41 @@ PLAIN = {"shape": "profile", "wall": [[0.03, 0.0], [0.15, 0.2], [0.15, 0.5]],
          "fill_level": 0.3}
 
 
-def test_an_insert_far_above_the_fill_changes_nothing(tmp_path):
-    """An inverted cone on the axis well above the material: the plain hopper's results to
-    the bit (its time series and its wall's loads), the insert carrying nothing."""
-    base = {"numerics": {"cell_size": 0.01}, "run": {"end_time": 0.3, **RUN}}
-    plain = fh.run(config({"hopper": PLAIN, **base}), tmp_path / "plain", threads=1)
-    far = {**PLAIN, "inserts": [{"outline": [[0.0, 0.48], [0.05, 0.44], [0.0, 0.40]]}]}
-    insert = fh.run(config({"hopper": far, **base}), tmp_path / "insert", threads=1)
+NEAR_BASE = {"numerics": {"cell_size": 0.01}, "run": {"end_time": 0.3, **RUN}}
+#: inserts the material never touches: an inverted cone well above the fill, and a box on
+#: the axis 3.5 cells above it (the strip behind its top face runs down through the material:
+#: the contact once held that whole column up, and the discharge stopped)
+ABOVE = {"far": [[0.0, 0.48], [0.05, 0.44], [0.0, 0.40]],
+         "box 3.5 cells above": [[0.0, 0.335], [0.05, 0.335], [0.05, 0.375], [0.0, 0.375]]}
+
+
+@pytest.fixture(scope="module")
+def plain_run(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("plain") / "plain"
+    return fh.run(config({"hopper": PLAIN, **NEAR_BASE}), folder, threads=1), folder
+
+
+@pytest.mark.parametrize("outline", list(ABOVE.values()), ids=list(ABOVE))
+def test_an_insert_above_the_fill_changes_nothing(outline, plain_run, tmp_path):
+    """An insert above the material: the plain hopper's results to the bit (its time series
+    and its wall's loads), the insert carrying nothing, and no contact of the insert at a
+    node outside it further than half a cell from it."""
+    plain, plain_dir = plain_run
+    hopper = {**PLAIN, "inserts": [{"outline": outline}]}
+    cfg = config({"hopper": hopper, **NEAR_BASE})
+    model = HopperModel(cfg)
+    j, i, _, _ = model.contact_list
+    bnd, g = model.boundary, model.grid
+    kinds = np.array([c.kind for c in bnd.chains])
+    on_insert = kinds[bnd.table.chain[model.contact_owner]] == "insert"
+    x, z = g.r_nodes[i[on_insert]], g.z_nodes[j[on_insert]]
+    assert np.all(bnd.in_solid(x, z) | (np.abs(bnd.signed_distance(x, z)) < 0.5 * g.h))
+    insert = fh.run(cfg, tmp_path / "insert", threads=1)
     assert same_summary(plain, insert) == []
     assert insert["insert_1_vertical_force_N"] == 0.0
-    assert filecmp.cmp(tmp_path / "plain" / "timeseries.csv",
+    assert filecmp.cmp(plain_dir / "timeseries.csv",
                        tmp_path / "insert" / "timeseries.csv", shallow=False)
-    a = fh.read_results(tmp_path / "plain").wall_pressure
+    a = fh.read_results(plain_dir).wall_pressure
     b = fh.read_results(tmp_path / "insert").wall_pressure
     on_wall = b["wall"] == "wall"
     for column in ("s_m", "p_n_Pa", "tau_Pa", "p_n_raw_Pa", "p_n_stress_Pa"):

@@ -1,22 +1,27 @@
 """The boundary as data (:mod:`fipy_hopper.boundary`) and the profile configuration.
 
-The conical and wedge shorthands give today's :mod:`fipy_hopper.geometry` bit for bit, and a
-profile of the same vertices the shorthand; distances, normals and contact sets against
+The conical and wedge shorthands give the closed-form cone written out by hand
+(``tests/closed_cone.py``) bit for bit, and a profile of the same vertices the shorthand; distances, normals and contact sets against
 points computed by hand; open fractions against exact areas; fill masses against closed
 forms; the mirror symmetry of a full section; the compiled one-point kernels against the
 numpy methods; the picture and the description; every bad input in one line naming the key.
 """
 
 import math
+import sys
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from fipy_hopper import boundary as fb
-from fipy_hopper import geometry, mesh
+from fipy_hopper import mesh
 from fipy_hopper.cli import main
 from fipy_hopper.config import ConfigError, HopperConfig
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import closed_cone as geometry  # noqa: E402  (the closed-form reference)
 
 RHO = 1500.0
 #: a two-slope hopper: a steep stretch, a shallow one, a bin
@@ -52,7 +57,7 @@ def grid_lines(cfg):
 
 
 class Today:
-    """Today's closed-form cone (:mod:`fipy_hopper.geometry`) where mesh wants a boundary."""
+    """The closed-form cone (``closed_cone``) where mesh wants a boundary."""
 
     def __init__(self, geom):
         self.geom, self.section = geom, geom.boundary.section
@@ -292,7 +297,8 @@ def test_a_full_section_with_a_centred_slot_is_its_own_mirror_image():
                   "left_wall": [[0.05, 0.0], [-0.2, 0.0], [-0.2, 0.5]], "fill_level": 0.4})
     assert off.boundary.section.centreline == pytest.approx(0.075)
     assert off.hopper.outlet_diameter == pytest.approx(0.05)
-    assert off.hopper.x_extent == (-0.2, 0.3) and off.hopper.bin_diameter == 0.5
+    assert off.hopper.x_extent == (-0.2, 0.3) and off.hopper.width == 0.5
+    assert off.hopper.bin_diameter is None and off.hopper.half_angle_deg is None
 
 
 def test_sections_own_the_axis_the_mirror_and_the_factor():
@@ -353,9 +359,9 @@ def test_validate_describes_and_draws_the_boundary(tmp_path, capsys):
     assert main(["validate", str(path)]) == 0
     out = capsys.readouterr().out
     assert "insert_1" in out and "outlet       x in [0, 0.03] m" in out
-    assert (tmp_path / "geometry.png").is_file()
-    assert main(["validate", str(path), "--out", str(tmp_path / "pictures")]) == 0
-    assert (tmp_path / "pictures" / "geometry.png").is_file()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["silo.toml"]   # nothing written
+    assert main(["validate", str(path), "--picture", str(tmp_path / "silo.png")]) == 0
+    assert (tmp_path / "silo.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
 # ---------------------------------------------------------------- configuration
@@ -382,16 +388,30 @@ def test_profiles_round_trip_through_toml(tmp_path):
                                                  "fill_height", "shape"}
 
 
-def test_a_profiles_sizes_for_the_rest_of_the_code():
+def test_a_profiles_shorthand_sizes_exist_only_for_the_shapes_they_describe():
+    """A two-slope wall has no one half-angle, cone height or bin diameter (None, and not a
+    silo the classic theories cover); the boundary gives every silo its sizes (width,
+    transition).  A cone under a bin drawn with a 1.4 mm sliver at its lip (45 deg; shorter
+    ones are refused) is a cone: its half-angle is the cone's by length, not the sliver's; a
+    wall whose top slopes has none."""
     g = profile().hopper
-    assert (g.bin_radius, g.outlet_radius, g.top, g.cone_height) == (0.15, 0.03, 0.6, 0.2)
-    assert g.half_angle_deg == pytest.approx(math.degrees(math.atan2(0.05, 0.12)))
-    assert g.fill_height == pytest.approx(0.25) and g.bin_height == pytest.approx(0.4)
+    assert (g.bin_diameter, g.half_angle_deg, g.cone_height, g.bin_height, g.fill_height) == \
+        (None,) * 5
+    assert (g.outlet_radius, g.top, g.width) == (0.03, 0.6, 0.3) and not g.classic
+    assert g.boundary.transition_height() == 0.2 and g.boundary.hopper_shape is None
     assert g.axisymmetric and g.n_wall_segments == 3
+    cone = [[0.03, 0.0], [0.15, 0.2], [0.15, 0.6]]
+    for wall, theta in ((cone, math.degrees(math.atan2(0.12, 0.2))),
+                        ([[0.03, 0.0], [0.031, 0.001]] + cone[1:],
+                         math.degrees(math.atan2(0.119, 0.199)))):
+        c = profile(wall=wall).hopper
+        assert c.classic and c.half_angle_deg == pytest.approx(theta, abs=1e-3)
+        assert (c.bin_radius, c.cone_height, c.outlet_radius) == (0.15, 0.2, 0.03)
+        assert c.fill_height == pytest.approx(0.25) and c.bin_height == pytest.approx(0.4)
     spout = profile(wall=[[0.03, 0.0], [0.03, 0.02], [0.15, 0.1], [0.12, 0.3]],
                     fill_level=0.25).hopper
-    assert spout.half_angle_deg == pytest.approx(math.degrees(math.atan2(0.12, 0.08)))
-    assert spout.cone_height == 0.3 and spout.bin_radius == 0.15
+    assert spout.half_angle_deg is None and spout.cone_height is None
+    assert spout.boundary.transition_height() == 0.3 and spout.width == 0.3
     cfg = profile()
     assert cfg.hopper.boundary is cfg.hopper.boundary and cfg.boundary is cfg.boundary
 
@@ -432,6 +452,10 @@ BAD = [
      ["hopper.inserts[0].outline encloses no area", "closed polygon"]),
     ("an insert that crosses itself",
      {**H, "inserts": [{"outline": [[0.02, 0.3], [0.08, 0.4], [0.08, 0.3], [0.02, 0.4]]}]},
+     None, ["hopper.inserts[0].outline crosses itself"]),
+    ("a bow-tie insert (its signed area exactly 0)",
+     {**H, "inserts": [{"outline": [[0.0625, 0.25], [0.125, 0.3125], [0.125, 0.25],
+                                    [0.0625, 0.3125]]}]},
      None, ["hopper.inserts[0].outline crosses itself"]),
     ("an insert across the axis",
      {**H, "inserts": [{"outline": [[-0.02, 0.3], [0.05, 0.3], [0.0, 0.4]]}]}, None,

@@ -240,12 +240,14 @@ def test_validate_prints_derived_quantities(tmp_path, capsys):
         warnings.simplefilter("ignore")
         cfg = HopperConfig.from_toml(path)
     grid = build_grid(cfg)
-    bev = float(theory.beverloo_rate(1500.0, 0.06) * theory.rose_tanaka_factor(20.0))
+    bev = float(theory.beverloo_rate(1500.0, 0.06, d=cfg.material.grain_diameter)
+                * theory.rose_tanaka_factor(20.0))
     theta_c = float(theory.jenike_critical_half_angle(30.0, 15.0))
     fill_mass = 1500.0 * cfg.hopper.fill_volume()
     for text in (f"{grid.n_cells} cells", "time step", "P-wave speed c_p",
                  f"{cfg.material.p_wave_speed:.4g} m/s", f"{bev:.4g} kg/s", "Rose-Tanaka",
-                 f"{theta_c:.1f} deg", "mass flow", f"{fill_mass:.4g} kg"):
+                 f"{theta_c:.1f} deg", "mass flow", f"{fill_mass:.4g} kg",
+                 "grains             d = 0.001 m, the outlet 60 grains across"):
         assert text in out.out, text
     assert "warning: only 3.0 cells across the outlet radius" in out.err
     assert "Traceback" not in out.err
@@ -273,6 +275,7 @@ def test_overwrite_refused_without_force(run_dir, capsys):
 def test_force_overwrites(tmp_path):
     out = tmp_path / "run"
     out.mkdir()
+    (out / "manifest.json").write_text('{"package": "fipy_hopper", "sessions": []}')
     (out / "summary.json").write_text("{}")
     (out / "notes.txt").write_text("mine")
     cfg = coarse_config(tmp_path)

@@ -200,6 +200,7 @@ class _Grid:
         self.r_cells = (np.arange(nr) + 0.5) * h
         self.z_nodes = z0 + np.arange(nz + 1) * h
         self.z_cells = 0.5 * (self.z_nodes[1:] + self.z_nodes[:-1])
+        self.kappa = np.ones((nz, nr))            # every cell open: no wall, no insert
 
 
 class _Model:

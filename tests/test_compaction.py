@@ -167,11 +167,20 @@ def test_loose_column_compacts_to_dense_under_gravity():
     inside = below[:, None] & (g.kappa > 0.99)
     assert state.alpha[inside].min() > 0.99
     assert state.loose[inside].max() < 0.01
-    # at rest on a frictionless wall: the floor carries the weight, sigma_zz = -rho g depth
+    # at rest on a frictionless wall each horizontal section carries the weight above it:
+    # its mean sigma_zz (over the open area) is -rho g depth (1 %; measured 0.1 %); the
+    # interior cells alone within 7 %: the impact's plastic history locks in a radial
+    # variation (measured up to 3.5 % with the plain law, 6 % with the grain size's
+    # overstress acting while the column decelerates)
     depth = 0.08 - g.z_cells
     rows = below & (depth > 2 * g.h)
+    weight = -RHO * GRAVITY * depth[rows]
+    carried = state.alpha * model.open_volume
+    section = (state.sigma[rows][:, :, 1] * carried[rows]).sum(axis=1) \
+        / model.open_volume[rows].sum(axis=1)
+    assert np.allclose(section / weight, 1.0, atol=0.01)
     szz = state.sigma[rows][:, :, 1][:, g.kappa[rows][0] > 0.99].mean(axis=1)
-    assert np.allclose(szz / (-RHO * GRAVITY * depth[rows]), 1.0, atol=0.05)
+    assert np.allclose(szz / weight, 1.0, atol=0.07)
 
 
 @pytest.mark.parametrize("alpha", [1.0, 0.8])

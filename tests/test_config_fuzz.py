@@ -9,8 +9,8 @@ and sections, and sections that are not tables.  A configuration that passes mus
 numbers ``fipy-hopper validate`` prints (:func:`fipy_hopper.api.expected_quantities`, the
 grid size, the time step) without an exception, finite where they are defined, and must
 survive its own TOML round trip.  The same inputs written as TOML files go through
-``fipy-hopper validate`` itself: exit 0, or exit 2 with one line and no traceback (its
-picture, ``geometry.png``, is stood in for: tests/test_boundary.py draws it).  The ``[hopper]``
+``fipy-hopper validate`` itself: exit 0, or exit 2 with one line and no traceback, drawing
+nothing (a picture is drawn only with ``--picture``: tests/test_boundary.py).  The ``[hopper]``
 tables mostly hold the keys of the shape drawn (a profile's walls, fill level, inserts; a
 shorthand's sizes), sometimes the other shape's too.
 
@@ -107,7 +107,11 @@ PLAUSIBLE = {
                            any_value | st.lists(any_value | insert, max_size=2))},
     "material": {"density": near(100.0, 5000.0), "youngs_modulus": near(1e4, 1e9),
                  "poisson_ratio": near(-0.5, 0.49), "friction_angle_deg": near(5.0, 60.0),
-                 "dilation_angle_deg": near(0.0, 30.0), "cohesion": near(0.0, 1e4)},
+                 "dilation_angle_deg": near(0.0, 30.0), "cohesion": near(0.0, 1e4),
+                 "grain_diameter": near(1e-4, 5e-3), "grain_density": near(1500.0, 8000.0),
+                 "rate_dependence": (st.sampled_from(["mu_I", "none"]),
+                                     st.sampled_from(["", "muI", "mu(I)"]) | any_value),
+                 "friction_rise": near(0.01, 1.0), "inertial_number_i0": near(0.01, 2.0)},
     "wall": {"friction_angle_deg": near(0.0, 45.0),
              "segment_friction_deg": (st.lists(near(0.0, 45.0)[0], min_size=1, max_size=4),
                                       any_value | st.lists(near(0.0, 45.0)[1], max_size=4))},
@@ -199,9 +203,12 @@ def check(data):
         again = HopperConfig.from_dict(tomllib.loads(cfg.to_toml()))
     assert again == cfg
     e = expected_quantities(cfg)
-    for key in ("fill_mass_kg", "p_wave_speed_m_s", "beverloo_rate_kg_s",
-                "expected_discharge_time_s", "rose_tanaka_factor", "cone_height_m"):
+    classic = ("beverloo_rate_kg_s", "rose_tanaka_factor", "cone_height_m")
+    for key in ("fill_mass_kg", "p_wave_speed_m_s", "beverloo_flat_rate_kg_s",
+                "expected_discharge_time_s", "transition_height_m") + (
+                    classic if cfg.hopper.classic else ()):
         assert math.isfinite(e[key]) and e[key] >= 0, (key, e[key])
+    assert cfg.hopper.classic or not any(key in e for key in classic)
     assert e["jenike_flow_mode"] in ("mass", "funnel", "unknown")
     assert 0 < cfg.n_cells <= fconfig.MAX_CELLS
     assert 0 < cfg.step_estimate() <= fconfig.MAX_STEPS
@@ -285,11 +292,11 @@ def test_validate_command_exits_0_or_2_with_one_line(folder, data):
     with open(path, "w", encoding="utf-8") as fh:
         fh.write(toml_text(data))
     out, err = io.StringIO(), io.StringIO()
-    drawn = []              # geometry.png: stood in for (tests/test_boundary.py draws)
+    drawn = []              # a picture would be noted here: none is drawn unless asked
     with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err), \
             mock.patch.object(Boundary, "draw", lambda self, p: drawn.append(p)):
         code = main(["validate", path])
-    assert len(drawn) == (code == 0)
+    assert not drawn                  # validate draws only when asked (--picture)
     errors = [line for line in err.getvalue().splitlines() if "warning:" not in line]
     if code == 0:
         assert not errors and out.getvalue().startswith(f"{path}: valid"), err.getvalue()

@@ -53,7 +53,7 @@ def corner_forces(model, state, sigma, viscosity, bulk_viscosity=0.0):
     stepping._cell_forces(carry_runs, n_carry, state.alpha, sig, state.v, model.open_volume,
                           model.r_c, model.grid.h, model.hourglass_base, out, viscosity,
                           bulk_viscosity, model.cfg.numerics.alpha_min, np.zeros_like(state.alpha),
-                          False)
+                          False, np.zeros_like(state.alpha), np.zeros(4))
     return out
 
 

@@ -55,6 +55,7 @@ def test_the_flow_mode_map_count_is_read_from_the_report():
     """The map's agreement comes from its table's rows on the map's own cells: one row
     flipped, one fewer; a flipped grid-check row (on finer cells) counts in the grid check."""
     before = {c["key"]: c for c in headline.build(REPORT_TEXT)["claims"]}["flow_mode_cones"]
+    assert "in-sample" in before["result"] and "not placed on" in before["result"]
     values = before["values"]
     agree, cases = values["agree"], values["cases"]
     own = "| 10 | 10 | 5 | 44.8 | mass | mass | 0.81 | 1 | 0 | 0.87 | yes |"
@@ -121,3 +122,51 @@ def test_readme_picture_caption_is_the_pictures_own_record():
     assert picture.readme_text() == picture.README.read_text(encoding="utf-8"), \
         "README.md's picture caption is not the picture's: run 'python studies/demo_picture.py'"
     assert picture.PICTURE.stat().st_size < 400_000
+
+
+def test_the_picture_is_stale_once_a_later_commit_changes_what_it_draws(tmp_path):
+    """``demo_picture.py --check``'s rule on a constructed repository: a picture made at a
+    commit is up to date while the later commits touch other files, stale (one line naming
+    the commit and the file) once one changes the plotting or the wall loads, and stale when
+    it records no commit or one the checkout does not hold."""
+    import subprocess
+
+    from PIL import Image, PngImagePlugin
+
+    picture = load("demo_picture")
+
+    def git(*args):
+        out = subprocess.run(["git", "-C", str(tmp_path), "-c", "user.name=t",
+                              "-c", "user.email=t@example.org", *args],
+                             capture_output=True, text=True, check=True)
+        return out.stdout.strip()
+
+    def commit(path, text):
+        (tmp_path / path).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / path).write_text(text, encoding="utf-8")
+        git("add", path)
+        git("commit", "-q", "-m", f"change {path}")
+        return git("rev-parse", "--short", "HEAD")
+
+    def draw(recorded):
+        info = PngImagePlugin.PngInfo()
+        info.add_text("fipy_hopper:commit", recorded)
+        png = tmp_path / "docs" / "images" / "demo.png"
+        png.parent.mkdir(parents=True, exist_ok=True)
+        Image.new("RGB", (4, 4), "white").save(png, pnginfo=info)
+        return png
+
+    git("init", "-q")
+    made = commit("fipy_hopper/plotting.py", "a = 1\n")
+    png = draw(made)
+    assert picture.stale_reason(tmp_path, png) is None
+    commit("fipy_hopper/io.py", "b = 1\n")
+    assert picture.stale_reason(tmp_path, png) is None
+    later = commit("fipy_hopper/wall_traction.py", "c = 1\n")
+    reason = picture.stale_reason(tmp_path, png)
+    assert reason and "\n" not in reason
+    assert f"git {made}" in reason and f"git {later}" in reason
+    assert "fipy_hopper/wall_traction.py" in reason and "demo_picture.py hopper_run" in reason
+    assert picture.stale_reason(tmp_path, draw(git("rev-parse", "--short", "HEAD"))) is None
+    assert "records no commit" in picture.stale_reason(tmp_path, draw("not recorded"))
+    assert "does not hold" in picture.stale_reason(tmp_path, draw("0123abc"))

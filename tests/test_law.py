@@ -51,7 +51,13 @@ class HalfStepLaw(MohrCoulomb):
 
 
 def law_of(cls, **extra):
-    return cls(**{k: v for k, (v, _) in CFG.material.law().parameters().items()}, **extra)
+    """A law of class ``cls`` made from the configuration's law's declared parameters (its
+    rate dependence's among them: the law's parameters are complete)."""
+    from fipy_hopper.material.rate import RATE_PARAMETERS, InertialRheology
+
+    values = {k: v for k, (v, _) in CFG.material.law().parameters().items()}
+    rate = {k: values.pop(k) for k in RATE_PARAMETERS if k in values}
+    return cls(**values, rate=InertialRheology(**rate) if rate else None, **extra)
 
 
 def test_the_model_takes_its_step_and_its_update_from_the_law():

@@ -39,7 +39,8 @@ def test_compiled_step_equals_numpy_reference(small_cfg):
 @pytest.mark.parametrize("plate_closed", [True, False])
 def test_compiled_contact_equals_numpy(small_cfg, plate_closed):
     """Random velocities at every node in contact (corners and the lip included): the
-    compiled contact and its numpy reference give the same velocities and impulses."""
+    compiled contact and its numpy reference give the same velocities and impulses, to the
+    bit."""
     from fipy_hopper import stepping
     model = HopperModel(small_cfg)
     rng = np.random.default_rng(0)
@@ -54,14 +55,14 @@ def test_compiled_contact_equals_numpy(small_cfg, plate_closed):
     for q in range(len(node_j)):
         stepping._contact_node(v, node_j[q], node_i[q], mass, node_ptr[q], node_ptr[q + 1],
                                normal, mu, kind, entry, plate_closed, wall, plate)
-    assert np.allclose(v, ref_v, rtol=1e-12, atol=1e-14)
-    assert np.allclose(wall, ref_wall, rtol=1e-12, atol=1e-14)
-    assert np.allclose(plate, ref_plate, rtol=1e-12, atol=1e-14)
-    # nothing presses into a wall afterwards, and the impulses explain the change
+    assert np.array_equal(v, ref_v)
+    assert np.array_equal(wall, ref_wall)
+    assert np.array_equal(plate, ref_plate)
+    # nothing presses into a wall afterwards
     for q in range(len(node_j)):
         for k in range(node_ptr[q], node_ptr[q + 1]):
             if kind[k] == 0 or plate_closed:
-                assert v[:, node_j[q], node_i[q]] @ normal[k] <= 1e-12
+                assert v[:, node_j[q], node_i[q]] @ normal[k, :2] <= 1e-12
 
 
 def test_a_corner_pressed_from_both_sides_stops(small_cfg):

@@ -562,6 +562,7 @@ def held(tmp_path):
     out.mkdir()
     (out / "config.toml").write_text(HopperConfig().to_toml())
     (out / "checkpoint.npz").write_bytes(b"PK")
+    (out / "manifest.json").write_text('{"package": "fipy_hopper", "sessions": []}')
     proc = subprocess.Popen([sys.executable, "-c", HOLD, str(out / ".lock")],
                             stdout=subprocess.PIPE, text=True)
     assert proc.stdout.readline().strip() == "locked"
@@ -585,7 +586,8 @@ def test_a_second_run_with_force_is_refused_in_one_line(held, tmp_path, capsys):
     assert main(argv) == 2
     assert "in use by another run" in one_error_line(capsys.readouterr().err)
     assert (out / "config.toml").read_text() == before
-    assert sorted(p.name for p in out.iterdir()) == [".lock", "checkpoint.npz", "config.toml"]
+    assert sorted(p.name for p in out.iterdir()) == [".lock", "checkpoint.npz", "config.toml",
+                                                     "manifest.json"]
 
 
 def test_the_lock_of_a_killed_process_does_not_block(held):
@@ -640,6 +642,7 @@ def test_ctrl_c_before_any_checkpoint_does_not_suggest_resume(tmp_path, capsys, 
 
     def interrupted(config, out, **kwargs):       # Ctrl-C after writing what api.run writes
         rundir = RunDirectory(out, force=kwargs["force"])
+        (rundir / "manifest.json").write_text('{"package": "fipy_hopper", "sessions": []}')
         (rundir / "config.toml").write_text(config.to_toml())
         if checkpoints:
             (rundir / "checkpoint.npz").write_bytes(b"")

@@ -211,8 +211,8 @@ def test_stress_rotates_with_the_material_jaumann(small_cfg):
     _, _, n_blocks, _, _ = stepping._runs(alpha, num.alpha_min, sigma, loose, v.copy(), contrib,
                                           carry_runs, load_runs, block_ptr)
     before = sigma.copy()
-    stepping._stress_update(block_ptr, n_blocks, load_runs, v, sigma, loose, eps_p, model.r_c,
-                            model.flux_radius, model.strain_dims, g.h, model.dt, g.kappa,
+    stepping._stress_update(block_ptr, n_blocks, load_runs, v, sigma, loose, eps_p,
+                            np.zeros_like(alpha), model.r_c, model.flux_radius, model.strain_dims, g.h, model.dt, g.kappa,
                             model._zface_aperture,
                             model._rface_aperture, model._prm,
                             return_fast._fast_constants(model._prm), np.zeros_like(alpha))
@@ -277,7 +277,7 @@ def _forces_and_nodes(model, state, with_mass):
     stepping._cell_forces(carry_runs, n_carry, state.alpha, sigma, v, model.open_volume,
                           model.r_c, g.h, model.hourglass_base, contrib, model.viscosity,
                           model.bulk_viscosity, num.alpha_min, np.zeros_like(state.alpha),
-                          False)
+                          False, state.flowing, model._rate)
     row_nodes, _, node_i, node_ptr, normal, mu, kind, entry = model.contact_groups
     stepping._node_update(0, g.nz + 1, v, mass, contrib, 9.81, model.dt, 0.0, model.light_mass,
                           row_nodes, node_i, node_ptr, normal, mu, kind, entry, False, 0.0,

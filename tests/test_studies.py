@@ -363,12 +363,54 @@ def test_funnel_channel_edge_on_a_constructed_speed_profile():
 
 def test_funnel_channel_study_writes_its_outputs(root):
     out = run_quick(root, "funnel_channel")
-    numbers = study_json(out)["numbers"]["funnel_plain"]
+    numbers = study_json(out)["numbers"]["funnel_default"]
     assert numbers["cell_sizes_mm"] == [10.0, 7.5]
     assert all(math.isfinite(x) for x in numbers["early_rate_kg_s"])
     assert all(x is not None for x in numbers["edge_angle_deg"])
+    assert all(x is not None and x > 0 for x in numbers["edge_width_grains"])
     assert_png(out / "funnel_channel.png")
     assert len(rows_of(out / "channel.csv")) > 10
+
+
+# ---------------------------------------------------------------- grain size
+def test_grain_size_offset_fit_on_constructed_rates():
+    """Rates made exactly as W = A (D0 - k d)^n give back k and n (the fit the study makes
+    of its runs: never a value set in a test of the model)."""
+    study = load("grain_size")
+    d0 = np.repeat([0.04, 0.06, 0.08], 4)
+    d = np.tile([0.0005, 0.001, 0.002, 0.003], 3)
+    for k, n in ((1.4, 2.5), (0.6, 2.62)):
+        w = 3.0 * (d0 - k * d) ** n
+        a, k_fit, n_fit = study.fit_offset(d0, d, w)
+        assert k_fit == pytest.approx(k, abs=1e-3) and n_fit == pytest.approx(n, rel=1e-4)
+        a, k_held, _ = study.fit_offset(d0, d, w, n=n)
+        assert k_held == pytest.approx(k, abs=1e-3)
+
+
+def test_grain_size_study_writes_its_outputs(root):
+    out = run_quick(root, "grain_size")
+    data = study_json(out)
+    rows = rows_of(out / "results.csv")
+    laws = {r["law"] for r in rows}
+    assert laws == {"plain", "mu_I"}
+    assert all(not r["error"] for r in rows)
+    # the grain size slows the flow: every mu(I) case below the plain law at its outlet
+    assert all(float(r["ratio_to_plain"]) < 1.0 for r in rows if r["law"] == "mu_I")
+    assert "k_free" in data["numbers"]
+    assert_png(out / "rate_vs_grain.png")
+
+
+def test_shear_band_study_measures_the_band_in_grains(root):
+    """The quick layers: the band is the grain size's (the same at both cells within 15 %,
+    wider in mm for the coarser grains), and the plain law's is one cell."""
+    out = root / "shear_band"
+    assert load("shear_band").main(["--quick", "--out", str(out)]) == 0
+    numbers = study_json(out)["numbers"]
+    for d in (1, 3):
+        assert numbers[f"band_change_pct_v0.5_d{d}mm"] < 15.0
+    assert numbers["band_mm_v0.5_d3mm"][-1] > numbers["band_mm_v0.5_d1mm"][-1]
+    assert all(c <= 1.01 for c in numbers["plain_band_cells_v0.5"])
+    assert_png(out / "shear_band.png")
 
 
 # ---------------------------------------------------------------- robustness
@@ -577,7 +619,9 @@ def test_report_is_generated_from_the_outputs(root, flow_map, discharge, wall, c
     assert set(result["missing"]) == {"plane_flow", "discharge_rate", "wall_pressure",
                                       "convergence",
                                       "discharge_dynamics", "stiffness_spread",
-                                      "robustness", "funnel_channel", "element_tests",
+                                      "robustness", "funnel_channel", "grain_size",
+                                      "shear_band",
+                                      "element_tests",
                                       "lagrangian_vs_eulerian", "arching", "geometries"}
     assert "python studies/robustness.py" in (tmp_path / "partial.md").read_text()
 

@@ -3,6 +3,7 @@ exact stretch by stretch, positive (Coulomb holds wherever it holds at the nodes
 the wall cuts the cells smooth, converging bin by bin under refinement, at rest and in
 discharge; the plain binning of the reaction, node by node, is not."""
 
+import math
 import warnings
 
 import numpy as np
@@ -13,10 +14,11 @@ from fipy_hopper.config import HopperConfig
 from fipy_hopper.diagnostics import bin_scatter, smooth_fit_rms
 from fipy_hopper.model import HopperModel
 from fipy_hopper.simulation import Simulation
-from fipy_hopper.wall_traction import StretchRecovery, WallStretch
+from fipy_hopper.boundary import Segment
+from fipy_hopper.wall_traction import StretchRecovery
 
-CONE = WallStretch((0.03, 0.0), (0.15, 0.33), 0.0, True, segment=1)
-PLATE = WallStretch((0.03, 0.0), (0.15, 0.33), 0.0, False, segment=1)
+CONE = Segment((0.03, 0.0), (0.15, 0.33), s_start=0.0, index=1, axisymmetric=True)
+PLATE = Segment((0.03, 0.0), (0.15, 0.33), s_start=0.0, index=1, axisymmetric=False)
 
 
 def scattered_forces(stretch, n=400, seed=1):
@@ -161,36 +163,90 @@ def test_the_recovered_traction_carries_the_reaction_and_the_weight(at_rest):
     assert abs(section * up.sum() + rec.rest_balance["outlet"] - weight) < 0.005 * weight
 
 
-def test_the_profile_at_rest_converges_bin_by_bin():
+@pytest.fixture(scope="module")
+def refined():
+    """The reference hopper at rest at 5, 3.75 and 2.5 mm (about 90 s of CPU together)."""
+    return {h: run(reference(cell_size=h)) for h in (0.005, 0.00375, 0.0025)}
+
+
+@pytest.fixture(scope="module")
+def discharged():
+    """The reference hopper at 5 mm, filled and 1.6 s into the discharge."""
+    return run(reference(end_time=1.6))
+
+
+def corner_bin(sim):
+    """The index of the bin wall's first bin above the transition."""
+    s = sim.record.wall["filling"][1]
+    return int(np.flatnonzero(s > float(geometry.transition_arc_length(
+        sim.model.cfg.hopper)))[0])
+
+
+def test_the_profile_at_rest_converges_bin_by_bin(refined):
     """The reference hopper at rest at 5, 3.75 and 2.5 mm, on the same 15 mm bins: between
     3.75 and 2.5 mm no bin of the loaded wall differs by 5 % or more, but for the two bins at
-    the outlet lip (a re-entrant corner: singular stress) and the bin wall's first bin above
-    the transition, where the corner's node carries the cone's load and the bin wall's first
-    cell is under-loaded by a share that shrinks with the cell (its deficit against the next
-    bin falls with each refinement); and the L2 differences decrease."""
-    runs = {h: run(reference(cell_size=h)) for h in (0.005, 0.00375, 0.0025)}
+    the outlet lip (a re-entrant corner: singular stress) and the top bin under the free
+    surface (75 Pa, 2 % of the peak, set by how the surface is smeared over a cell: 4.9 %
+    with the corner's load on the cone, 5.4 % with it shared), the bin wall's first bin above
+    the transition among them (the corner's node shares its load with the bin wall: within
+    1 % here, 8.8 % when the cone took it all); and the L2 differences decrease."""
+    runs = refined
     s = runs[0.005].record.wall["filling"][1]
     p = {h: sim.record.wall["filling"][4] for h, sim in runs.items()}
     for h in p:
         np.testing.assert_array_equal(runs[h].record.wall["filling"][1], s)
     geom = runs[0.005].model.cfg.hopper
-    s_t = float(geometry.transition_arc_length(geom))
     s_top = float(geometry.arc_length(geom.fill_level, geom))
-    corner = int(np.flatnonzero(s > s_t)[0])
-    loaded = (np.arange(len(s)) >= 2) & (s < s_top) & (np.arange(len(s)) != corner)
+    corner = corner_bin(runs[0.005])
+    width = runs[0.005].model.cfg.wall_bin_width_m
+    loaded = (np.arange(len(s)) >= 2) & (s < s_top - width)
     diff = np.abs(p[0.00375] - p[0.0025]) / p[0.0025]
     assert diff[loaded].max() < 0.05
-    deficit = [1 - p[h][corner] / p[h][corner + 1] for h in (0.005, 0.00375, 0.0025)]
-    assert deficit[0] > deficit[1] > deficit[2] > 0
+    assert diff[corner] < 0.05
     l2 = [np.linalg.norm(p[a] - p[b]) / np.linalg.norm(p[b])
           for a, b in ((0.005, 0.00375), (0.00375, 0.0025))]
     assert l2[0] > l2[1]
 
 
-def test_the_pressure_on_the_cone_in_discharge_is_smooth():
+def coulomb_ratio(sim, stage):
+    """``|tau| / (tan phi_w p_n)`` in every loaded bin of the walls' stretches (the cone and
+    the bin wall) of a stage, and where each bin is (True on the cone)."""
+    _, s, _, _, p, tau = sim.record.wall[stage]
+    mu = math.tan(math.radians(sim.model.cfg.wall.friction_angle_deg))
+    loaded = p > 0
+    s_t = float(geometry.transition_arc_length(sim.model.cfg.hopper))
+    return np.abs(tau[loaded]) / (mu * p[loaded]), s[loaded] < s_t
+
+
+def test_coulomb_holds_in_every_bin_at_rest_beside_the_corner(refined):
+    """At rest at 5, 3.75 and 2.5 mm: |tau| <= tan phi_w p_n in every bin of the cone and of
+    the bin wall (the corner's node shares its impulse inside both walls' friction cones),
+    and the bin wall's first bin above the transition is within 5 % of the next (it carries
+    its share of the corner: 20 % short at 5 mm when the cone took it all)."""
+    for h, sim in refined.items():
+        ratio, on_cone = coulomb_ratio(sim, "filling")
+        assert on_cone.any() and (~on_cone).any()
+        assert ratio.max() <= 1.0 + 1e-9, h
+        p = sim.record.wall["filling"][4]
+        k = corner_bin(sim)
+        assert abs(p[k] / p[k + 1] - 1) < 0.05, h
+
+
+def test_coulomb_holds_in_every_bin_of_every_stage(discharged):
+    """Filled and 1.6 s into the discharge (5 mm): |tau| <= tan phi_w p_n in every bin of the
+    cone and of the bin wall at rest and in the early discharge (the envelope has no shear)."""
+    stages = [k for k in discharged.record.wall if k != "discharge_envelope"]
+    assert stages == ["filling", "early_discharge"]
+    for stage in stages:
+        ratio, on_cone = coulomb_ratio(discharged, stage)
+        assert on_cone.any() and (~on_cone).any()
+        assert ratio.max() <= 1.0 + 1e-9, stage
+
+
+def test_the_pressure_on_the_cone_in_discharge_is_smooth(discharged):
     """The reference hopper at 5 mm, the 0.1 s window from the moment 90 % of the mass is
     left: the cone's bin-to-bin scatter of p_n is at most 4 %; the plain binning's is more."""
-    sim = run(reference(end_time=1.6))
+    sim = discharged
     _, s, _, _, p, _ = sim.record.wall["early_discharge"]
     raw = sim.record.wall_raw["early_discharge"][0]
     s_t = float(geometry.transition_arc_length(sim.model.cfg.hopper))

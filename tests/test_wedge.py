@@ -143,7 +143,7 @@ def test_wedge_results_are_per_metre_and_say_so(tmp_path, capsys):
         '[hopper]\nshape = "wedge"\nbin_width = 0.4\noutlet_width = 0.08\n')
     assert main(["validate", str(tmp_path / "w.toml")]) == 0
     out = capsys.readouterr().out
-    slot = float(theory.beverloo_slot_rate(RHO, 0.08))
+    slot = float(theory.beverloo_slot_rate(RHO, 0.08, d=HopperConfig().material.grain_diameter))
     plane = float(theory.jenike_critical_half_angle_plane(30.0, 15.0))
     assert f"{slot:.4g} kg/s per m of slot" in out
     assert f"{plane:.1f} deg" in out and "plane flow" in out
@@ -216,7 +216,8 @@ def test_no_strain_along_the_wedge_in_cut_cells():
                                                   state.loose, state.v.copy(), contrib,
                                                   carry_runs, load_runs, block_ptr)
             stepping._stress_update(block_ptr, n_blocks, load_runs, state.v, state.sigma,
-                                    state.loose, state.eps_p, model.r_c, model.flux_radius,
+                                    state.loose, state.eps_p, state.flowing, model.r_c,
+                                    model.flux_radius,
                                     model.strain_dims, g.h, model.dt, g.kappa,
                                     model._zface_aperture, model._rface_aperture, model._prm,
                                     return_fast._fast_constants(model._prm),

@@ -8,14 +8,17 @@ compression and extension, simple shear, oedometric).  Stresses in Pa, tension p
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from .mohr_coulomb import MohrCoulomb, elastic_stiffness, invariants
+from .mohr_coulomb import ELASTIC, MohrCoulomb, elastic_stiffness, invariants
+from .rate import overstress, overstress_compiled
 from .return_fast import update
 
-__all__ = ["ElementTestResult", "PATHS", "drive", "element_test"]
+__all__ = ["ElementTestResult", "PATHS", "ShearLayerResult", "drive", "element_test", "shear_layer",
+           "steady_simple_shear"]
 
 #: Laboratory paths of :func:`element_test`: the strain increment per unit of ``strain`` and the
 #: stress-controlled strain modes (rows; see :func:`drive`).  Homogeneous axisymmetric
@@ -132,3 +135,118 @@ def element_test(mat: MohrCoulomb, path: str, sigma0, strain: float, n_steps: in
         sigma0 = sigma0 * np.array([1.0, 1.0, 1.0, 0.0])
     d_eps = np.tile(np.asarray(unit) * (strain / n_steps), (n_steps, 1))
     return drive(mat, sigma0, d_eps, control, path=path)
+
+
+def steady_simple_shear(mat: MohrCoulomb, normal_stress: float, gamma_dot: float,
+                        strain: float = 0.05, n_steps: int = 100, compiled: bool = True) -> dict:
+    """Simple shear at the shear rate ``gamma_dot`` (1/s) under a held normal stress
+    ``sigma_zz = -normal_stress`` (Pa), from the isotropic state ``-normal_stress I`` to the
+    engineering shear strain ``strain`` in ``n_steps`` steps (:func:`element_test`'s
+    ``simple_shear``: the rate-independent return), then the law's rate-dependent overstress
+    at the last step's strain rate ``D = d_eps / dt``, ``dt = strain / (gamma_dot n_steps)``
+    (:func:`fipy_hopper.material.rate.overstress_compiled`, or its numpy reference with
+    ``compiled=False``).
+
+    Returns ``{"I", "p", "gamma_dot", "tau_plain", "tau", "mu_plain", "mu"}``: the inertial
+    number ``gamma_dot d / sqrt(p / rho_s)`` of the flow (``gamma_dot = sqrt(2 D':D')``; 0
+    for a plain law), the pressure ``p = -tr(sigma) / 3`` (Pa) of the rate-independent stress,
+    the shear stresses ``|sigma_rz|`` without and with the overstress (Pa) and their ratios to
+    ``p``.  In steady flow ``mu - mu_plain`` is the rise ``delta_mu I / (I_0 + I)`` of the
+    mu(I) law."""
+    res = element_test(mat, "simple_shear", -float(normal_stress), strain, n_steps)
+    dt = strain / (gamma_dot * n_steps)
+    D = (res.strain[-1] - res.strain[-2]) / dt
+    sigma = res.stress[-1]
+    flowing = res.status[-1] != ELASTIC
+    rate = mat.rate_parameters()
+    extra = (overstress_compiled if compiled else overstress)(sigma, D, flowing, rate)
+    p = -(sigma[0] + sigma[1] + sigma[2]) / 3.0
+    dev = D[:3] - D[:3].sum() / 3.0
+    rate_of_shear = float(np.sqrt(2.0 * (dev @ dev + 2.0 * D[3] ** 2)))
+    inertial = (rate_of_shear * rate[0] / np.sqrt(p / rate[1])) if rate[0] > 0 else 0.0
+    tau_plain, tau = abs(sigma[3]), abs(sigma[3] + extra[3])
+    return {"I": float(inertial), "p": float(p), "gamma_dot": rate_of_shear,
+            "tau_plain": float(tau_plain), "tau": float(tau),
+            "mu_plain": float(tau_plain / p), "mu": float(tau / p)}
+
+
+@dataclass(frozen=True)
+class ShearLayerResult:
+    """A plane shear layer driven at its top (:func:`shear_layer`): node heights ``y`` (m,
+    from the fixed bottom), node speeds ``u`` (m/s), the cells' pressure ``p`` (Pa) and
+    total shear stress ``tau`` (Pa, the overstress included), the time reached (s)."""
+
+    y: np.ndarray
+    u: np.ndarray
+    p: np.ndarray
+    tau: np.ndarray
+    t: float
+
+    def band_width(self, fraction: float = 0.05) -> float:
+        """The depth (m) below the moving top over which the speed falls to ``fraction`` of
+        the top's (linear between nodes): the shear band's width."""
+        top = self.u[-1]
+        below = np.flatnonzero(self.u < fraction * top)
+        if below.size == 0:
+            return float(self.y[-1] - self.y[0])
+        k = below[-1]                       # the highest node below the fraction
+        u0, u1 = self.u[k], self.u[k + 1]
+        y = self.y[k] + (fraction * top - u0) / (u1 - u0) * (self.y[k + 1] - self.y[k])
+        return float(self.y[-1] - y)
+
+
+def shear_layer(mat: MohrCoulomb, depth: float, cells: int, speed: float, top_pressure: float,
+                gravity: float = 9.81, duration: float = 0.5, dt_safety: float = 0.4,
+                compiled: bool = True) -> ShearLayerResult:
+    """A horizontal plane layer of the law ``mat`` (depth ``depth`` m, ``cells`` cells) under
+    gravity and a top pressure ``top_pressure`` (Pa), its bottom held and its top moved
+    sideways at ``speed`` (m/s) for ``duration`` s from rest: the shear band the law forms
+    under its moving top.
+
+    One horizontal velocity ``u(y)`` (nodes), simple shear in each cell (``D_xy = du/dy /
+    2``, the layout ``(rr, zz, tt, rz)`` read as ``(xx, yy, zz, xy)``, ``zz`` out of the
+    plane), the Jaumann rotation, the law's return (:meth:`MohrCoulomb.update` or
+    ``update_reference``) and, where the return was plastic, the law's rate-dependent
+    overstress (:func:`fipy_hopper.material.rate.overstress_compiled` or its numpy
+    reference); ``rho h du/dt = tau_above - tau_below`` with ``tau`` the total shear stress,
+    explicit with ``dt = dt_safety h / c_p``.  The initial stress is isotropic,
+    ``p(y) = top_pressure + rho g (depth - y)``; with no volume change (``psi = 0``) the
+    pressure keeps that profile, so the shear stress that the layer carries in steady flow
+    rises above the plain law's yield only near the top, where ``p`` is least: the band.  A
+    plain law concentrates it in the top cell; the grain size gives it a width of its own."""
+    h = depth / cells
+    y = h * np.arange(cells + 1)
+    y_c = 0.5 * (y[1:] + y[:-1])
+    p0 = top_pressure + mat.rho * gravity * (depth - y_c)
+    sigma = np.zeros((cells, 4))
+    sigma[:, :3] = -p0[:, None]
+    u = np.zeros(cells + 1)
+    u[-1] = speed
+    flowing = np.zeros(cells, dtype=bool)
+    rate = mat.rate_parameters()
+    update_fn = mat.update if compiled else mat.update_reference
+    over_fn = overstress_compiled if compiled else overstress
+    dt = dt_safety * h / mat.p_wave_speed
+    steps = int(math.ceil(duration / dt))
+    m = mat.rho * h
+    D = np.zeros((cells, 4))
+    tau = np.zeros(cells)
+    for _ in range(steps):
+        gamma = np.diff(u) / h                       # du/dy per cell
+        D[:, 3] = 0.5 * gamma
+        tau = sigma[:, 3] + over_fn(sigma, D, flowing, rate)[:, 3]
+        u[1:-1] += dt * (tau[1:] - tau[:-1]) / m
+        gamma = np.diff(u) / h
+        w = 0.5 * gamma * dt                         # spin W_xy dt
+        rotated = sigma.copy()
+        rotated[:, 0] += 2.0 * w * sigma[:, 3]
+        rotated[:, 1] -= 2.0 * w * sigma[:, 3]
+        rotated[:, 3] += w * (sigma[:, 1] - sigma[:, 0])
+        d_eps = np.zeros((cells, 4))
+        d_eps[:, 3] = 0.5 * gamma * dt
+        sigma, _, status = update_fn(rotated, d_eps, return_status=True)
+        flowing = status != ELASTIC
+    D[:, 3] = 0.5 * np.diff(u) / h
+    tau = sigma[:, 3] + over_fn(sigma, D, flowing, rate)[:, 3]
+    p = -(sigma[:, 0] + sigma[:, 1] + sigma[:, 2]) / 3.0
+    return ShearLayerResult(y=y, u=u.copy(), p=p, tau=tau, t=steps * dt)

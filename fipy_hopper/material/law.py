@@ -12,16 +12,24 @@ A law is an object that declares
   arrays of points ``(n, 4)`` (``rr, zz, tt, rz``, tension positive, Pa) returning the new
   stress and the plastic strain increment (and, with ``return_status``, ``ELASTIC``/``PLASTIC``/
   ``APEX`` per point), with ``update_reference`` its plain-numpy twin;
-* ``kernel_parameters()``: the float array its compiled kernels read inside the fused step.
+* ``kernel_parameters()``: the float array its compiled kernels read inside the fused step;
+* ``rate_parameters()`` and ``overstress_reference(sigma, D, flowing)``: its rate dependence
+  above the yield surface (:mod:`fipy_hopper.material.rate`: the grain size ``d``, ``rho_s``,
+  ``delta_mu``, ``I_0``; zeros for a rate-independent law) and its numpy overstress
+  ``2 eta D'`` (Pa) in flowing material, which the momentum balance adds to the stored stress
+  in its forces (the compiled step calls the law's compiled point functions
+  ``rate.overstress_factor`` and ``rate.deviatoric_rate`` with ``rate_parameters()``).
 
 The model (:class:`fipy_hopper.model.HopperModel`) takes its time step, the fields it transports
 and its stress update from the law, and keeps what is not a property of the material to
 itself: the dense/loose rule (:mod:`fipy_hopper.dense_loose`) is a closure of the Eulerian
 mixture, applied around the law's update.  :class:`~fipy_hopper.material.MohrCoulomb` (the
 Abaqus form) is the law implemented; the compiled step is written for its internal variables
-and fuses its return mapping, so the compiled backend runs a law only when that is exactly
-its stress update (:func:`compiled_refusal`); any other law runs on the numpy backend, which
-calls the law's own ``update_reference``.
+and calls its compiled point update (:func:`fipy_hopper.material.return_fast.update_points`,
+the one compiled Mohr–Coulomb return) and its compiled overstress, so the compiled backend runs
+a law only when those are exactly its stress update and its rate dependence
+(:func:`compiled_refusal`); any other law runs on the numpy backend, which calls the law's own
+``update_reference`` and ``overstress_reference``.
 """
 
 from __future__ import annotations
@@ -55,6 +63,10 @@ class ConstitutiveLaw(Protocol):
 
     def kernel_parameters(self) -> np.ndarray: ...
 
+    def rate_parameters(self) -> np.ndarray: ...
+
+    def overstress_reference(self, sigma: np.ndarray, D: np.ndarray, flowing) -> np.ndarray: ...
+
 
 def transported_fields(law: ConstitutiveLaw, model_fields=("layer", "loose")) -> tuple:
     """The cell fields the Eulerian transport carries for ``law``: the material fraction
@@ -65,7 +77,8 @@ def transported_fields(law: ConstitutiveLaw, model_fields=("layer", "loose")) ->
 
 #: the methods of a law that make up its stress update; the compiled step fuses
 #: :class:`~fipy_hopper.material.MohrCoulomb`'s
-STRESS_UPDATE = ("update", "update_reference", "kernel_parameters")
+STRESS_UPDATE = ("update", "update_reference", "kernel_parameters", "rate_parameters",
+                 "overstress_reference")
 
 
 def compiled_refusal(law) -> str:

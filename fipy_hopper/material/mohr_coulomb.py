@@ -76,6 +76,13 @@ class MohrCoulomb:
     Abaqus default ``(3 - sin phi)/(3 + sin phi)``, for which the flow potential passes through the
     corners of the Mohr–Coulomb hexagon).  Ranges: ``0 < phi < 90``, ``0 <= psi <= phi``, ``c >= 0``,
     ``E > 0``, ``-1 < nu < 0.5``, ``1/2 < e <= 1``, ``eps > 0``, ``rho > 0``.
+
+    ``rate``: the rate dependence above the yield surface, an
+    :class:`~fipy_hopper.material.rate.InertialRheology` (the μ(I) overstress with the grain
+    size d, :mod:`fipy_hopper.material.rate`), or ``None``: the plain rate-independent law of
+    the published method.  It does not change the return (:meth:`update`): the overstress is a
+    function of the strain rate that the momentum balance adds in flowing material
+    (:meth:`overstress_reference`, :meth:`rate_parameters`).
     """
 
     E: float
@@ -86,6 +93,7 @@ class MohrCoulomb:
     c: float = 0.0
     eps: float = 0.1
     e: float | None = None
+    rate: object = None
 
     #: per-point state carried besides the stress (transported with the material):
     #: the equivalent plastic strain
@@ -127,6 +135,10 @@ class MohrCoulomb:
             except (TypeError, ValueError):
                 raise ValueError(f"MohrCoulomb: e = {self.e!r} is not a number") from None
             check("e", lambda v: math.isfinite(v) and 0.5 < v <= 1.0, "1/2 < e <= 1")
+        from .rate import InertialRheology
+        if self.rate is not None and not isinstance(self.rate, InertialRheology):
+            raise ValueError(f"MohrCoulomb: rate = {self.rate!r} is not an InertialRheology "
+                             f"or None")
 
     # elastic constants -------------------------------------------------------------------------
     @property
@@ -157,8 +169,26 @@ class MohrCoulomb:
 
     # the law's side of the material seam (fipy_hopper.material.law) ----------------------------
     def parameters(self) -> dict:
-        """``{name: (value, unit)}`` of every parameter (SI; angles in degrees)."""
-        return {name: (getattr(self, name), unit) for name, unit in self.UNITS.items()}
+        """``{name: (value, unit)}`` of every parameter (SI; angles in degrees), the rate
+        dependence's included."""
+        own = {name: (getattr(self, name), unit) for name, unit in self.UNITS.items()}
+        if self.rate is not None:
+            own.update({name: (getattr(self.rate, name), unit)
+                        for name, unit in self.rate.UNITS.items()})
+        return own
+
+    def rate_parameters(self) -> np.ndarray:
+        """``[d, rho_s, delta_mu, I_0]`` of the rate dependence for the compiled overstress
+        (:func:`fipy_hopper.material.rate.overstress_factor`); zeros (none) for the plain law."""
+        from .rate import NO_RATE
+        return NO_RATE.copy() if self.rate is None else self.rate.kernel_parameters()
+
+    def overstress_reference(self, sigma, D, flowing):
+        """The rate-dependent overstress ``2 eta D'`` (Pa, ``(..., 4)``) of stresses ``sigma``
+        at strain rates ``D`` (1/s) where ``flowing``: :func:`fipy_hopper.material.rate.
+        overstress` (zero for the plain law)."""
+        from .rate import overstress
+        return overstress(sigma, D, flowing, self.rate_parameters())
 
     def stable_time_step(self, h: float, safety: float) -> float:
         """The explicit step ``safety * h / c_p`` (s) on cells of size ``h`` (m)."""

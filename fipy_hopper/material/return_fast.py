@@ -330,16 +330,33 @@ def _fast_final(m, p_tr, q_tr, ct, st, f, tau, valid, done, N1, N2, N3, ok, cst,
 
 
 @_jit
-def _predict_block(sig, deps, b0, b1, prm, sig_out, dep_out, status, idx, pos, trial, S):
-    """Pass 1 of :func:`_update_kernel` over the points b0:b1: elastic predictor, principal
-    stresses and F.  Elastic points are written out; the plastic ones are gathered (their index,
-    position of the hoop stress, trial stress and in-plane axes, sorted principal stresses and
-    F_tr).  Returns their number."""
+def update_points(points, n, prm, cst, out, status):
+    """The law's compiled point update of ``n <= _BLOCK`` points, in place into ``out``.
+
+    ``points`` (at least 8 rows, ``n`` columns): rows 0-3 the stress before the increment
+    (``rr, zz, tt, rz``, Pa), rows 4-7 the strain increment (tensor shear).  Writes ``out``
+    (8 rows): rows 0-3 the new stress, rows 4-7 the plastic strain increment ``C^-1 (sigma_tr -
+    sigma_new)``, and ``status`` (``ELASTIC``, ``PLASTIC``, ``APEX``).  ``cst``:
+    :func:`_fast_constants` of ``prm``.
+
+    (1) the elastic predictor, the principal stresses and F of every point; elastic points are
+    written out, plastic ones gathered; (2) the fast return of the gathered points in lockstep
+    (:func:`_fast_block`); (3) each plastic point takes the fast result if it was accepted,
+    else the robust :func:`_return_sorted` (the algorithm of update_reference), and its stress
+    is rebuilt on the trial axes.  The stand-alone :func:`update` and the fused step of the
+    Eulerian model (:mod:`fipy_hopper.stepping`) both call this function: the one place the
+    compiled Mohr–Coulomb update is written.
+    """
     lam, mu, K, E, nu, sp, cp, tp, tpsi, c, a, e, rc3 = _unpack(prm)
+    idx = np.empty(n, dtype=np.int64)
+    pos = np.empty(n, dtype=np.int8)
+    trial = np.empty((6, n))  # rr, zz, tt, rz and the in-plane axes (cos 2w, sin 2w)
+    S = np.empty((4, n))
     m = 0
-    for i in range(b0, b1):
-        rr, zz, tt, rz = _elastic_trial_nb(sig[i, 0], sig[i, 1], sig[i, 2], sig[i, 3], deps[i, 0],
-                                           deps[i, 1], deps[i, 2], deps[i, 3], lam, mu)
+    for q in range(n):
+        rr, zz, tt, rz = _elastic_trial_nb(points[0, q], points[1, q], points[2, q],
+                                           points[3, q], points[4, q], points[5, q],
+                                           points[6, q], points[7, q], lam, mu)
         mid = 0.5 * (rr + zz)
         d = 0.5 * (rr - zz)
         rad = _radius_nb(d, rz)
@@ -352,63 +369,61 @@ def _predict_block(sig, deps, b0, b1, prm, sig_out, dep_out, status, idx, pos, t
             ps, s1, s2, s3 = 2, la, lb, tt
         f = ((s1 - s3) + (s1 + s3) * sp) / (2.0 * cp) - c
         if not f > 0.0:
-            sig_out[i, 0], sig_out[i, 1], sig_out[i, 2], sig_out[i, 3] = rr, zz, tt, rz
-            dep_out[i, 0] = dep_out[i, 1] = dep_out[i, 2] = dep_out[i, 3] = 0.0
-            status[i] = ELASTIC
+            out[0, q], out[1, q], out[2, q], out[3, q] = rr, zz, tt, rz
+            out[4, q] = out[5, q] = out[6, q] = out[7, q] = 0.0
+            status[q] = ELASTIC
             continue
         if rad > 0.0:
             cw, sw = d / rad, rz / rad
         else:
             cw, sw = 1.0, 0.0
-        idx[m], pos[m] = i, ps
+        idx[m], pos[m] = q, ps
         trial[0, m], trial[1, m], trial[2, m], trial[3, m] = rr, zz, tt, rz
         trial[4, m], trial[5, m] = cw, sw
         S[0, m], S[1, m], S[2, m], S[3, m] = s1, s2, s3, f
         m += 1
-    return m
+    W = np.empty((_W_ROWS, m))
+    flags = np.empty((_F_ROWS, m), dtype=np.bool_)
+    _fast_block(m, S, W, flags, cst)
+    for j in range(m):
+        q = idx[j]
+        if flags[_F_OK, j]:
+            n1, n2, n3, status[q] = W[_W_N1, j], W[_W_N2, j], W[_W_N3, j], PLASTIC
+        else:
+            n1, n2, n3, status[q] = _return_sorted(S[0, j], S[1, j], S[2, j], prm)
+        if pos[j] == 0:
+            na, nb_, ntt = n2, n3, n1
+        elif pos[j] == 1:
+            na, nb_, ntt = n1, n3, n2
+        else:
+            na, nb_, ntt = n1, n2, n3
+        rr, zz, tt, rz = trial[0, j], trial[1, j], trial[2, j], trial[3, j]
+        nrr, nzz, nrz = _rebuild_inplane_nb(na, nb_, trial[4, j], trial[5, j])
+        out[0, q], out[1, q], out[2, q], out[3, q] = nrr, nzz, ntt, nrz
+        out[4, q], out[5, q], out[6, q], out[7, q] = _compliance_nb(
+            rr - nrr, zz - nzz, tt - ntt, rz - nrz, E, nu, mu)
 
 
 @_jit
 def _update_kernel(sig, deps, prm, sig_out, dep_out, status):
-    """Loop of :func:`update` over the points (rows) of sig and deps, writing into the outputs.
-
-    Blocks of _BLOCK points: (1) elastic predictor, principal stresses and F; elastic points are
-    written out, plastic ones gathered (:func:`_predict_block`); (2) the fast return of the
-    gathered points in lockstep (:func:`_fast_block`); (3) each plastic point takes the fast
-    result if it was accepted, else the robust :func:`_return_sorted` (the algorithm of
-    update_reference), and its stress is rebuilt on the trial axes.
-    """
-    lam, mu, K, E, nu, sp, cp, tp, tpsi, c, a, e, rc3 = _unpack(prm)
+    """Loop of :func:`update` over the points (rows) of sig and deps, writing into the outputs:
+    :func:`update_points` on blocks of _BLOCK points."""
     cst = _fast_constants(prm)
     n = sig.shape[0]
     nb = min(n, _BLOCK)
-    idx = np.empty(nb, dtype=np.int64)
-    pos = np.empty(nb, dtype=np.int8)
-    trial = np.empty((6, nb))  # rr, zz, tt, rz and the in-plane axes (cos 2w, sin 2w)
-    S = np.empty((4, nb))
-    W = np.empty((_W_ROWS, nb))
-    flags = np.empty((_F_ROWS, nb), dtype=np.bool_)
+    points = np.empty((8, nb))
+    out = np.empty((8, nb))
     for b0 in range(0, n, _BLOCK):
-        m = _predict_block(sig, deps, b0, min(b0 + _BLOCK, n), prm, sig_out, dep_out, status, idx,
-                           pos, trial, S)
-        _fast_block(m, S, W, flags, cst)
-        for j in range(m):
-            i = idx[j]
-            if flags[_F_OK, j]:
-                n1, n2, n3, status[i] = W[_W_N1, j], W[_W_N2, j], W[_W_N3, j], PLASTIC
-            else:
-                n1, n2, n3, status[i] = _return_sorted(S[0, j], S[1, j], S[2, j], prm)
-            if pos[j] == 0:
-                na, nb_, ntt = n2, n3, n1
-            elif pos[j] == 1:
-                na, nb_, ntt = n1, n3, n2
-            else:
-                na, nb_, ntt = n1, n2, n3
-            rr, zz, tt, rz = trial[0, j], trial[1, j], trial[2, j], trial[3, j]
-            nrr, nzz, nrz = _rebuild_inplane_nb(na, nb_, trial[4, j], trial[5, j])
-            sig_out[i, 0], sig_out[i, 1], sig_out[i, 2], sig_out[i, 3] = nrr, nzz, ntt, nrz
-            dep_out[i, 0], dep_out[i, 1], dep_out[i, 2], dep_out[i, 3] = _compliance_nb(
-                rr - nrr, zz - nzz, tt - ntt, rz - nrz, E, nu, mu)
+        b1 = min(b0 + _BLOCK, n)
+        for i in range(b0, b1):
+            for k in range(4):
+                points[k, i - b0] = sig[i, k]
+                points[4 + k, i - b0] = deps[i, k]
+        update_points(points, b1 - b0, prm, cst, out, status[b0:b1])
+        for i in range(b0, b1):
+            for k in range(4):
+                sig_out[i, k] = out[k, i - b0]
+                dep_out[i, k] = out[4 + k, i - b0]
 
 
 def _as_points(sigma, d_eps):

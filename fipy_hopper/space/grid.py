@@ -156,7 +156,7 @@ def build_grid(boundary: SiloBoundary, h: float, free_fall_depth: float = 1.0,
                min_open_fraction: float = 0.05, mirror_planes: str = "auto",
                n_sub: int = 8) -> SpaceGrid:
     """The grid of ``boundary`` for cubes of side ``h`` (m) (module docstring)."""
-    from fipy.meshes.uniformGrid3D import UniformGrid3D
+    from ..fipy_adapter import UniformGrid3D
 
     mirror_x, mirror_y = computed_part(mirror_planes, boundary.outlet_offset)
     radius = boundary.radius

@@ -78,8 +78,9 @@ def material_call(model, state, prm=None, part="all"):
     sigma, loose, eps_p = state.sigma.copy(), state.loose.copy(), state.eps_p.copy()
     v, flux, disp = state.v.copy(), state.face_flux_sum.copy(), state.displacement.copy()
     trace = np.zeros_like(state.alpha)      # tr(D) as the strain pass leaves it for the forces
+    flowing = state.flowing.copy()
     stepping._stress_update(block_ptr, n_blocks, load_runs, v, sigma.copy(), loose.copy(),
-                            eps_p.copy(), model.r_c, model.flux_radius, model.strain_dims, g.h,
+                            eps_p.copy(), flowing, model.r_c, model.flux_radius, model.strain_dims, g.h,
                             model.dt, g.kappa, model._zface_aperture, model._rface_aperture, prm,
                             cst, trace, threads)
     calls = {
@@ -88,13 +89,13 @@ def material_call(model, state, prm=None, part="all"):
                                                 model.hourglass_base, contrib,
                                                 model.viscosity, model.bulk_viscosity,
                                                 model.cfg.numerics.alpha_min, trace, True,
-                                                threads),
+                                                flowing, model._rate, threads),
         "nodes": lambda: stepping._node_update(j0, j1, v, mass, contrib, GRAVITY, model.dt,
                                                0.0, model.light_mass, groups[0], *groups[2:],
                                                False, -1.0, g.r_nodes, wall, plate,
                                                row_budget),
         "stress": lambda: stepping._stress_update(block_ptr, n_blocks, load_runs, v, sigma,
-                                                  loose, eps_p, model.r_c, model.flux_radius,
+                                                  loose, eps_p, flowing, model.r_c, model.flux_radius,
                                                   model.strain_dims, g.h, model.dt, g.kappa,
                                                   model._zface_aperture,
                                                   model._rface_aperture, prm, cst,
