@@ -9,7 +9,9 @@ The sections' method (docs/physics_and_numerics.md, sections 3-7) on the 3D grid
    cell (``alpha >= alpha_min``) the Jaumann rotation, the open divergence as volumetric
    strain, the closing of loose volume and the law's 3D point update
    (:mod:`fipy_hopper.material.principal3d`), the plastic and loose strains
-   (:mod:`fipy_hopper.space.momentum`, compiled in :mod:`fipy_hopper.space.stepping`);
+   (:mod:`fipy_hopper.space.momentum`, compiled in :mod:`fipy_hopper.space.stepping`); in
+   the internal forces the law's rate-dependent overstress in the cells whose last return was
+   plastic (:mod:`fipy_hopper.space.rate3d`, the sections' seam);
 2. transport, sub-cycled as in the sections (when the material has crossed ``transport_cfl``
    of a cell at the largest open-face speed, or every ``max_transport_interval`` steps): the
    carried fields ``alpha, alpha sigma (6), alpha eps_p, alpha e_l`` by the bounded van Leer
@@ -36,7 +38,7 @@ import numpy as np
 
 from .. import resources
 from ..material import principal3d as p3
-from ..material.mohr_coulomb import APEX
+from ..material.mohr_coulomb import APEX, ELASTIC
 from ..transport import material_rows
 from . import contact as sc
 from . import momentum as sm
@@ -44,6 +46,7 @@ from . import stepping
 from .boundary import SiloBoundary
 from .config import SpaceConfig
 from .grid import build_grid
+from .rate3d import overstress6
 from .transport import SpaceTransport, dual_momentum_transport_compiled
 
 GRAVITY = 9.81
@@ -57,7 +60,9 @@ REDISTRIBUTION_ROOM_MIN_FALLBACK = 1e-3
 @dataclass
 class SpaceState:
     """Everything that evolves (SI): nodal velocity ``v`` (3, nz + 1, ny + 1, nx + 1), cell
-    fields ``alpha``, ``sigma`` (..., 6), ``eps_p``, ``loose``; the face-flux integrals of the
+    fields ``alpha``, ``sigma`` (..., 6), ``eps_p``, ``loose``, ``flowing`` (1 where the cell's
+    last return was plastic: the law's overstress acts there; not carried, a flag of the
+    grid's cell as in the sections); the face-flux integrals of the
     three face directions (m); the discharged and lost masses (kg, whole silo); the cumulative
     impulses of every wall and plate entry (kg m/s, rows ``(x, y, z)``, computed part) and the
     vertical momentum budget (:data:`MOMENTUM_BUDGET`)."""
@@ -70,6 +75,7 @@ class SpaceState:
     sigma: np.ndarray
     eps_p: np.ndarray
     loose: np.ndarray
+    flowing: np.ndarray
     flux_z: np.ndarray
     flux_y: np.ndarray
     flux_x: np.ndarray
@@ -151,6 +157,9 @@ class SpaceModel:
         self._mass, self._mass_of = None, None
         self._wall_loads = None
         self._prm = self.law.kernel_parameters()
+        #: the law's rate parameters (``[d, rho_s, delta_mu, I_0]``; zeros: none), the
+        #: overstress of :mod:`fipy_hopper.space.rate3d` in flowing cells
+        self._rate = np.ascontiguousarray(self.law.rate_parameters(), dtype=float)
         n = g.n_cells
         self._work = (np.zeros((8, 3) + g.kappa.shape), np.empty((n, 6)), np.empty((n, 6)),
                       np.empty((n, 6)), np.empty((n, 6)), np.empty(n, np.int8))
@@ -178,8 +187,9 @@ class SpaceModel:
         return SpaceState(
             t=0.0, step=0, stage="filling", v=np.zeros((3,) + tuple(n + 1 for n in shape)),
             alpha=alpha, sigma=np.zeros(shape + (6,)), eps_p=np.zeros(shape),
-            loose=np.zeros(shape), flux_z=np.zeros(g.aperture_z.shape),
-            flux_y=np.zeros(g.aperture_y.shape), flux_x=np.zeros(g.aperture_x.shape),
+            loose=np.zeros(shape), flowing=np.zeros(shape),
+            flux_z=np.zeros(g.aperture_z.shape), flux_y=np.zeros(g.aperture_y.shape),
+            flux_x=np.zeros(g.aperture_x.shape),
             wall_impulse=np.zeros((self.n_wall, 3)), plate_impulse=np.zeros((self.n_plate, 3)),
             momentum_budget=np.zeros(len(MOMENTUM_BUDGET)))
 
@@ -333,6 +343,7 @@ class SpaceModel:
         not_loaded = state.alpha < num.alpha_min
         state.sigma[not_loaded] = 0.0
         state.loose[not_loaded] = 0.0
+        state.flowing[not_loaded] = 0.0
         moving = np.argwhere((mass > self.light_mass) | np.any(state.v != 0.0, axis=0))
         nodes = np.zeros((len(moving), 5), np.int64)
         nodes[:, :3] = moving
@@ -351,16 +362,16 @@ class SpaceModel:
         _, _, normal, mu, kind, entry = self.contacts[:6]
         done, due = stepping.material_steps(
             int(max_steps), clock, state.v, mass, state.alpha, state.sigma, state.loose,
-            state.eps_p, state.flux_z, state.flux_y, state.flux_x, carry, len(carry), loaded,
-            len(loaded), nodes, len(nodes), k0, k1, self.open_volume, g.kappa, g.aperture_z,
-            g.aperture_y, g.aperture_x, self.open_z, self.open_y, self.open_x, g.h,
+            state.eps_p, state.flowing, state.flux_z, state.flux_y, state.flux_x, carry,
+            len(carry), loaded, len(loaded), nodes, len(nodes), k0, k1, self.open_volume,
+            g.kappa, g.aperture_z, g.aperture_y, g.aperture_x, self.open_z, self.open_y, self.open_x, g.h,
             self.hourglass_base, self._prm, self.dt, GRAVITY,
             self.ramp_time if filling else 0.0, self.fill_damping if filling else 0.0,
             self.light_mass, num.alpha_min, self.bulk_viscosity, num.transport_cfl,
             num.max_transport_interval, normal, mu, kind, entry, state.plate_closed,
             g.mirror_x, g.mirror_y, state.wall_impulse, state.plate_impulse,
             state.momentum_budget, contrib, *self._work[1:], self._node_budget[:len(nodes)],
-            self._plane_top, self.threads)
+            self._plane_top, self._rate, self.threads)
         state.t, state.step, state.flux_time = float(clock[0]), state.step + int(done), \
             float(clock[2])
         if due:
@@ -376,12 +387,20 @@ class SpaceModel:
         loaded = state.alpha >= num.alpha_min
         state.sigma[~loaded] = 0.0
         state.loose[~loaded] = 0.0
+        state.flowing[~loaded] = 0.0
         stress = state.sigma
-        if self.bulk_viscosity > 0.0:
+        rated = self._rate[0] != 0.0
+        if self.bulk_viscosity > 0.0 or rated:
+            # sigma + 2 eta_I D' (flowing cells) + eta_b tr(D) I in loaded cells
             D, _ = sm.strain_rate(state.v, g.h)
-            p_b = self.bulk_viscosity * (D[..., 0] + D[..., 1] + D[..., 2])
-            viscous = state.sigma.copy()
-            viscous[..., :3] = state.sigma[..., :3] + p_b[..., None]
+            viscous = state.sigma
+            if rated:
+                viscous = viscous + overstress6(state.sigma, D, state.flowing != 0.0,
+                                                self._rate)
+            if self.bulk_viscosity > 0.0:
+                p_b = self.bulk_viscosity * (D[..., 0] + D[..., 1] + D[..., 2])
+                viscous = viscous.copy() if viscous is state.sigma else viscous
+                viscous[..., :3] = viscous[..., :3] + p_b[..., None]
             stress = np.where(loaded[..., None], viscous, state.sigma)
         contrib = (-sm.corner_forces(state.alpha[..., None] * stress, self.open_volume, g.h)
                    + sm.hourglass_corner_forces(state.v, self.hourglass_base * state.alpha))
@@ -424,6 +443,8 @@ class SpaceModel:
                                                 return_status=True)
         state.sigma = np.where(loaded[..., None], 0.0, state.sigma)
         state.sigma[loaded] = new
+        state.flowing = np.zeros_like(state.flowing)
+        state.flowing[loaded] = np.where(status != ELASTIC, 1.0, 0.0)
         loose = np.where(loaded, state.loose - closed, 0.0)
         loose[loaded] += np.where(status == APEX, np.maximum(dep[:, :3].sum(axis=1), 0.0), 0.0)
         state.loose = loose

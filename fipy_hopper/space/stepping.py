@@ -5,14 +5,16 @@ A step is the numpy reference's (:meth:`fipy_hopper.space.model.SpaceModel._step
 forces, the node update, the contact and the faces:
 
 1. per *carrying* cell (``alpha != 0``): its corner forces ``-w s . grad N_a + f_hg``
-   (``s = alpha (sigma + eta_b tr(D) I)`` in loaded cells, ``eta_b`` the bulk viscosity);
+   (``s = alpha (sigma + 2 eta_I D' + eta_b tr(D) I)`` in loaded cells: the law's
+   rate-dependent overstress where the cell is flowing, :mod:`fipy_hopper.space.rate3d`, and
+   the bulk viscosity ``eta_b``);
    per moving node: the sum of its eight cells' corners in the order 0..7, ``v += dt (f / m -
    g e_z)`` (rest if no heavier than ``light_mass``), the wall and plate contact
    (:func:`contact_node`), the filling damping and the mirror planes;
 2. per *loaded* cell (``alpha >= alpha_min``): velocity gradient, Jaumann rotation, the open
    divergence as volumetric strain, the closing of loose volume, then the law's 3D point update
-   (:func:`fipy_hopper.material.principal3d.update6_points`: the law's principal-space return)
-   and the plastic and loose strains;
+   (:func:`fipy_hopper.material.principal3d.update6_points`: the law's principal-space return),
+   the plastic and loose strains and the flowing flag (the return was plastic);
 3. the face velocities of the node planes of the material added to the face-flux integral,
    and the transport rule.
 
@@ -41,7 +43,9 @@ from numba import prange
 
 from ..material import principal3d as p3
 from ..material import return_fast as _fast
-from ..material.mohr_coulomb import APEX
+from ..material.mohr_coulomb import APEX, ELASTIC
+from ..material.rate import overstress_factor
+from .rate3d import deviatoric_rate6
 
 #: points per block of the law's update (the threads take whole blocks)
 BLOCK = _fast._BLOCK
@@ -77,30 +81,51 @@ def _gradient(v, k, j, i, g, L):
 
 @_jit_parallel
 def cell_forces(cells, n, alpha, sigma, v, open_volume, h, hg_base, alpha_min, bulk_viscosity,
-                contrib, threads=1):
+                contrib, flowing, rate, threads=1):
     """Corner forces ``-f_int + f_hg`` of the cells ``cells[:n]`` (k, j, i) into ``contrib``
-    (8, 3, nz, ny, nx), as ``momentum.corner_forces`` and ``hourglass_corner_forces``."""
+    (8, 3, nz, ny, nx), as ``momentum.corner_forces`` and ``hourglass_corner_forces``.  The
+    stress of a loaded cell (``alpha >= alpha_min``) in them is ``sigma + 2 eta_I D' + eta_b
+    tr(D) I``: the law's rate-dependent overstress where the cell is ``flowing`` (its last
+    return was plastic; :mod:`fipy_hopper.space.rate3d` with the law's rate parameters
+    ``rate``, none when ``rate[0]``, the grain size, is 0) and the bulk viscosity, added in
+    this order."""
     for t in prange(threads):
         _cell_forces_of(t, threads, cells, n, alpha, sigma, v, open_volume, h, hg_base,
-                        alpha_min, bulk_viscosity, contrib)
+                        alpha_min, bulk_viscosity, contrib, flowing, rate)
 
 
 @_jit
 def _cell_forces_of(t, threads, cells, n, alpha, sigma, v, open_volume, h, hg_base, alpha_min,
-                    bulk_viscosity, contrib):
+                    bulk_viscosity, contrib, flowing, rate):
     """:func:`cell_forces` of the cells ``t, t + threads, ...``."""
     g = 1.0 / (4.0 * h)
     L = np.empty((3, 3))
     s = np.empty(6)
     modes = np.empty((4, 3))
+    rated = rate[0] != 0.0
     for q in range(t, n, threads):
         k, j, i = cells[q, 0], cells[q, 1], cells[q, 2]
         a = alpha[k, j, i]
         w = open_volume[k, j, i]
         for c in range(6):
             s[c] = sigma[k, j, i, c]
-        if bulk_viscosity > 0.0 and a >= alpha_min:
+        over = rated and a >= alpha_min and flowing[k, j, i] != 0.0
+        if (bulk_viscosity > 0.0 and a >= alpha_min) or over:
             _gradient(v, k, j, i, g, L)
+        if over:
+            p = -(sigma[k, j, i, 0] + sigma[k, j, i, 1] + sigma[k, j, i, 2]) / 3.0
+            d3 = 0.5 * (L[1, 2] + L[2, 1])
+            d4 = 0.5 * (L[0, 2] + L[2, 0])
+            d5 = 0.5 * (L[0, 1] + L[1, 0])
+            e0, e1, e2, gamma_dot = deviatoric_rate6(L[0, 0], L[1, 1], L[2, 2], d3, d4, d5)
+            f = overstress_factor(p, gamma_dot, rate)
+            s[0] = s[0] + f * e0
+            s[1] = s[1] + f * e1
+            s[2] = s[2] + f * e2
+            s[3] = s[3] + f * d3
+            s[4] = s[4] + f * d4
+            s[5] = s[5] + f * d5
+        if bulk_viscosity > 0.0 and a >= alpha_min:
             p_b = bulk_viscosity * (L[0, 0] + L[1, 1] + L[2, 2])
             s[0] = s[0] + p_b
             s[1] = s[1] + p_b
@@ -328,27 +353,29 @@ def _node_update_of(t, threads, nodes, n_nodes, v, mass, contrib, gravity, dt, d
 
 
 @_jit_parallel
-def stress_update(cells, n, v, sigma, loose, eps_p, kappa, aperture_z, aperture_y, aperture_x,
-                  h, dt, prm, sig_in, dep_in, sig_out, dep_out, status, threads=1):
+def stress_update(cells, n, v, sigma, loose, eps_p, flowing, kappa, aperture_z, aperture_y,
+                  aperture_x, h, dt, prm, sig_in, dep_in, sig_out, dep_out, status, threads=1):
     """The stress update of the loaded cells ``cells[:n]`` in place: velocity gradient,
     Jaumann rotation, the open divergence as volumetric strain (shared equally by the three
     normal strains), the closing of loose volume, then the law's point update
-    (``principal3d.update6_points``) of the gathered cells and the plastic and loose
-    strains.  ``sig_in`` ... ``status``: work arrays of at least ``n`` rows.  Thread ``t``
+    (``principal3d.update6_points``) of the gathered cells, the plastic and loose strains and
+    ``flowing`` (1 where the return was plastic, else 0).  ``sig_in`` ... ``status``: work
+    arrays of at least ``n`` rows.  Thread ``t``
     takes the blocks of :data:`BLOCK` points ``t, t + threads, ...``."""
     n_blocks = (n + BLOCK - 1) // BLOCK
     for t in prange(threads):
         for b in range(t, n_blocks, threads):
             b0 = b * BLOCK
             b1 = min(b0 + BLOCK, n)
-            _stress_block(b0, b1, cells, v, sigma, loose, eps_p, kappa, aperture_z,
+            _stress_block(b0, b1, cells, v, sigma, loose, eps_p, flowing, kappa, aperture_z,
                           aperture_y, aperture_x, h, dt, prm, sig_in, dep_in, sig_out,
                           dep_out, status)
 
 
 @_jit
-def _stress_block(b0, b1, cells, v, sigma, loose, eps_p, kappa, aperture_z, aperture_y,
-                  aperture_x, h, dt, prm, sig_in, dep_in, sig_out, dep_out, status):
+def _stress_block(b0, b1, cells, v, sigma, loose, eps_p, flowing, kappa, aperture_z,
+                  aperture_y, aperture_x, h, dt, prm, sig_in, dep_in, sig_out, dep_out,
+                  status):
     """:func:`stress_update` of the points ``b0 <= q < b1``."""
     g = 1.0 / (4.0 * h)
     L = np.empty((3, 3))
@@ -403,6 +430,7 @@ def _stress_block(b0, b1, cells, v, sigma, loose, eps_p, kappa, aperture_z, aper
         k, j, i = cells[q, 0], cells[q, 1], cells[q, 2]
         for c in range(6):
             sigma[k, j, i, c] = sig_out[q, c]
+        flowing[k, j, i] = 0.0 if status[q] == ELASTIC else 1.0
         e0, e1, e2 = dep_out[q, 0], dep_out[q, 1], dep_out[q, 2]
         e3, e4, e5 = dep_out[q, 3], dep_out[q, 4], dep_out[q, 5]
         if status[q] == APEX:
@@ -457,14 +485,14 @@ def _faces_of(k, v, dt, open_z, open_y, open_x, flux_z, flux_y, flux_x):
 
 
 @_jit
-def material_steps(max_steps, clock, v, mass, alpha, sigma, loose, eps_p, flux_z, flux_y,
-                   flux_x, carry, n_carry, loaded, n_loaded, nodes, n_nodes, k0, k1,
+def material_steps(max_steps, clock, v, mass, alpha, sigma, loose, eps_p, flowing, flux_z,
+                   flux_y, flux_x, carry, n_carry, loaded, n_loaded, nodes, n_nodes, k0, k1,
                    open_volume, kappa, aperture_z, aperture_y, aperture_x, open_z, open_y,
                    open_x, h, hg_base, prm, dt, g_full, ramp_time, damping, light_mass,
                    alpha_min, bulk_viscosity, transport_cfl, max_transport_interval, normal,
                    mu, kind, entry, plate_closed, mirror_x, mirror_y, wall_impulse,
                    plate_impulse, budget, contrib, sig_in, dep_in, sig_out, dep_out, status,
-                   node_budget, plane_top, threads=1):
+                   node_budget, plane_top, rate, threads=1):
     """Up to ``max_steps`` material steps in place (module docstring).  ``clock = [t, step,
     flux_time]``; gravity ``g_full`` ramped over ``ramp_time`` (0: none).  ``carry``/``loaded``
     (n, 3) cell lists, ``nodes`` (n, 5) node list with its contact constraints, ``k0 <= k <
@@ -473,13 +501,13 @@ def material_steps(max_steps, clock, v, mass, alpha, sigma, loose, eps_p, flux_z
         t = clock[0]
         gravity = g_full * min(1.0, t / ramp_time) if ramp_time > 0.0 else g_full
         cell_forces(carry, n_carry, alpha, sigma, v, open_volume, h, hg_base, alpha_min,
-                    bulk_viscosity, contrib, threads)
+                    bulk_viscosity, contrib, flowing, rate, threads)
         node_update(nodes, n_nodes, v, mass, contrib, gravity, dt, damping, light_mass, normal,
                     mu, kind, entry, plate_closed, mirror_x, mirror_y, wall_impulse,
                     plate_impulse, budget, node_budget, threads)
-        stress_update(loaded, n_loaded, v, sigma, loose, eps_p, kappa, aperture_z, aperture_y,
-                      aperture_x, h, dt, prm, sig_in, dep_in, sig_out, dep_out, status,
-                      threads)
+        stress_update(loaded, n_loaded, v, sigma, loose, eps_p, flowing, kappa, aperture_z,
+                      aperture_y, aperture_x, h, dt, prm, sig_in, dep_in, sig_out, dep_out,
+                      status, threads)
         speed = faces(k0, k1, v, dt, open_z, open_y, open_x, flux_z, flux_y, flux_x,
                       plane_top, threads)
         clock[2] += dt
