@@ -132,7 +132,7 @@ def test_compiled_forces_and_node_update_equal_the_numpy_reference_to_the_bit():
     cells = np.argwhere(alpha != 0.0).astype(np.int64)
     contrib = np.zeros((8, 3) + shape)
     stepping.cell_forces(cells, len(cells), alpha, sigma, v, w, H, hg, alpha_min, eta_b,
-                         contrib)
+                         contrib, np.zeros(shape), np.zeros(4))
     carrying = alpha != 0.0
     assert np.array_equal(contrib[:, :, carrying], expected[:, :, carrying])
     # the node update
@@ -151,5 +151,5 @@ def test_compiled_forces_and_node_update_equal_the_numpy_reference_to_the_bit():
     none = np.zeros((0, 3))
     stepping.node_update(nodes, len(nodes), vc, m, contrib, gravity, dt, 0.0, light, none,
                          np.zeros(0), np.zeros(0, np.int8), np.zeros(0, np.int64), True, False,
-                         False, none, none, np.zeros(4))
+                         False, none, none, np.zeros(4), np.zeros((len(nodes), 3)))
     assert np.array_equal(vc, ref)

@@ -35,8 +35,14 @@ surface of revolution when its projection in its meridian plane falls on the seg
 (extended by ``reach`` past a concave corner) and it lies less than ``reach`` in front of it
 (3D distance) or anywhere behind it, with that surface's normal at the node; a node within
 ``reach`` of the wall that no segment holds (round a convex corner, the outlet lip) is held
-by the normal towards its nearest wall point.  Each entry carries the wall friction of its
-segment (tubes frictionless) and the profile's segment index (-1 a tube, -2 a convex corner).
+by the normal towards its nearest wall point.  A tube (the free fall below the outlet) holds
+only nodes below the outlet plane: the plane itself is the floor's or the plate's (with the
+sections' rule a node of a flat floor at ``z = 0`` was also held by the tube's surface behind
+it, a frictionless wall with a normal about the outlet's centre, which took a share of the
+bin wall's reaction at the floor's corner: 10 % of the lowest bin's pressure on the near side
+of an off-centre outlet at rest, none on the far side).  Each entry carries the wall friction
+of its segment (tubes frictionless) and the profile's segment index (-1 a tube, -2 a convex
+corner).
 """
 
 from __future__ import annotations
@@ -255,6 +261,8 @@ class SiloBoundary:
                 ext = reach / length
                 lo = -ext if tab.concave[k, 0] else 0.0
                 hi = 1.0 + ext if tab.concave[k, 1] else 1.0
+                if tab.tube[k]:             # the outlet plane is the floor's or the plate's
+                    hi -= 1e-9
                 mask = cand & (t >= lo - 1e-12) & (t <= hi + 1e-12) & (front < reach)
                 if not mask.any():
                     continue

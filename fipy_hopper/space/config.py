@@ -5,8 +5,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from ..config import (HopperGeometry, MaterialConfig, NumericsConfig, WallConfig,
-                      damped_step_factor)
+from ..config import (HopperConfig, HopperGeometry, MaterialConfig, NumericsConfig,
+                      RunConfig, WallConfig, damped_step_factor)
 
 #: the bulk viscosity b_1 of ``numerics.bulk_viscosity = "auto"`` (the Eulerian default)
 DEFAULT_BULK_VISCOSITY = 0.06
@@ -19,7 +19,10 @@ class SpaceConfig:
     ``cell_size`` is the cube's side; the sections' ``3 cells across the outlet radius`` is
     not required here), the outlet's offset from the silo's axis along ``+x``
     (``outlet_offset``, m) and the computed part (``mirror_planes``: ``"auto"``, ``"none"``,
-    ``"quarter"``, ``"half"``, :mod:`fipy_hopper.space.grid`)."""
+    ``"quarter"``, ``"half"``, :mod:`fipy_hopper.space.grid`); ``run`` the sections'
+    :class:`~fipy_hopper.config.RunConfig` (the stop rules, the sampling, the load window, the
+    wall bins' width) and ``wall_sectors``, the sectors of the wall-load maps around the
+    circumference (:mod:`fipy_hopper.space.wall`)."""
 
     hopper: HopperGeometry = field(default_factory=HopperGeometry)
     material: MaterialConfig = field(default_factory=MaterialConfig)
@@ -27,6 +30,41 @@ class SpaceConfig:
     numerics: NumericsConfig = field(default_factory=lambda: NumericsConfig(cell_size=0.02))
     outlet_offset: float = 0.0
     mirror_planes: str = "auto"
+    run: RunConfig = field(default_factory=RunConfig)
+    wall_sectors: int = 12
+
+    def __post_init__(self):
+        if not (isinstance(self.wall_sectors, int) and 1 <= self.wall_sectors <= 360):
+            raise ValueError(f"wall_sectors = {self.wall_sectors!r}: expected a whole number "
+                             "in [1, 360]")
+
+    @property
+    def boundary(self):
+        """The centred silo's axisymmetric section (:class:`fipy_hopper.boundary.Boundary`,
+        with the walls' friction): the wall profile that the 3D wall loads are binned along
+        (the meridian's arc length ``s``)."""
+        return self.hopper.boundary.with_friction(self.wall.friction_angle_deg,
+                                                  self.wall.segment_friction_deg)
+
+    def wall_bin_width_at(self, cell_size: float) -> float:
+        """The wall bins' width along the meridian (m), the sections' rule:
+        ``run.wall_bin_width``, or a twentieth of the bin's diameter, at least three cells."""
+        if self.run.wall_bin_width != "auto":
+            return float(self.run.wall_bin_width)
+        return max(3.0 * cell_size, self.hopper.bin_diameter / 20.0)
+
+    @property
+    def wall_bin_width_m(self) -> float:
+        return self.wall_bin_width_at(self.numerics.cell_size)
+
+    def section_config(self, **run) -> HopperConfig:
+        """The axisymmetric section of the same silo, material, wall and numerics (the 3D
+        model's comparison; its outlet is centred whatever ``outlet_offset``); ``run``: keys
+        of its ``[run]`` replacing this one's."""
+        from dataclasses import replace
+        return HopperConfig(hopper=self.hopper, material=self.material, wall=self.wall,
+                            numerics=self.numerics, run=replace(self.run, **run) if run
+                            else self.run)
 
     @property
     def bulk_viscosity(self) -> float:

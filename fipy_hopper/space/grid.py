@@ -137,7 +137,7 @@ def _sampled_fraction(boundary, lo, h, n_sub, dims, both_sides):
     return (~_solid(boundary, pts, both_sides)).mean(axis=1)
 
 
-def _fractions(boundary, corner_lists, h, n_sub, dims, near, both_sides=False, chunk=4096):
+def _fractions(boundary, corner_lists, h, n_sub, dims, near, both_sides=False, chunk=1024):
     """Open fractions of boxes given by their corners ``(3, m)``: sampled where ``near``, else
     0 or 1 from the solid test of the box's centre."""
     lo = corner_lists

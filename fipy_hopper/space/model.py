@@ -9,7 +9,9 @@ The sections' method (docs/physics_and_numerics.md, sections 3-7) on the 3D grid
    cell (``alpha >= alpha_min``) the Jaumann rotation, the open divergence as volumetric
    strain, the closing of loose volume and the law's 3D point update
    (:mod:`fipy_hopper.material.principal3d`), the plastic and loose strains
-   (:mod:`fipy_hopper.space.momentum`, compiled in :mod:`fipy_hopper.space.stepping`);
+   (:mod:`fipy_hopper.space.momentum`, compiled in :mod:`fipy_hopper.space.stepping`); in
+   the internal forces the law's rate-dependent overstress in the cells whose last return was
+   plastic (:mod:`fipy_hopper.space.rate3d`, the sections' seam);
 2. transport, sub-cycled as in the sections (when the material has crossed ``transport_cfl``
    of a cell at the largest open-face speed, or every ``max_transport_interval`` steps): the
    carried fields ``alpha, alpha sigma (6), alpha eps_p, alpha e_l`` by the bounded van Leer
@@ -19,9 +21,11 @@ The sections' method (docs/physics_and_numerics.md, sections 3-7) on the 3D grid
 Masses, forces and momenta of the computed part (a quarter, a half or all of the silo) are
 reported for the whole silo by ``section_factor`` (4, 2, 1) where a method says so.
 
-Not yet: markers, layers, the opening iris (the plate goes at once), the wall-load
-diagnostics, the loop of :mod:`fipy_hopper.simulation`; the methods of the model protocol that
-the diagnostics use raise ``NotImplementedError``.
+The model implements :class:`fipy_hopper.protocol.HopperModelProtocol` and the methods the
+loop and the diagnostics call beyond it (``contact_slip``, ``bin_lateral_stress_ratio``,
+``material``); the wall loads and flow measures are 3D (:mod:`fipy_hopper.space.wall`,
+:mod:`fipy_hopper.space.flow`).  Not yet: markers, layers, the opening iris (the plate goes at
+once), the loop of :mod:`fipy_hopper.simulation` (:mod:`fipy_hopper.space.run` drives it).
 """
 
 from __future__ import annotations
@@ -29,10 +33,12 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
+from .. import resources
 from ..material import principal3d as p3
-from ..material.mohr_coulomb import APEX
+from ..material.mohr_coulomb import APEX, ELASTIC
 from ..transport import material_rows
 from . import contact as sc
 from . import momentum as sm
@@ -40,7 +46,8 @@ from . import stepping
 from .boundary import SiloBoundary
 from .config import SpaceConfig
 from .grid import build_grid
-from .transport import SpaceTransport
+from .rate3d import overstress6
+from .transport import SpaceTransport, dual_momentum_transport_compiled
 
 GRAVITY = 9.81
 #: the carried fields, alpha-weighted but alpha itself
@@ -53,7 +60,9 @@ REDISTRIBUTION_ROOM_MIN_FALLBACK = 1e-3
 @dataclass
 class SpaceState:
     """Everything that evolves (SI): nodal velocity ``v`` (3, nz + 1, ny + 1, nx + 1), cell
-    fields ``alpha``, ``sigma`` (..., 6), ``eps_p``, ``loose``; the face-flux integrals of the
+    fields ``alpha``, ``sigma`` (..., 6), ``eps_p``, ``loose``, ``flowing`` (1 where the cell's
+    last return was plastic: the law's overstress acts there; not carried, a flag of the
+    grid's cell as in the sections); the face-flux integrals of the
     three face directions (m); the discharged and lost masses (kg, whole silo); the cumulative
     impulses of every wall and plate entry (kg m/s, rows ``(x, y, z)``, computed part) and the
     vertical momentum budget (:data:`MOMENTUM_BUDGET`)."""
@@ -66,6 +75,7 @@ class SpaceState:
     sigma: np.ndarray
     eps_p: np.ndarray
     loose: np.ndarray
+    flowing: np.ndarray
     flux_z: np.ndarray
     flux_y: np.ndarray
     flux_x: np.ndarray
@@ -86,14 +96,18 @@ class SpaceState:
 class SpaceModel:
     """The 3D silo of a :class:`~fipy_hopper.space.config.SpaceConfig` on its grid.
     ``backend``: ``"numba"`` (:mod:`fipy_hopper.space.stepping`, the compiled transport) or
-    ``"numpy"`` (the reference of every part of a step)."""
+    ``"numpy"`` (the reference of every part of a step); ``threads`` the compiled steps'
+    numba threads."""
 
     formulation = "eulerian"
 
-    def __init__(self, cfg: SpaceConfig, backend: str = "numba"):
+    def __init__(self, cfg: SpaceConfig, backend: str = "numba", threads: int | None = None):
         if backend not in ("numba", "numpy"):
             raise ValueError(f"backend must be 'numba' or 'numpy', not {backend!r}")
         self.cfg, self.backend = cfg, backend
+        #: numba threads of the compiled steps (default: one per core this process may use,
+        #: :func:`fipy_hopper.resources.thread_limit`); the results do not depend on them
+        self.threads = int(threads) if threads else resources.thread_limit()
         num = cfg.numerics
         self.boundary = SiloBoundary.from_geometry(
             cfg.hopper, cfg.outlet_offset, cfg.wall.friction_angle_deg,
@@ -141,10 +155,16 @@ class SpaceModel:
         self.open_y = g.aperture_y > 0
         self.open_x = g.aperture_x > 0
         self._mass, self._mass_of = None, None
+        self._wall_loads = None
         self._prm = self.law.kernel_parameters()
+        #: the law's rate parameters (``[d, rho_s, delta_mu, I_0]``; zeros: none), the
+        #: overstress of :mod:`fipy_hopper.space.rate3d` in flowing cells
+        self._rate = np.ascontiguousarray(self.law.rate_parameters(), dtype=float)
         n = g.n_cells
         self._work = (np.zeros((8, 3) + g.kappa.shape), np.empty((n, 6)), np.empty((n, 6)),
                       np.empty((n, 6)), np.empty((n, 6)), np.empty(n, np.int8))
+        self._node_budget = np.zeros(((g.nz + 1) * (g.ny + 1) * (g.nx + 1), 3))
+        self._plane_top = np.zeros(g.nz + 1)
 
     # ------------------------------------------------------------------ the protocol's sizes
     @property
@@ -167,8 +187,9 @@ class SpaceModel:
         return SpaceState(
             t=0.0, step=0, stage="filling", v=np.zeros((3,) + tuple(n + 1 for n in shape)),
             alpha=alpha, sigma=np.zeros(shape + (6,)), eps_p=np.zeros(shape),
-            loose=np.zeros(shape), flux_z=np.zeros(g.aperture_z.shape),
-            flux_y=np.zeros(g.aperture_y.shape), flux_x=np.zeros(g.aperture_x.shape),
+            loose=np.zeros(shape), flowing=np.zeros(shape),
+            flux_z=np.zeros(g.aperture_z.shape), flux_y=np.zeros(g.aperture_y.shape),
+            flux_x=np.zeros(g.aperture_x.shape),
             wall_impulse=np.zeros((self.n_wall, 3)), plate_impulse=np.zeros((self.n_plate, 3)),
             momentum_budget=np.zeros(len(MOMENTUM_BUDGET)))
 
@@ -220,29 +241,86 @@ class SpaceModel:
     def reset_caches(self) -> None:
         self._mass = None
 
+    # ------------------------------------------------------------------ diagnostics
+    @property
+    def material(self):
+        """The constitutive law (the loop's fingerprint reads it)."""
+        return self.law
+
+    @property
+    def wall_loads(self):
+        """The wall's patches, the entries and cells located on them and the load maps
+        (:class:`fipy_hopper.space.wall.SpaceWallLoads`; built once)."""
+        if self._wall_loads is None:
+            from .wall import SpaceWallLoads
+            self._wall_loads = SpaceWallLoads(self)
+        return self._wall_loads
+
     def summary_extras(self, state) -> dict:
+        """The 3D keys of a run's summary: ``dimensions``, ``outlet_offset_m``,
+        ``mirror_factor`` (the computed part to the whole silo), ``wall_sectors``."""
         return {"dimensions": 3, "outlet_offset_m": self.boundary.outlet_offset,
-                "mirror_factor": self.section_factor}
+                "mirror_factor": self.section_factor, "wall_sectors": self.cfg.wall_sectors}
 
     def wall_entries(self) -> tuple:
-        """``(z, normal (n, 3), segment)`` of the rows of ``state.wall_impulse``: the height of
-        the entry's node (m), its contact normal and the profile's segment (-1 a tube, -2 the
-        lip)."""
+        """``(s, normal, segment)`` of the rows of ``state.wall_impulse``: the arc length
+        along the wall profile's meridian of the entry's wall point (m,
+        :mod:`fipy_hopper.space.wall`), its contact normal ``(n, 3)`` and the profile's
+        segment of its constraint (-1 the tube, -2 a convex corner: the lip).  Its angle
+        around the circumference: :meth:`wall_theta`."""
+        W = self.wall_loads
         nodes, ptr, normal, _, kind, entry, segment = self.contacts[:7]
-        counts = np.diff(ptr)
-        node_of = np.repeat(np.arange(len(nodes)), counts)
-        wall = kind == 0
-        z = np.empty(self.n_wall)
         nrm = np.empty((self.n_wall, 3))
-        z[entry[wall]] = self.grid.z_nodes[nodes[node_of[wall], 0]]
-        nrm[entry[wall]] = normal[wall]
-        return z, nrm, segment
+        nrm[entry[kind == 0]] = normal[kind == 0]
+        return W.entry_s, nrm, segment
 
-    def _not_yet(self, *args, **kwargs):
-        raise NotImplementedError("the 3D model's wall-load and flow-mode diagnostics are a "
-                                  "later step")
+    def wall_theta(self) -> np.ndarray:
+        """The angle (deg) around its part's axis of each wall entry's wall point
+        (:mod:`fipy_hopper.space.wall`: 0 towards the outlet's offset, +y positive)."""
+        return np.degrees(self.wall_loads.entry_theta)
 
-    wall_load_rows = wall_stress_points = flow_mode_measures = empty_channel = _not_yet
+    def wall_load_rows(self) -> np.ndarray:
+        """The profile's segment whose load each wall entry is (the lip's: the cone's or
+        floor's; -1 for the tube's entries, which are no load)."""
+        return self.wall_loads.entry_segment
+
+    def wall_stress_points(self, state) -> tuple:
+        """``(position, weight, sigma)`` of the cells 0.5 to 2.5 cells inside the material
+        from the wall: the arc length ``s`` of the nearest wall point along the meridian (m),
+        the weight ``alpha kappa V`` where ``alpha > 1/2`` (else 0) and the stress (six
+        components, Pa).  Their angles: :meth:`wall_stress_theta`."""
+        cells = self.wall_loads._wall_band()
+        flat = cells[0]
+        alpha = state.alpha.ravel()[flat]
+        w = np.where(alpha > 0.5, (state.alpha * self.open_volume).ravel()[flat], 0.0)
+        return cells[2], w, state.sigma.reshape(-1, 6)[flat]
+
+    def wall_stress_theta(self) -> np.ndarray:
+        """The angles (deg) of the cells of :meth:`wall_stress_points`."""
+        return np.degrees(self.wall_loads._wall_band()[3])
+
+    def contact_slip(self, state) -> tuple:
+        """``(slip, axis_speed)`` (m/s) of every wall entry
+        (:func:`fipy_hopper.space.flow.contact_slip`)."""
+        from .flow import contact_slip
+        return contact_slip(self, state)
+
+    def flow_mode_measures(self, state, rule) -> tuple:
+        """``(mass-flow index, stagnant fraction)``
+        (:func:`fipy_hopper.space.flow.flow_mode_measures`)."""
+        from .flow import flow_mode_measures
+        return flow_mode_measures(self, state, rule)
+
+    def empty_channel(self, state, rule) -> tuple:
+        """``(diameter, height)`` (m) of an empty channel
+        (:func:`fipy_hopper.space.flow.empty_channel`)."""
+        from .flow import empty_channel
+        return empty_channel(self, state, rule)
+
+    def bin_lateral_stress_ratio(self, state) -> float:
+        """:func:`fipy_hopper.space.flow.bin_lateral_stress_ratio`."""
+        from .flow import bin_lateral_stress_ratio
+        return bin_lateral_stress_ratio(self, state)
 
     # ------------------------------------------------------------------ steps
     def advance(self, state: SpaceState, max_steps: int) -> int:
@@ -257,12 +335,15 @@ class SpaceModel:
                     return n + 1
             return max_steps
         g, num = self.grid, self.cfg.numerics
+        if numba.get_num_threads() != self.threads:
+            numba.set_num_threads(self.threads)
         mass = self.node_mass(state)
         carry = np.argwhere(state.alpha != 0.0).astype(np.int64)
         loaded = np.argwhere(state.alpha >= num.alpha_min).astype(np.int64)
         not_loaded = state.alpha < num.alpha_min
         state.sigma[not_loaded] = 0.0
         state.loose[not_loaded] = 0.0
+        state.flowing[not_loaded] = 0.0
         moving = np.argwhere((mass > self.light_mass) | np.any(state.v != 0.0, axis=0))
         nodes = np.zeros((len(moving), 5), np.int64)
         nodes[:, :3] = moving
@@ -281,15 +362,16 @@ class SpaceModel:
         _, _, normal, mu, kind, entry = self.contacts[:6]
         done, due = stepping.material_steps(
             int(max_steps), clock, state.v, mass, state.alpha, state.sigma, state.loose,
-            state.eps_p, state.flux_z, state.flux_y, state.flux_x, carry, len(carry), loaded,
-            len(loaded), nodes, len(nodes), k0, k1, self.open_volume, g.kappa, g.aperture_z,
-            g.aperture_y, g.aperture_x, self.open_z, self.open_y, self.open_x, g.h,
+            state.eps_p, state.flowing, state.flux_z, state.flux_y, state.flux_x, carry,
+            len(carry), loaded, len(loaded), nodes, len(nodes), k0, k1, self.open_volume,
+            g.kappa, g.aperture_z, g.aperture_y, g.aperture_x, self.open_z, self.open_y, self.open_x, g.h,
             self.hourglass_base, self._prm, self.dt, GRAVITY,
             self.ramp_time if filling else 0.0, self.fill_damping if filling else 0.0,
             self.light_mass, num.alpha_min, self.bulk_viscosity, num.transport_cfl,
             num.max_transport_interval, normal, mu, kind, entry, state.plate_closed,
             g.mirror_x, g.mirror_y, state.wall_impulse, state.plate_impulse,
-            state.momentum_budget, contrib, *self._work[1:])
+            state.momentum_budget, contrib, *self._work[1:], self._node_budget[:len(nodes)],
+            self._plane_top, self._rate, self.threads)
         state.t, state.step, state.flux_time = float(clock[0]), state.step + int(done), \
             float(clock[2])
         if due:
@@ -305,12 +387,20 @@ class SpaceModel:
         loaded = state.alpha >= num.alpha_min
         state.sigma[~loaded] = 0.0
         state.loose[~loaded] = 0.0
+        state.flowing[~loaded] = 0.0
         stress = state.sigma
-        if self.bulk_viscosity > 0.0:
+        rated = self._rate[0] != 0.0
+        if self.bulk_viscosity > 0.0 or rated:
+            # sigma + 2 eta_I D' (flowing cells) + eta_b tr(D) I in loaded cells
             D, _ = sm.strain_rate(state.v, g.h)
-            p_b = self.bulk_viscosity * (D[..., 0] + D[..., 1] + D[..., 2])
-            viscous = state.sigma.copy()
-            viscous[..., :3] = state.sigma[..., :3] + p_b[..., None]
+            viscous = state.sigma
+            if rated:
+                viscous = viscous + overstress6(state.sigma, D, state.flowing != 0.0,
+                                                self._rate)
+            if self.bulk_viscosity > 0.0:
+                p_b = self.bulk_viscosity * (D[..., 0] + D[..., 1] + D[..., 2])
+                viscous = viscous.copy() if viscous is state.sigma else viscous
+                viscous[..., :3] = viscous[..., :3] + p_b[..., None]
             stress = np.where(loaded[..., None], viscous, state.sigma)
         contrib = (-sm.corner_forces(state.alpha[..., None] * stress, self.open_volume, g.h)
                    + sm.hourglass_corner_forces(state.v, self.hourglass_base * state.alpha))
@@ -353,6 +443,8 @@ class SpaceModel:
                                                 return_status=True)
         state.sigma = np.where(loaded[..., None], 0.0, state.sigma)
         state.sigma[loaded] = new
+        state.flowing = np.zeros_like(state.flowing)
+        state.flowing[loaded] = np.where(status != ELASTIC, 1.0, 0.0)
         loose = np.where(loaded, state.loose - closed, 0.0)
         loose[loaded] += np.where(status == APEX, np.maximum(dep[:, :3].sum(axis=1), 0.0), 0.0)
         state.loose = loose
@@ -413,10 +505,20 @@ class SpaceModel:
         mass_old = self.node_mass(state)
         mass_new = sm.node_mass(self.rho, new_alpha, self.open_volume)
         nzf, nyf, _ = g.n_faces
-        state.v, outflow, stopped = dual_momentum_transport(
-            state.v, mass_old, mass_new, oriented[:nzf].reshape(g.aperture_z.shape),
-            oriented[nzf:nzf + nyf].reshape(g.aperture_y.shape),
-            oriented[nzf + nyf:].reshape(g.aperture_x.shape), self.rho, self.light_mass)
+        fluxes = (oriented[:nzf].reshape(g.aperture_z.shape),
+                  oriented[nzf:nzf + nyf].reshape(g.aperture_y.shape),
+                  oriented[nzf + nyf:].reshape(g.aperture_x.shape))
+        if self.backend == "numba":
+            lo = [material_rows(x.reshape(g.nz, -1), margin=1) for x in (a, new_alpha)]
+            lo = [r for r in lo if r[1] > r[0]]
+            node_rows = ((min(r[0] for r in lo), max(r[1] for r in lo) + 1) if lo
+                         else (0, 0))
+            state.v, outflow, stopped = dual_momentum_transport_compiled(
+                state.v, mass_old, mass_new, *fluxes, self.rho, self.light_mass, node_rows,
+                self.threads)
+        else:
+            state.v, outflow, stopped = dual_momentum_transport(
+                state.v, mass_old, mass_new, *fluxes, self.rho, self.light_mass)
         state.momentum_budget[2] += stopped
         state.momentum_budget[3] += outflow
         state.alpha, state.sigma, state.eps_p, state.loose = new_alpha, sigma, eps_p, loose

@@ -5,21 +5,32 @@ A step is the numpy reference's (:meth:`fipy_hopper.space.model.SpaceModel._step
 forces, the node update, the contact and the faces:
 
 1. per *carrying* cell (``alpha != 0``): its corner forces ``-w s . grad N_a + f_hg``
-   (``s = alpha (sigma + eta_b tr(D) I)`` in loaded cells, ``eta_b`` the bulk viscosity);
+   (``s = alpha (sigma + 2 eta_I D' + eta_b tr(D) I)`` in loaded cells: the law's
+   rate-dependent overstress where the cell is flowing, :mod:`fipy_hopper.space.rate3d`, and
+   the bulk viscosity ``eta_b``);
    per moving node: the sum of its eight cells' corners in the order 0..7, ``v += dt (f / m -
    g e_z)`` (rest if no heavier than ``light_mass``), the wall and plate contact
    (:func:`contact_node`), the filling damping and the mirror planes;
 2. per *loaded* cell (``alpha >= alpha_min``): velocity gradient, Jaumann rotation, the open
    divergence as volumetric strain, the closing of loose volume, then the law's 3D point update
-   (:func:`fipy_hopper.material.principal3d.update6_points`: the law's principal-space return)
-   and the plastic and loose strains;
+   (:func:`fipy_hopper.material.principal3d.update6_points`: the law's principal-space return),
+   the plastic and loose strains and the flowing flag (the return was plastic);
 3. the face velocities of the node planes of the material added to the face-flux integral,
    and the transport rule.
 
 The cell lists are made once per call (alpha is constant between transports); the work of a
-step is on those cells and the nodes they move.  One thread: every sum has a fixed order.
-The stress update is not bit-identical to the numpy reference's (the eigen-solves differ,
-:mod:`fipy_hopper.material.principal3d`).
+step is on those cells and the nodes they move.  The stress update is not bit-identical to the
+numpy reference's (the eigen-solves differ, :mod:`fipy_hopper.material.principal3d`).
+
+Threads (numba ``prange``; the caller sets their number with ``numba.set_num_threads`` and
+passes it): thread ``t`` of ``T`` takes the cells (nodes, blocks of the law's update, node
+planes) ``t, t + T, ...`` of each list, so each has its share of the hopper and of the bin.
+Every cell writes only its own corner forces and fields, every node only its own velocity and
+its own constraints' impulses (a constraint belongs to one node), each node plane only its own
+faces; the vertical budget's terms are written per node and summed afterwards in the node
+list's order; the law's update runs on blocks of ``return_fast._BLOCK`` points aligned as in
+one thread (a point's return does not depend on the others of its block).  So the results do
+not depend on the number of threads, to the bit (tested).
 """
 
 from __future__ import annotations
@@ -28,11 +39,19 @@ import math
 
 import numba
 import numpy as np
+from numba import prange
 
 from ..material import principal3d as p3
-from ..material.mohr_coulomb import APEX
+from ..material import return_fast as _fast
+from ..material.mohr_coulomb import APEX, ELASTIC
+from ..material.rate import overstress_factor
+from .rate3d import deviatoric_rate6
+
+#: points per block of the law's update (the threads take whole blocks)
+BLOCK = _fast._BLOCK
 
 _jit = numba.njit(cache=True, error_model="numpy")
+_jit_parallel = numba.njit(cache=True, error_model="numpy", parallel=True)
 
 # corner offsets of a = di + 2 dj + 4 dk, and the hourglass vectors at the corners
 _DK = np.array([(a >> 2) & 1 for a in range(8)], dtype=np.int64)
@@ -60,23 +79,53 @@ def _gradient(v, k, j, i, g, L):
             L[a, 2] += sz * va
 
 
-@_jit
+@_jit_parallel
 def cell_forces(cells, n, alpha, sigma, v, open_volume, h, hg_base, alpha_min, bulk_viscosity,
-                contrib):
+                contrib, flowing, rate, threads=1):
     """Corner forces ``-f_int + f_hg`` of the cells ``cells[:n]`` (k, j, i) into ``contrib``
-    (8, 3, nz, ny, nx), as ``momentum.corner_forces`` and ``hourglass_corner_forces``."""
+    (8, 3, nz, ny, nx), as ``momentum.corner_forces`` and ``hourglass_corner_forces``.  The
+    stress of a loaded cell (``alpha >= alpha_min``) in them is ``sigma + 2 eta_I D' + eta_b
+    tr(D) I``: the law's rate-dependent overstress where the cell is ``flowing`` (its last
+    return was plastic; :mod:`fipy_hopper.space.rate3d` with the law's rate parameters
+    ``rate``, none when ``rate[0]``, the grain size, is 0) and the bulk viscosity, added in
+    this order."""
+    for t in prange(threads):
+        _cell_forces_of(t, threads, cells, n, alpha, sigma, v, open_volume, h, hg_base,
+                        alpha_min, bulk_viscosity, contrib, flowing, rate)
+
+
+@_jit
+def _cell_forces_of(t, threads, cells, n, alpha, sigma, v, open_volume, h, hg_base, alpha_min,
+                    bulk_viscosity, contrib, flowing, rate):
+    """:func:`cell_forces` of the cells ``t, t + threads, ...``."""
     g = 1.0 / (4.0 * h)
     L = np.empty((3, 3))
     s = np.empty(6)
     modes = np.empty((4, 3))
-    for q in range(n):
+    rated = rate[0] != 0.0
+    for q in range(t, n, threads):
         k, j, i = cells[q, 0], cells[q, 1], cells[q, 2]
         a = alpha[k, j, i]
         w = open_volume[k, j, i]
         for c in range(6):
             s[c] = sigma[k, j, i, c]
-        if bulk_viscosity > 0.0 and a >= alpha_min:
+        over = rated and a >= alpha_min and flowing[k, j, i] != 0.0
+        if (bulk_viscosity > 0.0 and a >= alpha_min) or over:
             _gradient(v, k, j, i, g, L)
+        if over:
+            p = -(sigma[k, j, i, 0] + sigma[k, j, i, 1] + sigma[k, j, i, 2]) / 3.0
+            d3 = 0.5 * (L[1, 2] + L[2, 1])
+            d4 = 0.5 * (L[0, 2] + L[2, 0])
+            d5 = 0.5 * (L[0, 1] + L[1, 0])
+            e0, e1, e2, gamma_dot = deviatoric_rate6(L[0, 0], L[1, 1], L[2, 2], d3, d4, d5)
+            f = overstress_factor(p, gamma_dot, rate)
+            s[0] = s[0] + f * e0
+            s[1] = s[1] + f * e1
+            s[2] = s[2] + f * e2
+            s[3] = s[3] + f * d3
+            s[4] = s[4] + f * d4
+            s[5] = s[5] + f * d5
+        if bulk_viscosity > 0.0 and a >= alpha_min:
             p_b = bulk_viscosity * (L[0, 0] + L[1, 1] + L[2, 2])
             s[0] = s[0] + p_b
             s[1] = s[1] + p_b
@@ -231,20 +280,39 @@ def contact_node(v, k, j, i, m, k0, k1, normal, mu, kind, entry, plate_closed, w
     imp[e, 2] -= m * vz
 
 
-@_jit
+@_jit_parallel
 def node_update(nodes, n_nodes, v, mass, contrib, gravity, dt, damping, light_mass, normal, mu,
                 kind, entry, plate_closed, mirror_x, mirror_y, wall_impulse, plate_impulse,
-                budget):
+                budget, node_budget, threads=1):
     """Velocities of the nodes ``nodes[:n_nodes]`` (k, j, i, first constraint, end): the sum
     of the eight cells' corner forces (order 0..7), ``v + dt (f / m - g e_z)`` (rest if no
     heavier than ``light_mass``), the mirror planes (``v_x = 0`` on ``i = 0``, ``v_y = 0`` on
     ``j = 0``: before the contact, whose friction must not see the unbalanced force across
     the plane, and again after it), the contact (:func:`contact_node`) and the damping
     ``v / (1 + c_d dt)``.  ``budget[0:3]`` gets the vertical impulses of gravity, damping and
-    stopped nodes."""
+    stopped nodes (each node's into ``node_budget[q]``, then added in the list's order)."""
+    for t in prange(threads):
+        _node_update_of(t, threads, nodes, n_nodes, v, mass, contrib, gravity, dt, damping,
+                        light_mass, normal, mu, kind, entry, plate_closed, mirror_x, mirror_y,
+                        wall_impulse, plate_impulse, node_budget)
+    for c in range(3):
+        total = 0.0
+        for q in range(n_nodes):
+            total += node_budget[q, c]
+        budget[c] += total
+
+
+@_jit
+def _node_update_of(t, threads, nodes, n_nodes, v, mass, contrib, gravity, dt, damping,
+                    light_mass, normal, mu, kind, entry, plate_closed, mirror_x, mirror_y,
+                    wall_impulse, plate_impulse, node_budget):
+    """:func:`node_update` of the nodes ``t, t + threads, ...``."""
     nz, ny, nx = contrib.shape[2], contrib.shape[3], contrib.shape[4]
     scale = 1.0 / (1.0 + damping * dt)
-    for q in range(n_nodes):
+    for q in range(t, n_nodes, threads):
+        node_budget[q, 0] = 0.0
+        node_budget[q, 1] = 0.0
+        node_budget[q, 2] = 0.0
         k, j, i = nodes[q, 0], nodes[q, 1], nodes[q, 2]
         m = mass[k, j, i]
         f0, f1, f2 = 0.0, 0.0, 0.0
@@ -255,12 +323,12 @@ def node_update(nodes, n_nodes, v, mass, contrib, gravity, dt, damping, light_ma
                 f1 += contrib[c, 1, kk, jj, ii]
                 f2 += contrib[c, 2, kk, jj, ii]
         if m > light_mass:
-            budget[0] -= m * gravity * dt
+            node_budget[q, 0] = -(m * gravity * dt)
             v[0, k, j, i] = v[0, k, j, i] + dt * f0 / m
             v[1, k, j, i] = v[1, k, j, i] + dt * f1 / m
             v[2, k, j, i] = v[2, k, j, i] + dt * (f2 / m - gravity)
         else:
-            budget[2] -= m * v[2, k, j, i]
+            node_budget[q, 2] = -(m * v[2, k, j, i])
             v[0, k, j, i] = 0.0
             v[1, k, j, i] = 0.0
             v[2, k, j, i] = 0.0
@@ -277,24 +345,41 @@ def node_update(nodes, n_nodes, v, mass, contrib, gravity, dt, damping, light_ma
             v[0, k, j, i] *= scale
             v[1, k, j, i] *= scale
             v[2, k, j, i] = vz * scale
-            budget[1] += m * (v[2, k, j, i] - vz)
+            node_budget[q, 1] = m * (v[2, k, j, i] - vz)
         if mirror_x and i == 0:
             v[0, k, j, i] = 0.0
         if mirror_y and j == 0:
             v[1, k, j, i] = 0.0
 
 
-@_jit
-def stress_update(cells, n, v, sigma, loose, eps_p, kappa, aperture_z, aperture_y, aperture_x,
-                  h, dt, prm, sig_in, dep_in, sig_out, dep_out, status):
+@_jit_parallel
+def stress_update(cells, n, v, sigma, loose, eps_p, flowing, kappa, aperture_z, aperture_y,
+                  aperture_x, h, dt, prm, sig_in, dep_in, sig_out, dep_out, status, threads=1):
     """The stress update of the loaded cells ``cells[:n]`` in place: velocity gradient,
     Jaumann rotation, the open divergence as volumetric strain (shared equally by the three
     normal strains), the closing of loose volume, then the law's point update
-    (``principal3d.update6_points``) of the gathered cells and the plastic and loose
-    strains.  ``sig_in`` ... ``status``: work arrays of at least ``n`` rows."""
+    (``principal3d.update6_points``) of the gathered cells, the plastic and loose strains and
+    ``flowing`` (1 where the return was plastic, else 0).  ``sig_in`` ... ``status``: work
+    arrays of at least ``n`` rows.  Thread ``t``
+    takes the blocks of :data:`BLOCK` points ``t, t + threads, ...``."""
+    n_blocks = (n + BLOCK - 1) // BLOCK
+    for t in prange(threads):
+        for b in range(t, n_blocks, threads):
+            b0 = b * BLOCK
+            b1 = min(b0 + BLOCK, n)
+            _stress_block(b0, b1, cells, v, sigma, loose, eps_p, flowing, kappa, aperture_z,
+                          aperture_y, aperture_x, h, dt, prm, sig_in, dep_in, sig_out,
+                          dep_out, status)
+
+
+@_jit
+def _stress_block(b0, b1, cells, v, sigma, loose, eps_p, flowing, kappa, aperture_z,
+                  aperture_y, aperture_x, h, dt, prm, sig_in, dep_in, sig_out, dep_out,
+                  status):
+    """:func:`stress_update` of the points ``b0 <= q < b1``."""
     g = 1.0 / (4.0 * h)
     L = np.empty((3, 3))
-    for q in range(n):
+    for q in range(b0, b1):
         k, j, i = cells[q, 0], cells[q, 1], cells[q, 2]
         _gradient(v, k, j, i, g, L)
         wyz = 0.5 * (L[1, 2] - L[2, 1]) * dt
@@ -339,11 +424,13 @@ def stress_update(cells, n, v, sigma, loose, eps_p, kappa, aperture_z, aperture_
         dep_in[q, 0], dep_in[q, 1], dep_in[q, 2] = d0 * share, d1 * share, d2 * share
         dep_in[q, 3], dep_in[q, 4], dep_in[q, 5] = d3 * share, d4 * share, d5 * share
         loose[k, j, i] = old - closed
-    p3.update6_points(sig_in[:n], dep_in[:n], prm, sig_out[:n], dep_out[:n], status[:n])
-    for q in range(n):
+    p3.update6_points(sig_in[b0:b1], dep_in[b0:b1], prm, sig_out[b0:b1], dep_out[b0:b1],
+                      status[b0:b1])
+    for q in range(b0, b1):
         k, j, i = cells[q, 0], cells[q, 1], cells[q, 2]
         for c in range(6):
             sigma[k, j, i, c] = sig_out[q, c]
+        flowing[k, j, i] = 0.0 if status[q] == ELASTIC else 1.0
         e0, e1, e2 = dep_out[q, 0], dep_out[q, 1], dep_out[q, 2]
         e3, e4, e5 = dep_out[q, 3], dep_out[q, 4], dep_out[q, 5]
         if status[q] == APEX:
@@ -352,47 +439,60 @@ def stress_update(cells, n, v, sigma, loose, eps_p, kappa, aperture_z, aperture_
                                                  + 2.0 * (e3 ** 2 + e4 ** 2 + e5 ** 2)))
 
 
-@_jit
-def faces(k0, k1, v, dt, open_z, open_y, open_x, flux_z, flux_y, flux_x):
+@_jit_parallel
+def faces(k0, k1, v, dt, open_z, open_y, open_x, flux_z, flux_y, flux_x, plane_top,
+          threads=1):
     """The face velocities of the node planes ``k0 <= k < k1`` (z-faces of the plane, y- and
     x-faces of the cell layer above it) added to the flux integrals (``u dt``, m); returns the
-    largest open-face speed (m/s)."""
-    nz1, ny1, nx1 = v.shape[1], v.shape[2], v.shape[3]
+    largest open-face speed (m/s) (each plane's in ``plane_top[k]``)."""
+    for t in prange(threads):
+        for k in range(k0 + t, k1, threads):
+            plane_top[k] = _faces_of(k, v, dt, open_z, open_y, open_x, flux_z, flux_y, flux_x)
     top = 0.0
     for k in range(k0, k1):
-        for j in range(ny1 - 1):
-            for i in range(nx1 - 1):
-                u = 0.25 * (v[2, k, j, i] + v[2, k, j, i + 1] + v[2, k, j + 1, i]
-                            + v[2, k, j + 1, i + 1])
-                flux_z[k, j, i] += u * dt
-                if open_z[k, j, i]:
-                    top = max(top, abs(u))
-        if k < nz1 - 1:
-            for j in range(ny1):
-                for i in range(nx1 - 1):
-                    u = 0.25 * (v[1, k, j, i] + v[1, k, j, i + 1] + v[1, k + 1, j, i]
-                                + v[1, k + 1, j, i + 1])
-                    flux_y[k, j, i] += u * dt
-                    if open_y[k, j, i]:
-                        top = max(top, abs(u))
-            for j in range(ny1 - 1):
-                for i in range(nx1):
-                    u = 0.25 * (v[0, k, j, i] + v[0, k, j + 1, i] + v[0, k + 1, j, i]
-                                + v[0, k + 1, j + 1, i])
-                    flux_x[k, j, i] += u * dt
-                    if open_x[k, j, i]:
-                        top = max(top, abs(u))
+        top = max(top, plane_top[k])
     return top
 
 
 @_jit
-def material_steps(max_steps, clock, v, mass, alpha, sigma, loose, eps_p, flux_z, flux_y,
-                   flux_x, carry, n_carry, loaded, n_loaded, nodes, n_nodes, k0, k1,
+def _faces_of(k, v, dt, open_z, open_y, open_x, flux_z, flux_y, flux_x):
+    """:func:`faces` of the node plane ``k``."""
+    nz1, ny1, nx1 = v.shape[1], v.shape[2], v.shape[3]
+    top = 0.0
+    for j in range(ny1 - 1):
+        for i in range(nx1 - 1):
+            u = 0.25 * (v[2, k, j, i] + v[2, k, j, i + 1] + v[2, k, j + 1, i]
+                        + v[2, k, j + 1, i + 1])
+            flux_z[k, j, i] += u * dt
+            if open_z[k, j, i]:
+                top = max(top, abs(u))
+    if k < nz1 - 1:
+        for j in range(ny1):
+            for i in range(nx1 - 1):
+                u = 0.25 * (v[1, k, j, i] + v[1, k, j, i + 1] + v[1, k + 1, j, i]
+                            + v[1, k + 1, j, i + 1])
+                flux_y[k, j, i] += u * dt
+                if open_y[k, j, i]:
+                    top = max(top, abs(u))
+        for j in range(ny1 - 1):
+            for i in range(nx1):
+                u = 0.25 * (v[0, k, j, i] + v[0, k, j + 1, i] + v[0, k + 1, j, i]
+                            + v[0, k + 1, j + 1, i])
+                flux_x[k, j, i] += u * dt
+                if open_x[k, j, i]:
+                    top = max(top, abs(u))
+    return top
+
+
+@_jit
+def material_steps(max_steps, clock, v, mass, alpha, sigma, loose, eps_p, flowing, flux_z,
+                   flux_y, flux_x, carry, n_carry, loaded, n_loaded, nodes, n_nodes, k0, k1,
                    open_volume, kappa, aperture_z, aperture_y, aperture_x, open_z, open_y,
                    open_x, h, hg_base, prm, dt, g_full, ramp_time, damping, light_mass,
                    alpha_min, bulk_viscosity, transport_cfl, max_transport_interval, normal,
                    mu, kind, entry, plate_closed, mirror_x, mirror_y, wall_impulse,
-                   plate_impulse, budget, contrib, sig_in, dep_in, sig_out, dep_out, status):
+                   plate_impulse, budget, contrib, sig_in, dep_in, sig_out, dep_out, status,
+                   node_budget, plane_top, rate, threads=1):
     """Up to ``max_steps`` material steps in place (module docstring).  ``clock = [t, step,
     flux_time]``; gravity ``g_full`` ramped over ``ramp_time`` (0: none).  ``carry``/``loaded``
     (n, 3) cell lists, ``nodes`` (n, 5) node list with its contact constraints, ``k0 <= k <
@@ -401,13 +501,15 @@ def material_steps(max_steps, clock, v, mass, alpha, sigma, loose, eps_p, flux_z
         t = clock[0]
         gravity = g_full * min(1.0, t / ramp_time) if ramp_time > 0.0 else g_full
         cell_forces(carry, n_carry, alpha, sigma, v, open_volume, h, hg_base, alpha_min,
-                    bulk_viscosity, contrib)
+                    bulk_viscosity, contrib, flowing, rate, threads)
         node_update(nodes, n_nodes, v, mass, contrib, gravity, dt, damping, light_mass, normal,
                     mu, kind, entry, plate_closed, mirror_x, mirror_y, wall_impulse,
-                    plate_impulse, budget)
-        stress_update(loaded, n_loaded, v, sigma, loose, eps_p, kappa, aperture_z, aperture_y,
-                      aperture_x, h, dt, prm, sig_in, dep_in, sig_out, dep_out, status)
-        speed = faces(k0, k1, v, dt, open_z, open_y, open_x, flux_z, flux_y, flux_x)
+                    plate_impulse, budget, node_budget, threads)
+        stress_update(loaded, n_loaded, v, sigma, loose, eps_p, flowing, kappa, aperture_z,
+                      aperture_y, aperture_x, h, dt, prm, sig_in, dep_in, sig_out, dep_out,
+                      status, threads)
+        speed = faces(k0, k1, v, dt, open_z, open_y, open_x, flux_z, flux_y, flux_x,
+                      plane_top, threads)
         clock[2] += dt
         clock[0] += dt
         clock[1] += 1.0

@@ -1,0 +1,292 @@
+"""Flow measures of the 3D silo: wall slip per sector (the flow-mode call), the mass-flow index
+and the stagnant fraction, the flow field and the flow channel in the vertical plane through
+the axis and the outlet, an empty channel (rathole), the bin's lateral stress ratio.  All read a
+model's state and never change it.
+
+The sections' rules (:class:`fipy_hopper.diagnostics.FlowModeRule`,
+:class:`~fipy_hopper.diagnostics.OutcomeRule`) in 3D:
+
+* **wall slip per sector**: for every loaded contact entry on a hopper stretch (not vertical),
+  its slip speed down the meridian ``u_e = -v . t`` over the downward speed ``U_e`` at the
+  axis of its section at its node's height (the silo's axis, or the eccentric cone's section
+  centre ``(c(z), 0)``: the grid's node nearest to it in the plane ``y = 0``), weighted by its
+  compressive normal impulse since the previous sample: the sections' wall slip ratio, per
+  sector around the circumference (:func:`fipy_hopper.diagnostics.wall_slip` with the sector
+  as the label) and per hopper stretch; a sector is ``"mass"`` when every hopper stretch slides
+  there (ratio ``>= rule.slip_ratio``), else ``"funnel"``;
+* **mass-flow index**: at the heights ``rule.heights`` of the hopper (fractions of the bin
+  wall's foot ``z_b``), the mean downward speed of the cells 1 to 2.5 cells from the wall over
+  that of the cells within 2 cells of the section's axis; **stagnant fraction**: the share of
+  the hopper's material (``alpha > 1/2``) slower than ``rule.stagnant_speed`` times its mean
+  downward speed;
+* **the plane through the axis and the outlet** (``y = 0``, a node plane of every grid): the
+  nodes' velocities and the mean ``alpha`` of their cells, the whole plane (mirrored across
+  ``x = 0`` for a quarter); the **flow channel** at each node row is where the downward speed
+  is at least ``rule.stagnant_speed`` times the mean downward speed of the material above the
+  outlet plane: its extent ``x_left .. x_right`` and its centre (leaning towards the near wall
+  with an off-centre outlet);
+* **empty channel**: in that plane, from the outlet's centre ``x = e`` outwards both ways, the
+  sections' rule (every row from the outlet plane to the top of the material empty at the
+  centre; the radius where ``alpha`` first reaches ``rule.full``, the mean of both sides;
+  the diameter twice the median).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .. import diagnostics
+
+
+def _axis_column(model) -> np.ndarray:
+    """Per node row, the node column (index into ``x_nodes``) nearest to the section's axis
+    ``c(z)`` in the plane ``y = 0``."""
+    g = model.grid
+    part = model.boundary.parts[0] if len(model.boundary.parts) == 1 else \
+        model.boundary.parts[1]
+    c = part.centre(g.z_nodes)
+    return np.argmin(np.abs(g.x_nodes[None, :] - c[:, None]), axis=1)
+
+
+def _plane_row(model) -> int:
+    """The node row ``j`` of the plane ``y = 0``."""
+    return int(np.argmin(np.abs(model.grid.y_nodes)))
+
+
+def contact_slip(model, state) -> tuple:
+    """``(slip, axis_speed)`` (m/s) of every wall entry: its node's slip speed down the
+    meridian of its wall point (NaN for the tube's entries) and the downward speed at its
+    section's axis at the node's height."""
+    W = model.wall_loads
+    k, j, i = W.entry_node.T
+    v = state.v[:, k, j, i]
+    slip = -(v * W.entry_tangent).sum(axis=0)
+    slip = np.where(W.entry_stretch >= 0, slip, np.nan)
+    axis = -state.v[2, k, _plane_row(model), _axis_column(model)[k]]
+    return slip, axis
+
+
+def hopper_stretches(patches) -> np.ndarray:
+    """The indices of the stretches that are hopper wall (not vertical)."""
+    return np.array([k for k, st3 in enumerate(patches.stretches)
+                     if abs(st3.stretch.tangent[0]) > 1e-9], dtype=np.int64)
+
+
+def wall_slip_by_sector(run, start: dict, rule=diagnostics.FlowModeRule()) -> np.ndarray:
+    """The wall slip ratio of every hopper stretch in every sector since the reading
+    ``start`` (:meth:`SpaceWallLoads.reading`): ``(n_hopper_stretches, n_sectors)``, NaN where
+    no loaded entry under a moving axis lies (module docstring)."""
+    model, state = run.model, run.state
+    W = model.wall_loads
+    P = W.patches
+    hop = hopper_stretches(P)
+    out = np.full((len(hop), P.n_sectors), np.nan)
+    if not len(hop):
+        return out
+    impulse = state.wall_impulse - start["wall"]
+    load = -np.einsum("ec,ce->e", impulse, W.entry_normal)
+    slip, axis = contact_slip(model, state)
+    label_of = np.full(len(P.stretches), -1)
+    label_of[hop] = np.arange(len(hop))
+    on = W._on
+    labels, loads, slips, axes, ss = [], [], [], [], []
+    for bins, sectors, _ in W._bin_sector:
+        lab = label_of[W.entry_stretch[on]]
+        labels.append(np.where(lab >= 0, lab * P.n_sectors + sectors, -1))
+        loads.append(load[on])
+        slips.append(slip[on])
+        axes.append(axis[on])
+        ss.append(W.entry_s[on])
+    ratio, _ = diagnostics.wall_slip(np.concatenate(loads), np.concatenate(slips),
+                                     np.concatenate(axes), np.concatenate(ss),
+                                     np.concatenate(labels), rule)
+    full = np.full(len(hop) * P.n_sectors, np.nan)
+    full[:len(ratio)] = ratio
+    return full.reshape(len(hop), P.n_sectors)
+
+
+def flow_mode_by_sector(samples, t, mass, m0, rule=diagnostics.FlowModeRule()) -> tuple:
+    """``(ratio (n_sectors,), calls)`` from the samples of :func:`wall_slip_by_sector` at
+    times ``t`` (s since the opening) with ``mass`` left: the median of each stretch's ratio
+    over the sections' flow-mode window (at most 90 % and at least 40 % of ``m0`` left, later
+    than 0.1 s; all samples but the first if none), the smallest over the hopper stretches per
+    sector, and the call (``"mass"`` or ``"funnel"``) per sector."""
+    t, mass = np.asarray(t, float), np.asarray(mass, float)
+    if not len(samples):
+        return np.zeros(0), []
+    window = (mass <= 0.9 * m0) & (mass >= 0.4 * m0) & (t > 0.1)
+    arr = np.asarray(samples, float)                     # (n_samples, n_stretches, n_sectors)
+    n = min(len(arr), len(window))
+    chosen = arr[:n][window[:n]] if window[:n].any() else arr[1:]
+    with np.errstate(all="ignore"):
+        import warnings
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            median = np.nanmedian(chosen, axis=0) if len(chosen) else np.full(arr.shape[1:],
+                                                                              np.nan)
+            ratio = np.nanmin(median, axis=0) if median.shape[0] else np.full(
+                arr.shape[2], np.nan)
+    return ratio, [diagnostics.classify_flow_mode(r, rule) for r in ratio]
+
+
+def cell_down(state) -> np.ndarray:
+    """The downward speed of every cell: minus the mean of its eight nodes' ``v_z`` (m/s)."""
+    vz = state.v[2]
+    return -0.125 * (vz[:-1, :-1, :-1] + vz[:-1, :-1, 1:] + vz[:-1, 1:, :-1] + vz[:-1, 1:, 1:]
+                     + vz[1:, :-1, :-1] + vz[1:, :-1, 1:] + vz[1:, 1:, :-1] + vz[1:, 1:, 1:])
+
+
+def flow_mode_measures(model, state, rule=diagnostics.FlowModeRule()) -> tuple:
+    """``(mass-flow index, stagnant fraction)`` of the hopper (module docstring)."""
+    g = model.grid
+    z_b = model.boundary.bin_foot
+    Z, Y, X = np.meshgrid(g.centres(2), g.centres(1), g.centres(0), indexing="ij")
+    d, _ = model.boundary.distance_normal(X, Y, Z)
+    down = cell_down(state)
+    full = (state.alpha > 0.5) & (g.kappa > 0)
+    part = model.boundary.parts[0]
+    ratios = []
+    for frac in rule.heights:
+        if z_b <= 0:
+            break
+        row = int(np.argmin(np.abs(g.centres(2) - frac * z_b)))
+        c = float(part.centre(g.centres(2)[row]))
+        near = (d[row] >= g.h) & (d[row] <= 2.5 * g.h) & full[row]
+        axis = (np.hypot(X[row] - c, Y[row]) < 2.0 * g.h) & full[row]
+        if near.any() and axis.any():
+            v_axis = float(np.mean(down[row][axis]))
+            if v_axis > 1e-9:
+                ratios.append(float(np.mean(down[row][near])) / v_axis)
+    index = float(np.mean(ratios)) if ratios else math.nan
+    cone = full & (Z > 0) & (Z < z_b)
+    if cone.any():
+        w = (state.alpha * model.open_volume)[cone]
+        mean_down = float(np.sum(down[cone] * w) / np.sum(w))
+        slow = down[cone] < rule.stagnant_speed * max(mean_down, 1e-12)
+        stagnant = float(np.sum(w[slow]) / np.sum(w))
+    else:
+        stagnant = math.nan
+    return index, stagnant
+
+
+def plane_field(model, state) -> dict:
+    """The vertical plane through the axis and the outlet (``y = 0``) on the grid's nodes,
+    the whole plane (a quarter's mirrored across ``x = 0``): ``x`` (m), ``z`` (m), ``vx``,
+    ``vz`` (nz + 1, nx') (m/s) and ``alpha`` (the mean of the cells round each node in the
+    plane, those beyond the mirror counted as their images)."""
+    g = model.grid
+    j = _plane_row(model)
+    vx, vz = state.v[0, :, j, :], state.v[2, :, j, :]
+    a = state.alpha
+    if j == 0:                           # the mirror plane y = 0: the cells on its side
+        side = a[:, 0, :]
+    else:
+        side = 0.5 * (a[:, j - 1, :] + a[:, j, :])
+    nzc, nxc = side.shape
+    alpha = np.zeros((nzc + 1, nxc + 1))
+    count = np.zeros_like(alpha)
+    for dk in (0, 1):
+        for di in (0, 1):
+            alpha[dk:dk + nzc, di:di + nxc] += side
+            count[dk:dk + nzc, di:di + nxc] += 1.0
+    if g.mirror_x:                       # the column x = 0 has its images' cells too
+        count[:, 0] *= 2.0
+        alpha[:, 0] *= 2.0
+    alpha /= count
+    x = g.x_nodes
+    if g.mirror_x:
+        x = np.concatenate([-x[:0:-1], x])
+        vx = np.concatenate([-vx[:, :0:-1], vx], axis=1)
+        vz = np.concatenate([vz[:, :0:-1], vz], axis=1)
+        alpha = np.concatenate([alpha[:, :0:-1], alpha], axis=1)
+    return {"x": x, "z": g.z_nodes.copy(), "vx": vx, "vz": vz, "alpha": alpha}
+
+
+def flow_channel(model, state, rule=diagnostics.FlowModeRule()) -> dict:
+    """The flow channel in the plane through the axis and the outlet (module docstring): per
+    node row above the outlet plane with material, ``z``, ``x_left``, ``x_right`` and
+    ``centre`` (m; NaN in a row where nothing flows), and the ``threshold`` speed (m/s)."""
+    f = plane_field(model, state)
+    g = model.grid
+    down = -cell_down(state)
+    above = (g.centres(2) > 0)[:, None, None] & (state.alpha > 0.5) & (g.kappa > 0)
+    w = (state.alpha * model.open_volume)[above]
+    mean_down = -float(np.sum(down[above] * w) / np.sum(w)) if w.size else 0.0
+    threshold = rule.stagnant_speed * max(mean_down, 1e-12)
+    rows = np.flatnonzero((f["z"] > 0) & (f["alpha"] > 0.5).any(axis=1))
+    out = {"z": f["z"][rows], "x_left": np.full(len(rows), np.nan),
+           "x_right": np.full(len(rows), np.nan), "threshold": threshold}
+    for n, k in enumerate(rows):
+        flowing = (-f["vz"][k] >= threshold) & (f["alpha"][k] > 0.5)
+        if flowing.any():
+            xs = f["x"][flowing]
+            out["x_left"][n], out["x_right"][n] = xs.min(), xs.max()
+    out["centre"] = 0.5 * (out["x_left"] + out["x_right"])
+    return out
+
+
+def empty_channel(model, state, rule=diagnostics.OutcomeRule()) -> tuple:
+    """``(diameter, height)`` (m) of an empty channel from the outlet up through the material
+    in the plane through the axis and the outlet (module docstring); NaN when the material
+    closes the outlet's centre line (or there is none)."""
+    f = plane_field(model, state)
+    e = model.boundary.outlet_offset
+    above = f["z"] >= 0.0
+    full = f["alpha"] > rule.full
+    rows = np.flatnonzero(above & full.any(axis=1))
+    if not len(rows):
+        return math.nan, math.nan
+    k0, top = int(np.flatnonzero(above)[0]), int(rows[-1])
+    c = int(np.argmin(np.abs(f["x"] - e)))
+    band = full[k0:top + 1]
+    if band[:, c].any():
+        return math.nan, math.nan
+    radii = []
+    for row in range(band.shape[0]):
+        sides = []
+        for step in (1, -1):
+            i = c
+            while 0 <= i + step < band.shape[1] and not band[row, i + step]:
+                i += step
+            if 0 <= i + step < band.shape[1]:
+                a0, a1 = f["alpha"][k0 + row, i], f["alpha"][k0 + row, i + step]
+                x0, x1 = f["x"][i], f["x"][i + step]
+                x = x0 + (rule.full - a0) / (a1 - a0) * (x1 - x0)
+                sides.append(abs(x - e))
+        if sides:
+            radii.append(float(np.mean(sides)))
+    if not radii:
+        return math.nan, math.nan
+    return 2.0 * float(np.median(radii)), float(f["z"][top])
+
+
+def bin_lateral_stress_ratio(model, state) -> float:
+    """The bin's lateral stress ratio ``K = sum(w sigma_rr) / sum(w sigma_zz)`` (``sigma_rr``
+    the radial normal stress about the silo's axis, ``w = alpha kappa V``) over the full cells
+    (``alpha >= 0.99``) of the bin from a quarter of its diameter above the bin wall's foot to a
+    quarter below the material's surface: the sections' measure
+    (:func:`fipy_hopper.diagnostics.bin_lateral_stress_ratio`); NaN when the band is empty or
+    not in compression."""
+    g = model.grid
+    z_b, quarter = model.boundary.bin_foot, 0.5 * model.boundary.radius
+    Z, Y, X = np.meshgrid(g.centres(2), g.centres(1), g.centres(0), indexing="ij")
+    in_bin = (Z > z_b) & (g.kappa > 0)
+    filled = in_bin & (state.alpha >= 0.5)
+    if not filled.any():
+        return math.nan
+    surface = float(Z[filled].max())
+    band = in_bin & (state.alpha >= 0.99) & (Z >= z_b + quarter) & (Z <= surface - quarter)
+    if not band.any():
+        return math.nan
+    rho = np.hypot(X[band], Y[band])
+    safe = np.where(rho > 0, rho, 1.0)
+    nx, ny = np.where(rho > 0, X[band] / safe, 1.0), np.where(rho > 0, Y[band] / safe, 0.0)
+    s = state.sigma[band]
+    s_rr = nx * nx * s[:, 0] + ny * ny * s[:, 1] + 2.0 * nx * ny * s[:, 5]
+    w = (state.alpha * model.open_volume)[band]
+    vertical = float(np.sum(w * s[:, 2]))
+    if not vertical < 0.0:
+        return math.nan
+    return float(np.sum(w * s_rr)) / vertical

@@ -1,0 +1,167 @@
+"""Pictures of a 3D run, drawn from the files it wrote (:mod:`fipy_hopper.space.output`):
+
+* :func:`plane_picture`: the flow pattern and the speed in the vertical plane through the
+  axis and the outlet (``y = 0``), from a field snapshot (``fields_NNNN.vtu``): the speed of
+  the cells next to the plane, arrows of their velocity in the plane, empty cells blank;
+* :func:`circumference_picture`: the wall pressure around the circumference at a few heights
+  (polar), at rest and in discharge, from ``wall_pressure.csv``;
+* :func:`unrolled_picture`: the wall pressure over the unrolled wall (``theta`` across, the
+  bins up the meridian, labelled with their ``s`` and ``z``), one panel per stage, from
+  ``wall_pressure.csv``.
+
+The wall pictures show the walls that rise (a cone, a bin wall); a flat floor is left out
+(its pressure is in the file).
+
+Each returns the path written (PNG, written atomically).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..io import atomic_path, read_csv
+
+
+def _figure():
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    return plt
+
+
+def _save(fig, path) -> Path:
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110)
+    import matplotlib.pyplot as plt
+    plt.close(fig)
+    return path
+
+
+def plane_cells(vtu_path) -> dict:
+    """The cells of a snapshot next to the plane ``y = 0`` (on its ``+y`` side) on their
+    ``(z, x)`` index grid: ``x``, ``z`` (cell centres, m), ``speed``, ``vx``, ``vz`` (m/s) and
+    ``alpha`` ``(nz, nx)``, NaN where no open cell is."""
+    from ..io import read_vtu
+    mesh = read_vtu(vtu_path)
+    hexes = mesh.cells_dict["hexahedron"]
+    centres = mesh.points[hexes].mean(axis=1)
+    h = float(np.ptp(mesh.points[hexes[0]][:, 0]))
+    near = (centres[:, 1] > 0.0) & (centres[:, 1] < h)
+    c = centres[near]
+    xs = np.unique(np.round(c[:, 0] / h - 0.5)).astype(int)
+    zs = np.unique(np.round(c[:, 2] / h - 0.5)).astype(int)
+    ix = np.searchsorted(xs, np.round(c[:, 0] / h - 0.5).astype(int))
+    iz = np.searchsorted(zs, np.round(c[:, 2] / h - 0.5).astype(int))
+    out = {"x": (xs + 0.5) * h, "z": (zs + 0.5) * h}
+    vel = mesh.cell_data_dict["velocity"]["hexahedron"][near]
+    for name, values in (("speed", np.linalg.norm(vel, axis=1)), ("vx", vel[:, 0]),
+                         ("vz", vel[:, 2]),
+                         ("alpha", mesh.cell_data_dict["alpha"]["hexahedron"][near])):
+        grid = np.full((len(zs), len(xs)), np.nan)
+        grid[iz, ix] = values
+        out[name] = grid
+    return out
+
+
+def plane_picture(vtu_path, png_path, title: str = "") -> Path:
+    """The speed and the flow pattern in the plane through the axis and the outlet."""
+    plt = _figure()
+    f = plane_cells(vtu_path)
+    empty = ~(f["alpha"] > 0.05)
+    speed = np.ma.masked_where(empty, f["speed"])
+    fig, ax = plt.subplots(figsize=(5.5, 6.5))
+    h = f["x"][1] - f["x"][0] if len(f["x"]) > 1 else 1.0
+    mesh = ax.pcolormesh(np.append(f["x"] - 0.5 * h, f["x"][-1] + 0.5 * h),
+                         np.append(f["z"] - 0.5 * h, f["z"][-1] + 0.5 * h), speed,
+                         cmap="viridis", shading="flat")
+    fig.colorbar(mesh, ax=ax, label="speed (m/s)")
+    X, Z = np.meshgrid(f["x"], f["z"])
+    norm = np.where(f["speed"] > 0, f["speed"], 1.0)
+    ok = ~empty & (f["speed"] > 1e-4)
+    ax.quiver(X[ok], Z[ok], (f["vx"] / norm)[ok], (f["vz"] / norm)[ok], color="white",
+              scale=35, width=0.004)
+    ax.axhline(0.0, color="0.5", lw=0.8)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m): towards the outlet's offset")
+    ax.set_ylabel("z (m)")
+    ax.set_title(title or "flow in the plane through the axis and the outlet")
+    fig.tight_layout()
+    return _save(fig, png_path)
+
+
+def _stage_table(csv_path, stage, floors: bool = False):
+    """``(s, z, sectors, p (n_bins, n_sectors))`` of a stage's rows of ``wall_pressure.csv``,
+    bins in the file's order (stretch by stretch up the wall); ``floors``: keep the bins of
+    horizontal stretches (a flat floor), else only the walls that rise."""
+    t = read_csv(csv_path)
+    on = np.asarray(t["stage"]) == stage
+    s = np.asarray(t["s_m"], float)[on]
+    z = np.asarray(t["z_m"], float)[on]
+    seg = np.asarray(t["segment"], float)[on]
+    theta = np.asarray(t["theta_deg"], float)[on]
+    p = np.asarray(t["p_n_Pa"], float)[on]
+    sectors = np.unique(theta)
+    n = len(sectors)
+    bins_s, bins_z, bins_seg = s[::n], z[::n], seg[::n]
+    grid = p.reshape(-1, n)
+    keep = np.ones(len(bins_s), bool)
+    if not floors:
+        for k in np.unique(bins_seg):
+            on_seg = bins_seg == k
+            if np.ptp(bins_z[on_seg]) == 0.0 and on_seg.sum() > 1 or (
+                    on_seg.sum() == 1 and np.any(bins_z[on_seg] == 0.0)):
+                keep[on_seg] = False
+    return bins_s[keep], bins_z[keep], sectors, grid[keep]
+
+
+def circumference_picture(csv_path, png_path, stages=("filling", "early_discharge"),
+                          n_heights: int = 3) -> Path:
+    """The wall pressure around the circumference at ``n_heights`` height bins (spread over
+    the wall), one polar panel per stage (those recorded)."""
+    plt = _figure()
+    stages = [s for s in stages if np.any(np.asarray(read_csv(csv_path)["stage"]) == s)]
+    fig, axes = plt.subplots(1, max(len(stages), 1), subplot_kw={"projection": "polar"},
+                             figsize=(4.5 * max(len(stages), 1), 4.8), squeeze=False)
+    for ax, stage in zip(axes[0], stages):
+        bins, z, sectors, grid = _stage_table(csv_path, stage)
+        pick = np.unique(np.linspace(0, len(bins) - 1, n_heights).round().astype(int))
+        closed = np.radians(np.append(sectors, sectors[0] + 360.0))
+        for b in pick:
+            ax.plot(closed, np.append(grid[b], grid[b, 0]), marker="o", ms=3,
+                    label=f"s = {bins[b]:.3f} m (z = {z[b]:.3f} m)")
+        ax.set_title(stage.replace("_", " "))
+        ax.legend(fontsize=7, loc="lower left", bbox_to_anchor=(-0.1, -0.25))
+    fig.suptitle("wall pressure p_n (Pa) around the circumference; 0 deg: the outlet's side",
+                 y=0.99)
+    fig.tight_layout(rect=(0, 0, 1, 0.94))
+    return _save(fig, png_path)
+
+
+def unrolled_picture(csv_path, png_path, stages=("filling", "early_discharge")) -> Path:
+    """The wall pressure over the unrolled wall (the walls that rise: a flat floor left out),
+    one panel per recorded stage, on a common colour scale; the bins up the wall in their
+    order, labelled with ``s`` (and ``z``) of their centres."""
+    plt = _figure()
+    stages = [s for s in stages if np.any(np.asarray(read_csv(csv_path)["stage"]) == s)]
+    tables = [_stage_table(csv_path, s) for s in stages]
+    top = max((np.nanmax(t[3]) for t in tables if np.isfinite(t[3]).any()), default=1.0)
+    fig, axes = plt.subplots(1, max(len(stages), 1), figsize=(5.2 * max(len(stages), 1), 5.0),
+                             squeeze=False)
+    mesh = None
+    for ax, stage, (bins, z, sectors, grid) in zip(axes[0], stages, tables):
+        width = sectors[1] - sectors[0] if len(sectors) > 1 else 360.0
+        t_edges = np.append(sectors - 0.5 * width, sectors[-1] + 0.5 * width)
+        rows = np.arange(len(bins) + 1) - 0.5
+        mesh = ax.pcolormesh(t_edges, rows, grid, vmin=0.0, vmax=top, cmap="magma",
+                             shading="flat")
+        ax.set_yticks(np.arange(len(bins)))
+        ax.set_yticklabels([f"{a:.3f} ({b:.3f})" for a, b in zip(bins, z)], fontsize=7)
+        ax.set_xlabel("theta (deg): 0 the outlet's side, 180 the far wall")
+        ax.set_title(stage.replace("_", " "))
+    axes[0, 0].set_ylabel("bin centre: s along the meridian (z) (m)")
+    if mesh is not None:
+        fig.colorbar(mesh, ax=list(axes[0]), label="p_n (Pa)")
+    return _save(fig, png_path)
