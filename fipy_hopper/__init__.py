@@ -76,5 +76,9 @@ def _set_numba_cache_dir() -> None:
 
 _set_numba_cache_dir()
 
+from . import kernel_cache as _kernel_cache  # noqa: E402
+
+_kernel_cache.refresh()       # kernels compiled from other sources are compiled again
+
 from .config import ConfigError, HopperConfig, ResolutionWarning  # noqa: E402
 from .api import Results, load_config, read_results, run  # noqa: E402
