@@ -316,6 +316,60 @@ def test_plane_walker_worked_example():
     assert_printed(pn[-1], 3274, 0)
 
 
+# --- §e eccentric discharge: EN 1991-4's flow channel, AS 3774's rules ----------------------
+# A published worked example as reproduced for this project: mu = 0.491 (lower), phi_i = 33.6
+# deg (upper), eta = 0.739; G = 0.25, 0.40, 0.60 give e_c/r = 0.780, 0.646, 0.461 and
+# theta_c = 7.74, 13.25, 22.33 deg.
+ECC_MU, ECC_PHI = 0.491, 33.6
+ECC_G = np.array([0.25, 0.40, 0.60])
+ECC_EPS = [0.780, 0.646, 0.461]
+ECC_THETA = [7.74, 13.25, 22.33]
+
+
+def test_en1991_eccentric_worked_example():
+    ch = th.en1991_eccentric_channel(1.0, ECC_G, ECC_MU, ECC_PHI)
+    assert_printed(ch.eta, [0.739] * 3, 3)
+    assert_printed(ch.e_c, ECC_EPS, 3)
+    assert_printed(ch.theta_c, ECC_THETA, 2)
+    # scale-free: a silo of radius 3.4 m gives e_c = 3.4 eps and the same angles
+    big = th.en1991_eccentric_channel(3.4, ECC_G, ECC_MU, ECC_PHI)
+    np.testing.assert_allclose(big.e_c, 3.4 * ch.e_c, rtol=1e-14)
+    np.testing.assert_allclose(big.theta_c, ch.theta_c, rtol=1e-14)
+    assert th.EN1991_ECCENTRIC_G == (0.25, 0.4, 0.6)
+    # docs/correlations.md §e, the rest of the same example (r = 1): psi = 32.60, 34.96,
+    # 39.30 deg; A_c / (pi r^2) = 0.0607, 0.1554, 0.3498
+    assert_printed(ch.psi, [32.60, 34.96, 39.30], 2)
+    assert_printed(ch.A_c / np.pi, [0.0607, 0.1554, 0.3498], 4)
+
+
+def test_en1991_eccentric_pressures_worked_values():
+    # docs/correlations.md §e: r = 2 m, G = 0.4, K = 0.5, gamma = 9 kN/m^3 with the example's
+    # mu and phi_i: z_oc = 1.242 m (z0 = 4.073 m); at z = 10 m p_hf = 16.76 kPa,
+    # p_hce = 5.59 kPa, p_hae = 27.92 kPa
+    z_oc = th.en1991_eccentric_z0(2.0, 0.4, 0.5, ECC_MU, ECC_PHI)
+    assert_printed(z_oc, 1.242, 3)
+    assert_printed(th.janssen_z0(4.0, 0.5, ECC_MU), 4.073, 3)
+    p = th.en1991_eccentric_pressures(10.0, 9e3, 2.0, 0.4, 0.5, ECC_MU, ECC_PHI)
+    assert_printed(p.p_hf / 1e3, 16.76, 2)
+    assert_printed(p.p_hce / 1e3, 5.59, 2)
+    assert_printed(p.p_hae / 1e3, 27.92, 2)
+
+
+def test_as3774_worked_values():
+    # docs/correlations.md §e: e_o = 1 m, d_c = 4 m, phi_i = 30 deg, p_nf = 10 kPa:
+    # e_o/d_c = 0.25, factor 0.15, h_D = 1.732 m, beta_e = 67.5 deg; the far side's peak
+    # +1500 Pa (theta = 180), +750 Pa at 120 deg; the near side's reduction -2250 Pa
+    c = th.as3774_eccentricity(1.0, 4.0, 30.0)
+    assert_printed(c.ratio, 0.25, 2)
+    assert_printed(c.factor, 0.15, 2)
+    assert_printed(c.h_D, 1.732, 3)
+    assert_printed(c.beta_e, 67.5, 1)
+    inc = lambda t, h: th.as3774_eccentric_increment(t, h, 10e3, 1.0, 4.0, 30.0)  # noqa: E731
+    assert_printed(inc(180.0, c.h_D), 1500.0, 0)
+    assert_printed(inc(120.0, c.h_D), 750.0, 0)
+    assert_printed(inc(0.0, 1.0), -2250.0, 0)
+
+
 # =======================================================================================
 # Part 2: properties
 # =======================================================================================
@@ -772,6 +826,235 @@ def test_scalar_in_scalar_out():
     assert out.shape == (2, 3)
 
 
+# --- §e eccentric discharge: the geometry, the limits, the patterns ------------------------
+def _overlap_area(r, r_c, e):
+    """The area common to the disc of radius r about the origin and the disc of radius r_c
+    about (e, 0), by integrating the chords' lengths along x (scipy quad)."""
+    from scipy.integrate import quad
+
+    def chord(x):
+        a = np.sqrt(max(r * r - x * x, 0.0))
+        b = np.sqrt(max(r_c * r_c - (x - e) ** 2, 0.0))
+        return 2.0 * min(a, b)
+
+    lo, hi = max(-r, e - r_c), min(r, e + r_c)
+    breaks = []
+    if e > 0:
+        xc = (r * r + e * e - r_c * r_c) / (2 * e)
+        if lo < xc < hi:
+            breaks = [xc]
+    val, _ = quad(chord, lo, hi, points=breaks or None, epsabs=1e-13, epsrel=1e-12, limit=200)
+    return val
+
+
+# (r, r_c, e_c): the worked example's three channels, a channel whose centre lies beyond
+# e^2 + r_c^2 = r^2 (psi > 90 deg), one whose centre is outside the silo, a large channel
+GEOMETRIES = [(1.0, 0.25, 0.7802809584772682), (1.0, 0.4, 0.6455672147574959),
+              (1.0, 0.6, 0.46066754420782374), (2.0, 0.8, 1.9), (1.5, 0.5, 1.7),
+              (1.0, 1.3, 0.5)]
+
+
+@pytest.mark.parametrize("r, r_c, e_c", GEOMETRIES)
+def test_channel_geometry_crossing_points_and_area(r, r_c, e_c):
+    g = th.eccentric_channel_geometry(r, r_c, e_c)
+    t = np.radians(g.theta_c)
+    # the two circles cross at +-theta_c on the wall
+    for s in (1.0, -1.0):
+        p = r * np.array([np.cos(t), s * np.sin(t)])
+        assert np.hypot(p[0] - e_c, p[1]) == pytest.approx(r_c, rel=1e-12)
+    # psi: the angle at the channel's centre between the outward direction and the crossing
+    psi = np.radians(g.psi)
+    p = r * np.array([np.cos(t), np.sin(t)])
+    assert np.arctan2(p[1], p[0] - e_c) == pytest.approx(psi, abs=1e-12)
+    # the arcs and the area
+    assert g.U_wc == pytest.approx(2 * t * r, rel=1e-14)
+    assert g.U_sc == pytest.approx(2 * r_c * (np.pi - psi), rel=1e-14)
+    assert g.A_c == pytest.approx(_overlap_area(r, r_c, e_c), rel=1e-6)
+    # the standard's arcsine form of psi holds where the angle at C is obtuse
+    if e_c ** 2 + r_c ** 2 <= r ** 2:
+        assert np.sin(psi) == pytest.approx(r / r_c * np.sin(t), rel=1e-12)
+        assert psi <= np.pi / 2
+
+
+def test_en1991_channel_is_the_general_geometry():
+    G = np.linspace(0.05, 0.95, 19)[:, None]
+    mu = np.array([0.05, 0.3, 0.491, 0.6])[None, :]
+    ch = th.en1991_eccentric_channel(1.7, G, mu, 33.6 + 10 * mu)
+    g = th.eccentric_channel_geometry(1.7, 1.7 * G, ch.e_c)
+    for name in ("theta_c", "psi", "U_wc", "U_sc", "A_c"):
+        np.testing.assert_allclose(getattr(ch, name), getattr(g, name), rtol=1e-9, atol=1e-12)
+    # the standard's printed forms: cos theta_c = (1 - G^2 + eps^2) / (2 eps),
+    # sin psi = (r / r_c) sin theta_c, e_c = r [eta (1 - G) + (1 - eta) sqrt(1 - G)]
+    eps = ch.e_c / 1.7
+    eta = mu / np.tan(np.radians(33.6 + 10 * mu))
+    np.testing.assert_allclose(eps, eta * (1 - G) + (1 - eta) * np.sqrt(1 - G), rtol=1e-14)
+    t, psi = np.radians(ch.theta_c), np.radians(ch.psi)
+    np.testing.assert_allclose(np.cos(t), (1 - G ** 2 + eps ** 2) / (2 * eps), rtol=1e-13)
+    np.testing.assert_allclose(np.sin(psi), np.sin(t) / G, rtol=1e-12)
+    # 1 - G <= e_c/r <= sqrt(1 - G): the channel reaches the wall, its centre inside the silo
+    eps = ch.e_c / 1.7
+    assert np.all(eps >= 1 - G - 1e-12) and np.all(eps <= np.sqrt(1 - G) + 1e-12)
+    assert np.all(eps ** 2 + G ** 2 < 1)
+
+
+def test_en1991_channel_limits():
+    phi = 33.6
+    tp = np.tan(np.radians(phi))
+    # G -> 0: a small channel whose centre lies a r_c inside the wall, a = (1 + eta)/2:
+    # theta_c / G -> sqrt(1 - a^2), psi -> arccos(a)
+    for mu in (0.1, 0.491, 0.6):
+        eta = mu / tp
+        a = (1 + eta) / 2
+        ch = th.en1991_eccentric_channel(1.0, 1e-6, mu, phi)
+        assert np.radians(ch.theta_c) / 1e-6 == pytest.approx(np.sqrt(1 - a * a), rel=1e-5)
+        assert np.radians(ch.psi) == pytest.approx(np.arccos(a), rel=1e-5)
+    # eta = 1 (mu = tan phi_i): the channel just touches the wall, its z_oc is the free
+    # channel's r_c / (2 K tan phi_i)
+    ch = th.en1991_eccentric_channel(1.0, 0.4, tp, phi)
+    assert ch.theta_c == pytest.approx(0.0, abs=1e-6) and ch.psi == pytest.approx(0.0, abs=1e-6)
+    assert ch.A_c == pytest.approx(np.pi * 0.16, rel=1e-12)
+    assert ch.U_sc == pytest.approx(2 * np.pi * 0.4, rel=1e-12)
+    assert th.en1991_eccentric_z0(1.0, 0.4, 0.5, tp, phi) == pytest.approx(
+        0.4 / (2 * 0.5 * tp), rel=1e-12)
+    # G -> 1: the channel becomes the silo; theta_c -> 90 deg (e_c -> 0 like sqrt(1 - G))
+    ch = th.en1991_eccentric_channel(1.0, 1 - 1e-10, 0.491, phi)
+    assert ch.A_c == pytest.approx(np.pi, rel=1e-4)
+    assert ch.theta_c == pytest.approx(90.0, abs=0.01)
+    # theta_c grows with G and falls with mu
+    t = th.en1991_eccentric_channel(1.0, np.linspace(0.05, 0.9, 30), 0.491, phi).theta_c
+    assert np.all(np.diff(t) > 0)
+    t = th.en1991_eccentric_channel(1.0, 0.4, np.linspace(0.05, 0.66, 30), phi).theta_c
+    assert np.all(np.diff(t) < 0)
+
+
+def test_channel_geometry_without_contact_is_continuous():
+    r, r_c = 1.0, 0.3
+    inside = th.eccentric_channel_geometry(r, r_c, np.array([0.0, 0.2, 0.7]))
+    np.testing.assert_array_equal(inside.theta_c, 0.0)
+    np.testing.assert_array_equal(inside.U_wc, 0.0)
+    np.testing.assert_allclose(inside.A_c, np.pi * r_c ** 2, rtol=1e-14)
+    np.testing.assert_allclose(inside.U_sc, 2 * np.pi * r_c, rtol=1e-14)
+    just = th.eccentric_channel_geometry(r, r_c, 0.7 + 1e-9)
+    assert just.A_c == pytest.approx(np.pi * r_c ** 2, rel=1e-6)
+    assert just.theta_c < 0.01
+    # a channel containing the silo: the whole wall, the whole section
+    big = th.eccentric_channel_geometry(r, 1.5, np.array([0.0, 0.5]))
+    np.testing.assert_allclose(big.theta_c, 180.0)
+    np.testing.assert_allclose(big.A_c, np.pi, rtol=1e-14)
+    np.testing.assert_allclose(big.U_wc, 2 * np.pi, rtol=1e-14)
+    np.testing.assert_allclose(big.U_sc, 0.0, atol=1e-15)
+
+
+def test_en1991_eccentric_pressures_properties():
+    r, G, K, gamma = 2.0, np.array([0.25, 0.4, 0.6]), 0.5, 9e3
+    z = np.linspace(0.1, 40.0, 50)[:, None]
+    p = th.en1991_eccentric_pressures(z, gamma, r, G, K, ECC_MU, ECC_PHI)
+    assert np.all(p.p_hce < p.p_hf) and np.all(p.p_hf < p.p_hae)
+    np.testing.assert_allclose((p.p_hce + p.p_hae) / 2, p.p_hf, rtol=1e-13)
+    np.testing.assert_allclose(p.p_wce, ECC_MU * p.p_hce, rtol=1e-14)
+    np.testing.assert_allclose(p.p_wae, ECC_MU * p.p_hae, rtol=1e-14)
+    # the default filling pressure is Janssen's with the same K and mu
+    np.testing.assert_allclose(
+        p.p_hf[:, 0], th.janssen_wall_pressure(z[:, 0], gamma / th.G, 2 * r, K, ECC_MU),
+        rtol=1e-12)
+    # p_hce is Janssen's solution for the channel: d(A_c sigma)/dz = gamma A_c - (friction)
+    z_oc = th.en1991_eccentric_z0(r, G, K, ECC_MU, ECC_PHI)
+    deep = th.en1991_eccentric_pressures(1e4, gamma, r, G, K, ECC_MU, ECC_PHI)
+    np.testing.assert_allclose(deep.p_hce, gamma * K * z_oc, rtol=1e-12)
+    assert np.all(z_oc < th.janssen_z0(2 * r, K, ECC_MU))
+    # a given p_hf is used as it is
+    q = th.en1991_eccentric_pressures(z, gamma, r, 0.4, K, ECC_MU, ECC_PHI, p_hf=2e4)
+    np.testing.assert_allclose(q.p_hae, 4e4 - q.p_hce, rtol=1e-14)
+    assert th.en1991_eccentric_pressures(0.0, gamma, r, 0.4, K, ECC_MU, ECC_PHI).p_hae == 0.0
+
+
+def test_en1991_eccentric_pattern_zones():
+    args = (10.0, 9e3, 2.0, 0.4, 0.5, ECC_MU, ECC_PHI)
+    tc = float(th.en1991_eccentric_channel(2.0, 0.4, ECC_MU, ECC_PHI).theta_c)
+    p = th.en1991_eccentric_pressures(10.0, 9e3, 2.0, 0.4, 0.5, ECC_MU, ECC_PHI)
+    theta = np.array([0.0, 0.5 * tc, tc, 1.5 * tc, 2 * tc, 2.5 * tc, 90.0, 180.0])
+    pat = th.en1991_eccentric_wall_pressure(theta, *args)
+    assert pat.zone.tolist() == [1, 1, 1, 2, 2, 0, 0, 0]
+    np.testing.assert_allclose(pat.p_h, [p.p_hce] * 3 + [p.p_hae] * 2 + [p.p_hf] * 3)
+    np.testing.assert_allclose(pat.p_w, ECC_MU * pat.p_h)
+    # symmetric about the channel's centre; theta_0 moves it; angles wrap
+    np.testing.assert_array_equal(th.en1991_eccentric_wall_pressure(-theta, *args).p_h, pat.p_h)
+    inner = np.array([0.0, 0.5 * tc, 0.99 * tc, 1.5 * tc, 1.99 * tc, 2.5 * tc, 90.0, 180.0])
+    moved = th.en1991_eccentric_wall_pressure(inner + 100.0, *args, theta_0=100.0)
+    np.testing.assert_array_equal(moved.zone, pat.zone)
+    wrapped = th.en1991_eccentric_wall_pressure(inner + 360.0, *args)
+    np.testing.assert_array_equal(wrapped.zone, pat.zone)
+    np.testing.assert_array_equal(th.en1991_eccentric_wall_pressure(-inner - 720.0, *args).zone,
+                                  pat.zone)
+    # the adjacent zones are each as wide as half the contact, so the circumferential mean
+    # of the pattern is the filling pressure (p_hce + p_hae = 2 p_hf) [D]
+    t = (np.arange(360000) + 0.5) / 1000.0
+    mean = th.en1991_eccentric_wall_pressure(t, *args).p_h.mean()
+    assert mean == pytest.approx(p.p_hf, rel=1e-4)
+    # broadcasting: angles across, depths down
+    grid = th.en1991_eccentric_wall_pressure(theta[None, :], np.array([[1.0], [10.0]]),
+                                             *args[1:])
+    assert grid.p_h.shape == (2, 8)
+    np.testing.assert_allclose(grid.p_h[1], pat.p_h)
+
+
+def test_as3774_no_effect_below_a_tenth_of_the_diameter():
+    theta = np.linspace(-180.0, 180.0, 73)[:, None]
+    h = np.linspace(0.0, 8.0, 33)[None, :]
+    for e_o in (0.0, 0.2, 0.4):          # d_c = 4 m: e_o/d_c = 0, 0.05, 0.1
+        inc = th.as3774_eccentric_increment(theta, h, 10e3, e_o, 4.0, 30.0)
+        assert np.all(inc == 0.0)
+    assert np.any(th.as3774_eccentric_increment(theta, h, 10e3, 0.44, 4.0, 30.0) != 0.0)
+
+
+@pytest.mark.parametrize("e_o", [0.6, 1.0, 1.6, 2.0])
+def test_as3774_shape_peaks_and_zones(e_o):
+    d_c, phi, p_nf = 4.0, 30.0, 10e3
+    c = th.as3774_eccentricity(e_o, d_c, phi)
+    f = e_o / d_c - 0.1
+    inc = lambda t, h: th.as3774_eccentric_increment(t, h, p_nf, e_o, d_c, phi)  # noqa: E731
+    theta = np.linspace(-180.0, 180.0, 721)
+    # symmetric about the eccentricity axis
+    for h in (0.3, c.h_D, c.h_D + 0.49 * d_c):
+        np.testing.assert_array_equal(inc(theta, h), inc(-theta, h))
+    # far side: -cos(theta) over 90..270 deg in the band of height d_c centred at h_D
+    far = np.linspace(90.0, 180.0, 19)
+    np.testing.assert_allclose(inc(far, c.h_D), f * p_nf * -np.cos(np.radians(far)),
+                               atol=1e-9)
+    assert inc(180.0, c.h_D) == pytest.approx(f * p_nf, rel=1e-14)
+    assert inc(90.0, c.h_D) == 0.0
+    for h in (c.h_D - 0.5 * d_c + 1e-9, c.h_D + 0.5 * d_c - 1e-9):
+        assert inc(180.0, h) == pytest.approx(f * p_nf, rel=1e-14)
+    for h in (c.h_D - 0.5 * d_c - 1e-6, c.h_D + 0.5 * d_c + 1e-6):
+        if not (0.0 <= h <= d_c):
+            assert inc(180.0, h) == 0.0
+    assert inc(180.0, c.h_D + 0.5 * d_c + 1e-6) == 0.0
+    # near side: -1.5 f p_nf within beta_e of the near side, from the outlet up over d_c
+    be = 105.0 - 150.0 * e_o / d_c
+    assert c.beta_e == pytest.approx(be)
+    for t in (0.0, be - 1e-6, -(be - 1e-6)):
+        for h in (0.0, 0.5 * d_c, d_c):
+            assert inc(t, h) == pytest.approx(-1.5 * f * p_nf, rel=1e-14)
+    assert inc(be + 1e-6, 0.5 * d_c) == 0.0
+    assert inc(0.0, d_c + 1e-6) == 0.0 and inc(0.0, -1e-6) == 0.0
+    # the increase scales with p_nf given per height
+    h = np.array([c.h_D, c.h_D + 0.1])
+    np.testing.assert_allclose(
+        th.as3774_eccentric_increment(180.0, h, np.array([1e3, 2e3]), e_o, d_c, phi),
+        [f * 1e3, f * 2e3], rtol=1e-14)
+
+
+def test_as3774_near_side_forms_agree():
+    # the near side's zone as a distance d_e/2 = 0.915 d_c (1 - 1.43 e_o/d_c) along the wall
+    # either side, and as an angle beta_e = 105 - 150 e_o/d_c deg either side, agree [D]
+    ratio = np.linspace(0.1, 0.5, 41)
+    c = th.as3774_eccentricity(ratio * 4.0, 4.0, 30.0)
+    arc = 0.5 * 4.0 * np.radians(c.beta_e)
+    d_e = 1.83 * 4.0 * (1 - 1.43 * ratio)
+    np.testing.assert_allclose(arc, d_e / 2, rtol=4e-3)
+    assert np.max(np.abs(arc - d_e / 2)) < 0.0013 * 4.0
+
+
 # =======================================================================================
 # Part 3: input validation (ValueError naming the parameter)
 # =======================================================================================
@@ -832,6 +1115,21 @@ def test_scalar_in_scalar_out():
         (lambda: th.critical_outlet_simplified(300.0, RHO_B, "slot"), "geometry"),
         (lambda: th.jenike_rathole_G(25.0), "phi_deg"),
         (lambda: th.jenike_rathole_diameter(300.0, RHO_B, np.array([40.0, 75.0])), "phi_deg"),
+        (lambda: th.en1991_eccentric_channel(1.0, 0.0, 0.4, 30.0), "G"),
+        (lambda: th.en1991_eccentric_channel(1.0, 1.0, 0.4, 30.0), "G"),
+        (lambda: th.en1991_eccentric_channel(1.0, 0.4, 0.7, 30.0), "mu"),
+        (lambda: th.en1991_eccentric_channel(1.0, 0.4, 0.0, 30.0), "mu"),
+        (lambda: th.en1991_eccentric_channel(1.0, 0.4, 0.4, 90.0), "phi_i"),
+        (lambda: th.en1991_eccentric_channel(-1.0, 0.4, 0.4, 30.0), "r"),
+        (lambda: th.en1991_eccentric_z0(1.0, 0.4, 0.0, 0.4, 30.0), "K"),
+        (lambda: th.en1991_eccentric_pressures(-1.0, 9e3, 1.0, 0.4, 0.5, 0.4, 30.0), "z"),
+        (lambda: th.en1991_eccentric_pressures(1.0, 9e3, 1.0, 0.4, 0.5, 0.4, 30.0, p_hf=-1.0),
+         "p_hf"),
+        (lambda: th.eccentric_channel_geometry(1.0, 0.2, 1.2), "e_c"),
+        (lambda: th.eccentric_channel_geometry(1.0, 0.0, 0.5), "r_c"),
+        (lambda: th.as3774_eccentricity(2.1, 4.0, 30.0), "e_o"),
+        (lambda: th.as3774_eccentricity(1.0, 0.0, 30.0), "d_c"),
+        (lambda: th.as3774_eccentric_increment(0.0, 1.0, -1.0, 1.0, 4.0, 30.0), "p_nf"),
     ],
 )
 def test_validation(call, name):
