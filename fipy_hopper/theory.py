@@ -1583,8 +1583,8 @@ def en1991_eccentric_pressures(z, gamma, r, G, K, mu, phi_i, p_hf=None):
         (:func:`en1991_filling_vertical_walls` with the same K and mu).  Pass the value of the
         code's own load combination (or of the intermediate-slenderness form) to use it.
 
-    Source: EN 1991-4:2006 §5.2.4.3, eqs. (5.63)-(5.70) approximately (the coding below
-    numbers only (5.65)-(5.66)).  Tag: [V: as coded in SadowskiAJ/AJSABQ_Input_File_Generator,
+    Source: EN 1991-4:2006 §5.2.4.3 (of these equations the coding below numbers only z_oc and
+    p_hco, (5.65)-(5.66)).  Tag: [V: as coded in SadowskiAJ/AJSABQ_Input_File_Generator,
     AJSABQ_fwrite_load.m: ``phce = phco (1 - exp(-z/zoc))``, ``phae = 2 ph - phce``, the
     friction the lower mu times each]; the default ``p_hf`` [M: the standard's combination of
     characteristic values for it was not read].
