@@ -152,7 +152,7 @@ def _validate(args) -> int:
         "" if have is None else f" ({have / 1e9:.2g} GB available)" if need <= have else
         f", more than the {have / 1e9:.2g} GB available: the run would be refused")
     geom, run = cfg.hopper, cfg.run
-    nr, nz = cfg.grid_shape()
+    nr, nz = cfg.grid_shape()[::2] if geom.dimensions == 3 else cfg.grid_shape()
     h = cfg.numerics.cell_size
     theta_c = e.get("jenike_critical_half_angle_deg", math.nan)
     if e["jenike_flow_mode"] == "unknown":
@@ -205,6 +205,11 @@ def _validate(args) -> int:
         lines[-1:-1] = _cohesion_lines(cfg, e)
     if cfg.numerics.formulation == "lagrangian":
         lines[1], lines[3] = _lagrangian_lines(cfg)
+    if geom.dimensions == 3:
+        from .resources import check_memory
+        check_memory(cfg)                   # a grid that will not fit: refused, exit 2
+        grid, lines[3] = _three_d_lines(cfg, e, memory)
+        lines[1:2] = grid
     if args.picture is not None:      # nothing is written unless asked
         from .io import atomic_path
         picture = Path(args.picture)
@@ -219,10 +224,52 @@ def _validate(args) -> int:
                           EXIT_BAD_INPUT)
         lines.append(f"  boundary           drawn to {_short(picture)}")
     else:
-        lines.append("  boundary")
+        lines.append("  boundary" + ("           the section below, revolved about the axis "
+                                     "(the outlet off it as above)" if geom.dimensions == 3
+                                     else ""))
     lines += ["    " + line for line in cfg.boundary.describe(cfg.material.density).split("\n")]
     print("\n".join(lines))
     return EXIT_OK
+
+
+def _three_d_lines(cfg, e: dict, memory: str) -> tuple:
+    """The grid and time-step lines of ``validate`` for a 3D run (``hopper.dimensions = 3``):
+    the computed part's grid and its loaded cells, the memory, the outlet's offset, and the
+    steps and the wall time of the fill and the discharge on one thread
+    (:func:`fipy_hopper.space.estimate.time_estimate`: an indication)."""
+    from .space.estimate import loaded_cells, time_estimate
+    from .space.grid import computed_part
+
+    space = cfg.space_config()
+    nx, ny, nz = cfg.grid_shape()
+    h, geom, run = cfg.numerics.cell_size, cfg.hopper, cfg.run
+    part = {(True, True): "a quarter", (False, True): "the half y >= 0",
+            (False, False): "the whole silo"}[computed_part(space.mirror_planes,
+                                                            space.outlet_offset)]
+    radius = max(r for r, _ in geom.wall_points)
+    grid = [f"  grid (3D)          {nx} x {ny} x {nz} = {nx * ny * nz:,} cubes of {h:g} m "
+            f"({part}, numerics.mirror_planes = \"{cfg.numerics.mirror_planes}\"; "
+            f"{loaded_cells(space):,} loaded; {geom.outlet_radius / h:.1f} across the outlet "
+            f"radius), {memory}",
+            f"  outlet offset      {geom.outlet_offset:g} m from the axis along +x "
+            f"(e/R = {geom.outlet_offset / radius:.3g}); wall loads in "
+            f"{run.wall_sectors} sectors around the circumference"]
+    discharge = (float(run.end_time) if run.end_time != "empty"
+                 else min(e["expected_discharge_time_s"], run.max_time))
+    t = time_estimate(space, discharge, emptied=run.end_time == "empty")
+    steps = (f"  time step          {cfg.time_step:.4g} s (at most {cfg.step_estimate():.3g} "
+             f"steps); estimated {t['fill_steps']:.3g} steps filling + "
+             f"{t['discharge_steps']:.3g} discharging ({discharge:.3g} s), about "
+             f"{_duration(t['seconds'])} on one thread (an indication)")
+    return grid, steps
+
+
+def _duration(seconds: float) -> str:
+    if seconds < 120:
+        return f"{seconds:.0f} s"
+    if seconds < 7200:
+        return f"{seconds / 60:.0f} min"
+    return f"{seconds / 3600:.1f} h"
 
 
 def _lagrangian_lines(cfg) -> tuple:

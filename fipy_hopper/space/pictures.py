@@ -1,4 +1,5 @@
-"""Pictures of a 3D run, drawn from the files it wrote (:mod:`fipy_hopper.space.output`):
+"""Pictures of a 3D run, drawn from the files it wrote (``fipy-hopper plot``,
+:func:`fipy_hopper.plotting.plot_run`, draws them into a 3D run's directory):
 
 * :func:`plane_picture`: the flow pattern and the speed in the vertical plane through the
   axis and the outlet (``y = 0``), from a field snapshot (``fields_NNNN.vtu``): the speed of
@@ -158,7 +159,8 @@ def unrolled_picture(csv_path, png_path, stages=("filling", "early_discharge")) 
         mesh = ax.pcolormesh(t_edges, rows, grid, vmin=0.0, vmax=top, cmap="magma",
                              shading="flat")
         ax.set_yticks(np.arange(len(bins)))
-        ax.set_yticklabels([f"{a:.3f} ({b:.3f})" for a, b in zip(bins, z)], fontsize=7)
+        ax.set_yticklabels([f"{a:.3f} ({b:.3f})" for a, b in zip(bins, z)]
+                           if ax is axes[0, 0] else [], fontsize=7)
         ax.set_xlabel("theta (deg): 0 the outlet's side, 180 the far wall")
         ax.set_title(stage.replace("_", " "))
     axes[0, 0].set_ylabel("bin centre: s along the meridian (z) (m)")
