@@ -354,9 +354,10 @@ def wall_patches(boundary, fill_level: float, width: float, n_sectors: int,
         st3 = stretches[cols["stretch"][b]]
         S, T = np.full(n_sectors, cols["s"][b]), theta
         centre[:, b], normal[:, b], tangent[:, b], hoop[:, b], _ = _surface(boundary, st3, S, T)
+    theta_deg = 360.0 * np.arange(n_sectors) / n_sectors        # exact: 30.0, not 29.99...
     patches = WallPatches(stretches, cols["stretch"], cols["segment"], cols["s"], cols["lo"],
-                          cols["hi"], cols["r"], cols["z"], np.degrees(theta), area, centre,
-                          normal, tangent, hoop)
+                          cols["hi"], cols["r"], cols["z"], theta_deg, area, centre, normal,
+                          tangent, hoop)
     return patches, tuple(maps)
 
 
