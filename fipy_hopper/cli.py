@@ -485,6 +485,8 @@ def _print_summary(s: dict, out) -> None:
               f"{num('transition_ring_compression_N', '.4g')} N\n"
               f"  mass                   {num('initial_mass_kg', '.4g')} kg{per} filled\n"
               f"  results in             {out}/ (wall_pressure.csv: the loads along the wall)")
+        if s.get("dimensions") == 3:
+            _print_circumference(s)
         return
     print(f"{PROG}: {s.get('stop_reason')} after {num('discharge_time_s', '.3g')} s of discharge "
           f"({num('steps', 'd')} steps, {num('wall_time_s', '.0f')} s wall time)\n"
@@ -499,6 +501,8 @@ def _print_summary(s: dict, out) -> None:
           f"  results in             {out}/")
     if s.get("distortion"):
         print(f"  Lagrangian mesh        stopped by distortion: {s['distortion']}")
+    if s.get("dimensions") == 3:
+        _print_circumference(s)
     stopped = s.get("flow_stopped_time_s")
     if stopped is not None and stopped == stopped:
         left = s.get("remaining_mass_fraction")
@@ -510,6 +514,23 @@ def _print_summary(s: dict, out) -> None:
               + (f", its surface at {s['heap_angle_deg']:.1f} deg from the horizontal (against "
                  f"the angle of repose)" if s.get("heap_angle_deg") is not None
                  and s["heap_angle_deg"] == s["heap_angle_deg"] else ""))
+
+
+def _print_circumference(s: dict) -> None:
+    """The 3D lines of the summary: the wall pressure's largest over smallest around the
+    circumference at rest and in discharge, and the flow mode per sector."""
+    def ratio(stage):
+        value = s.get(f"{stage}_wall_pressure_max_over_min_largest")
+        return "n/a" if value is None or value != value else f"{value:.3g}"
+
+    calls = [c for c in s.get("flow_mode_by_sector") or [] if c in ("mass", "funnel")]
+    mass = sum(c == "mass" for c in calls)
+    print(f"  around the wall        largest / smallest pressure up to {ratio('filling')} at "
+          f"rest, {ratio('early_discharge')} from 90 % left, {ratio('discharge_envelope')} "
+          f"in the envelope (wall_extremes.csv; outlet offset "
+          f"{s.get('outlet_offset_m', 0):g} m)")
+    if calls:
+        print(f"  flow mode by sector    mass in {mass} of {len(calls)} measured sectors")
 
 
 def main(argv=None) -> int:
