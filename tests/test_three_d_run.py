@@ -240,6 +240,11 @@ def interrupt_and_resume(folder, config, name, condition):
         with pytest.raises(KeyboardInterrupt):
             api.run(config, out, setup=setup, plots=False, threads=1)
     assert json.loads((out / "summary.json").read_text())["stop_reason"] == "interrupted"
+    with np.load(out / "checkpoint.npz") as archive:      # the record's 3D samples are in it
+        record = json.loads(str(archive["__meta__"][()]))["record"]
+    assert len(record["wall_slip_sectors"]) == len(record["t"])
+    assert all(np.shape(sectors) == (1, 12) for sectors in record["wall_slip_sectors"])
+    assert len(record["wall_theta"]) == len(record["wall_segment"]) == 5 * 12
     assert main(["run", str(config), "--out", str(out), "--resume", "--quiet",
                  "--threads", "1"]) == 0
     return out
