@@ -56,9 +56,10 @@ def _parser() -> argparse.ArgumentParser:
     p = _Parser(prog=PROG, description=(
         "Eulerian Mohr-Coulomb simulation of the filling and discharge of silos and hoppers "
         "on FiPy: a conical or wedge-shaped hopper under a bin, or any wall drawn as straight "
-        "segments with inserts, in an axisymmetric or a plane section; the discharge rate, "
-        "the flow mode per stretch of hopper wall and the wall loads, compared with "
-        "Beverloo, Jenike, Janssen, Walker and EN 1991-4 where they describe the silo."),
+        "segments with inserts, in an axisymmetric or a plane section, or a circular silo "
+        "whole in 3D with its outlet on or off the axis; the discharge rate, the flow mode "
+        "per stretch of hopper wall and the wall loads, compared with Beverloo, Jenike, "
+        "Janssen, Walker and EN 1991-4 where they describe the silo."),
         epilog="Exit codes: 0 success, 1 the run failed (or a fill-only run's fill did not "
         "come to rest), 2 bad input, 130 interrupted.")
     p.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
@@ -109,8 +110,10 @@ def _parser() -> argparse.ArgumentParser:
     q = sub.add_parser("validate", help="check a configuration and print derived quantities",
                        description="Check CONFIG.toml and print the grid, the time step, the "
                        "wave speed, the fill mass, Beverloo's rate, Jenike's critical angle "
-                       "and the boundary (walls, corners, outlet, fill); it writes nothing, "
-                       "unless --picture names a PNG file to draw the boundary to.")
+                       "and the boundary (walls, corners, outlet, fill); for a 3D silo the "
+                       "grid's cells, memory and an estimate of the time, refusing a grid "
+                       "that will not fit in memory; it writes nothing, unless --picture "
+                       "names a PNG file to draw the boundary to.")
     q.add_argument("config", metavar="CONFIG.toml", help="configuration file (TOML)")
     q.add_argument("--picture", metavar="PATH.png", default=None,
                    help="draw the boundary to this PNG file (default: no file is written)")
