@@ -31,7 +31,12 @@ from typing import Protocol, runtime_checkable
 class HopperModelProtocol(Protocol):
     """The model side of a run (see the module docstring for the state it returns)."""
 
-    cfg: object              #: the :class:`~fipy_hopper.config.HopperConfig`
+    #: the run's configuration: a :class:`~fipy_hopper.config.HopperConfig`, or the 3D
+    #: model's :class:`~fipy_hopper.space.config.SpaceConfig`; the loop reads its ``run``,
+    #: ``numerics``, ``material``, ``hopper.fill_level``, ``bulk_viscosity``, ``boundary``
+    #: (a section's: the outlet, the inserts, the hopper stretches; in 3D the centred
+    #: silo's axisymmetric section) and ``to_toml()`` (the run's fingerprint)
+    cfg: object
     dt: float                #: the explicit time step (s); an upper bound if it varies
     ramp_time: float         #: gravity rises linearly over this time while filling (s)
     mu_wall: float           #: wall friction coefficient
