@@ -197,6 +197,9 @@ def run(config_or_path, out, force: bool = False, resume: bool = False, quiet: b
     if lagrangian and profile:
         raise ConfigError('profile: the phases are those of the Eulerian model\'s compiled '
                           'step; numerics.formulation = "lagrangian" has none to time')
+    if cfg.hopper.dimensions == 3 and profile:
+        raise ConfigError("profile: the phases timed are those of the sections' compiled "
+                          "step; the 3D model's (hopper.dimensions = 3) are not timed yet")
     if lagrangian:
         checkpoint_interval = 0
     # every refusal before anything is built or written
@@ -233,9 +236,7 @@ def run(config_or_path, out, force: bool = False, resume: bool = False, quiet: b
     manifest = None
     try:
         with _interrupts_deferred() as setting_up:
-            strength = (cfg.material.cohesion, cfg.material.friction_angle_deg)
-            fields = (fio.FieldWriter(rundir.fields, model.grid, *strength) if not lagrangian
-                      else fio.MeshFieldWriter(rundir.fields, model, *strength))
+            fields = _field_writer(rundir, model, cfg)
 
             def snapshot(sim_, state):
                 with timed("snapshots and checkpoints"):
@@ -362,7 +363,7 @@ def _finish(rundir, sim, cfg, fields, manifest, status, reason, error, wall) -> 
 #: the time series of :class:`~fipy_hopper.simulation.RunRecord`, one value a sample
 SAMPLE_SERIES = ("t", "mass_in_hopper", "discharged", "rate", "mass_flow_index",
                  "stagnant_fraction", "wall_slip_ratio", "wall_slip_stretches",
-                 "wall_slip_fraction", "bin_lateral_stress_ratio")
+                 "wall_slip_fraction", "wall_slip_sectors", "bin_lateral_stress_ratio")
 
 
 def _drop_half_sample(record) -> None:
@@ -477,9 +478,14 @@ def _refuse_another_configuration(cfg: HopperConfig, out) -> None:
 
 
 def make_model(cfg: HopperConfig, threads: Optional[int] = None):
-    """The model of ``cfg.numerics.formulation``: the Eulerian
-    :class:`~fipy_hopper.model.HopperModel` (``threads``: numba threads of its compiled steps)
-    or the updated-Lagrangian :class:`~fipy_hopper.lagrangian.LagrangianModel`."""
+    """The model of ``cfg``: for ``hopper.dimensions = 3`` the 3D circular silo
+    :class:`~fipy_hopper.space.model.SpaceModel`; for a section that of
+    ``cfg.numerics.formulation``, the Eulerian :class:`~fipy_hopper.model.HopperModel` or the
+    updated-Lagrangian :class:`~fipy_hopper.lagrangian.LagrangianModel` (``threads``: numba
+    threads of the Eulerian models' compiled steps)."""
+    if cfg.hopper.dimensions == 3:
+        from .space.model import SpaceModel
+        return SpaceModel(cfg, threads=threads)
     if cfg.numerics.formulation == "lagrangian":
         from .lagrangian import LagrangianModel
         return LagrangianModel(cfg)
@@ -487,11 +493,25 @@ def make_model(cfg: HopperConfig, threads: Optional[int] = None):
     return HopperModel(cfg, threads=threads)
 
 
+def _field_writer(rundir, model, cfg):
+    """The field snapshots' writer of the model: the grid's quads of a section, the moving
+    mesh of a Lagrangian run, the hexahedra of the whole 3D silo."""
+    if model.dimensions == 3:
+        from .space.output import SpaceFieldWriter
+        return SpaceFieldWriter(rundir.fields, model)
+    strength = (cfg.material.cohesion, cfg.material.friction_angle_deg)
+    if cfg.numerics.formulation == "lagrangian":
+        return fio.MeshFieldWriter(rundir.fields, model, *strength)
+    return fio.FieldWriter(rundir.fields, model.grid, *strength)
+
+
 def _write_tables(rundir, record, axisymmetric: bool = True) -> None:
     from .diagnostics import FlowModeRule
 
     fio.write_timeseries(rundir / rundir.TIMESERIES, record, axisymmetric)
     fio.write_wall_pressure(rundir / rundir.WALL_PRESSURE, record)
+    if record.wall_theta:                        # 3D: the extremes around the circumference
+        fio.write_wall_extremes(rundir / rundir.WALL_EXTREMES, record)
     fio.write_loads(rundir / rundir.LOADS, record, axisymmetric)
     fio.write_wall_slip(rundir / rundir.WALL_SLIP, record, FlowModeRule().slip_ratio)
 

@@ -56,9 +56,10 @@ def _parser() -> argparse.ArgumentParser:
     p = _Parser(prog=PROG, description=(
         "Eulerian Mohr-Coulomb simulation of the filling and discharge of silos and hoppers "
         "on FiPy: a conical or wedge-shaped hopper under a bin, or any wall drawn as straight "
-        "segments with inserts, in an axisymmetric or a plane section; the discharge rate, "
-        "the flow mode per stretch of hopper wall and the wall loads, compared with "
-        "Beverloo, Jenike, Janssen, Walker and EN 1991-4 where they describe the silo."),
+        "segments with inserts, in an axisymmetric or a plane section, or a circular silo "
+        "whole in 3D with its outlet on or off the axis; the discharge rate, the flow mode "
+        "per stretch of hopper wall and the wall loads, compared with Beverloo, Jenike, "
+        "Janssen, Walker and EN 1991-4 where they describe the silo."),
         epilog="Exit codes: 0 success, 1 the run failed (or a fill-only run's fill did not "
         "come to rest), 2 bad input, 130 interrupted.")
     p.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
@@ -109,8 +110,10 @@ def _parser() -> argparse.ArgumentParser:
     q = sub.add_parser("validate", help="check a configuration and print derived quantities",
                        description="Check CONFIG.toml and print the grid, the time step, the "
                        "wave speed, the fill mass, Beverloo's rate, Jenike's critical angle "
-                       "and the boundary (walls, corners, outlet, fill); it writes nothing, "
-                       "unless --picture names a PNG file to draw the boundary to.")
+                       "and the boundary (walls, corners, outlet, fill); for a 3D silo the "
+                       "grid's cells, memory and an estimate of the time, refusing a grid "
+                       "that will not fit in memory; it writes nothing, unless --picture "
+                       "names a PNG file to draw the boundary to.")
     q.add_argument("config", metavar="CONFIG.toml", help="configuration file (TOML)")
     q.add_argument("--picture", metavar="PATH.png", default=None,
                    help="draw the boundary to this PNG file (default: no file is written)")
@@ -152,7 +155,7 @@ def _validate(args) -> int:
         "" if have is None else f" ({have / 1e9:.2g} GB available)" if need <= have else
         f", more than the {have / 1e9:.2g} GB available: the run would be refused")
     geom, run = cfg.hopper, cfg.run
-    nr, nz = cfg.grid_shape()
+    nr, nz = cfg.grid_shape()[::2] if geom.dimensions == 3 else cfg.grid_shape()
     h = cfg.numerics.cell_size
     theta_c = e.get("jenike_critical_half_angle_deg", math.nan)
     if e["jenike_flow_mode"] == "unknown":
@@ -205,6 +208,11 @@ def _validate(args) -> int:
         lines[-1:-1] = _cohesion_lines(cfg, e)
     if cfg.numerics.formulation == "lagrangian":
         lines[1], lines[3] = _lagrangian_lines(cfg)
+    if geom.dimensions == 3:
+        from .resources import check_memory
+        check_memory(cfg)                   # a grid that will not fit: refused, exit 2
+        grid, lines[3] = _three_d_lines(cfg, e, memory)
+        lines[1:2] = grid
     if args.picture is not None:      # nothing is written unless asked
         from .io import atomic_path
         picture = Path(args.picture)
@@ -219,10 +227,52 @@ def _validate(args) -> int:
                           EXIT_BAD_INPUT)
         lines.append(f"  boundary           drawn to {_short(picture)}")
     else:
-        lines.append("  boundary")
+        lines.append("  boundary" + ("           the section below, revolved about the axis "
+                                     "(the outlet off it as above)" if geom.dimensions == 3
+                                     else ""))
     lines += ["    " + line for line in cfg.boundary.describe(cfg.material.density).split("\n")]
     print("\n".join(lines))
     return EXIT_OK
+
+
+def _three_d_lines(cfg, e: dict, memory: str) -> tuple:
+    """The grid and time-step lines of ``validate`` for a 3D run (``hopper.dimensions = 3``):
+    the computed part's grid and its loaded cells, the memory, the outlet's offset, and the
+    steps and the wall time of the fill and the discharge on one thread
+    (:func:`fipy_hopper.space.estimate.time_estimate`: an indication)."""
+    from .space.estimate import loaded_cells, time_estimate
+    from .space.grid import computed_part
+
+    space = cfg.space_config()
+    nx, ny, nz = cfg.grid_shape()
+    h, geom, run = cfg.numerics.cell_size, cfg.hopper, cfg.run
+    part = {(True, True): "a quarter", (False, True): "the half y >= 0",
+            (False, False): "the whole silo"}[computed_part(space.mirror_planes,
+                                                            space.outlet_offset)]
+    radius = max(r for r, _ in geom.wall_points)
+    grid = [f"  grid (3D)          {nx} x {ny} x {nz} = {nx * ny * nz:,} cubes of {h:g} m "
+            f"({part}, numerics.mirror_planes = \"{cfg.numerics.mirror_planes}\"; "
+            f"{loaded_cells(space):,} loaded; {geom.outlet_radius / h:.1f} across the outlet "
+            f"radius), {memory}",
+            f"  outlet offset      {geom.outlet_offset:g} m from the axis along +x "
+            f"(e/R = {geom.outlet_offset / radius:.3g}); wall loads in "
+            f"{run.wall_sectors} sectors around the circumference"]
+    discharge = (float(run.end_time) if run.end_time != "empty"
+                 else min(e["expected_discharge_time_s"], run.max_time))
+    t = time_estimate(space, discharge, emptied=run.end_time == "empty")
+    steps = (f"  time step          {cfg.time_step:.4g} s (at most {cfg.step_estimate():.3g} "
+             f"steps); estimated {t['fill_steps']:.3g} steps filling + "
+             f"{t['discharge_steps']:.3g} discharging ({discharge:.3g} s), about "
+             f"{_duration(t['seconds'])} on one thread (an indication)")
+    return grid, steps
+
+
+def _duration(seconds: float) -> str:
+    if seconds < 120:
+        return f"{seconds:.0f} s"
+    if seconds < 7200:
+        return f"{seconds / 60:.0f} min"
+    return f"{seconds / 3600:.1f} h"
 
 
 def _lagrangian_lines(cfg) -> tuple:
@@ -438,6 +488,8 @@ def _print_summary(s: dict, out) -> None:
               f"{num('transition_ring_compression_N', '.4g')} N\n"
               f"  mass                   {num('initial_mass_kg', '.4g')} kg{per} filled\n"
               f"  results in             {out}/ (wall_pressure.csv: the loads along the wall)")
+        if s.get("dimensions") == 3:
+            _print_circumference(s)
         return
     print(f"{PROG}: {s.get('stop_reason')} after {num('discharge_time_s', '.3g')} s of discharge "
           f"({num('steps', 'd')} steps, {num('wall_time_s', '.0f')} s wall time)\n"
@@ -452,6 +504,8 @@ def _print_summary(s: dict, out) -> None:
           f"  results in             {out}/")
     if s.get("distortion"):
         print(f"  Lagrangian mesh        stopped by distortion: {s['distortion']}")
+    if s.get("dimensions") == 3:
+        _print_circumference(s)
     stopped = s.get("flow_stopped_time_s")
     if stopped is not None and stopped == stopped:
         left = s.get("remaining_mass_fraction")
@@ -463,6 +517,23 @@ def _print_summary(s: dict, out) -> None:
               + (f", its surface at {s['heap_angle_deg']:.1f} deg from the horizontal (against "
                  f"the angle of repose)" if s.get("heap_angle_deg") is not None
                  and s["heap_angle_deg"] == s["heap_angle_deg"] else ""))
+
+
+def _print_circumference(s: dict) -> None:
+    """The 3D lines of the summary: the wall pressure's largest over smallest around the
+    circumference at rest and in discharge, and the flow mode per sector."""
+    def ratio(stage):
+        value = s.get(f"{stage}_wall_pressure_max_over_min_largest")
+        return "n/a" if value is None or value != value else f"{value:.3g}"
+
+    calls = [c for c in s.get("flow_mode_by_sector") or [] if c in ("mass", "funnel")]
+    mass = sum(c == "mass" for c in calls)
+    print(f"  around the wall        largest / smallest pressure up to {ratio('filling')} at "
+          f"rest, {ratio('early_discharge')} from 90 % left, {ratio('discharge_envelope')} "
+          f"in the envelope (wall_extremes.csv; outlet offset "
+          f"{s.get('outlet_offset_m', 0):g} m)")
+    if calls:
+        print(f"  flow mode by sector    mass in {mass} of {len(calls)} measured sectors")
 
 
 def main(argv=None) -> int:

@@ -145,6 +145,14 @@ SHORTHAND_KEYS = ("bin_diameter", "half_angle_deg", "outlet_diameter", "bin_heig
 PROFILE_KEYS = ("wall", "left_wall", "fill_level")
 #: the models a run can use (numerics.formulation)
 FORMULATIONS = ("eulerian", "lagrangian")
+#: hopper.dimensions: 2, a section (axisymmetric or plane, as drawn); 3, the whole circular
+#: silo on a 3D grid (fipy_hopper.space)
+DIMENSIONS = (2, 3)
+#: numerics.mirror_planes of a 3D run: "auto" (a quarter of a centred silo, the half y >= 0
+#: of one with an off-centre outlet), "none" (the whole silo), "quarter", "half"
+MIRROR_PLANES = ("auto", "none", "quarter", "half")
+#: run.wall_sectors of a 3D run: sectors around the circumference of the wall-load maps
+WALL_SECTORS_RANGE = (1, 360)
 #: Bulk density (kg/m3): the lightest powders (aerogel, ~10) to beyond tungsten (~19,300).
 DENSITY_RANGE = (1.0, 2.0e4)
 #: Young's modulus (Pa): 1 kPa (loose, cohesive powder) to 1 TPa (stiffer than diamond).
@@ -247,12 +255,23 @@ class HopperGeometry:
     left_wall: Optional[tuple] = None
     fill_level: Optional[float] = None
     inserts: tuple = ()
+    dimensions: int = 2
+    outlet_offset: float = 0.0
 
     def __post_init__(self):
         lo, hi = LENGTH_RANGE
         if not isinstance(self.shape, str) or self.shape not in SHAPES:
             raise ConfigError(f"hopper.shape = {_show(self.shape)}: expected one of "
                               f"{', '.join(repr(s) for s in SHAPES)}")
+        if isinstance(self.dimensions, bool) or self.dimensions not in DIMENSIONS:
+            raise ConfigError(f"hopper.dimensions = {_show(self.dimensions)}: expected 2 (a "
+                              "section, axisymmetric or plane) or 3 (the whole circular silo)")
+        _check_range("hopper.outlet_offset", self.outlet_offset, 0, hi, unit=" m")
+        if self.dimensions == 2 and self.outlet_offset != 0.0:
+            raise ConfigError(f"hopper.outlet_offset = {self.outlet_offset:g} m is for "
+                              "hopper.dimensions = 3 (a section's outlet lies on its axis; a "
+                              "full plane section places its outlet by hopper.left_wall); "
+                              "allowed range with dimensions = 2 is [0, 0] m")
         self._check_section()
         if self.shape == "profile":
             _check_profile(self)
@@ -260,6 +279,28 @@ class HopperGeometry:
             self._check_shorthand(lo, hi)
             object.__setattr__(self, "fill_level", self.cone_height + self.fill_height)
         _check_inserts(self)
+        if self.dimensions == 3:
+            self._check_three_d()
+
+    def _check_three_d(self) -> None:
+        """A 3D silo is a circular one: the conical shorthand or an axisymmetric profile
+        revolved about its axis, without inserts, its outlet inside the floor or the hopper
+        (:func:`fipy_hopper.space.boundary.outlet_offset_error`)."""
+        if not self.axisymmetric:
+            what = ('a wedge (hopper.shape = "wedge")' if self.shape == "wedge" else
+                    'a plane profile (hopper.symmetry = "plane")')
+            raise ConfigError(f"hopper.dimensions = 3 computes a circular silo (the conical "
+                              f"shorthand or an axisymmetric profile revolved about its axis), "
+                              f"not {what}; a plane silo runs with dimensions = 2")
+        if self.inserts:
+            raise ConfigError(f"hopper.inserts: {len(self.inserts)} insert"
+                              f"{'s' * (len(self.inserts) > 1)} given; hopper.dimensions = 3 "
+                              "has no inserts yet (a silo with inserts runs with dimensions "
+                              "= 2)")
+        from .space.boundary import outlet_offset_error
+        error = outlet_offset_error(self.wall_points, self.outlet_offset)
+        if error:
+            raise ConfigError(f"hopper.{error}")
 
     def _check_section(self) -> None:
         implied = {"conical": "axisymmetric", "wedge": "plane"}.get(self.shape)
@@ -894,6 +935,10 @@ class NumericsConfig:
       :class:`fipy_hopper.model.HopperModel`) or ``"lagrangian"`` (a mesh that moves with the
       material, :class:`fipy_hopper.lagrangian.LagrangianModel`, conical hoppers only: it
       stops when the mesh distorts, long before the hopper is empty).
+    - ``mirror_planes`` (``hopper.dimensions = 3`` only): the part of the silo computed between
+      its mirror planes, the results given for the whole silo: ``"auto"`` (the default: a
+      quarter of a centred silo, the half ``y >= 0`` of one with an off-centre outlet),
+      ``"quarter"`` (a centred outlet only), ``"half"`` or ``"none"`` (the whole silo).
 
     ``cell_size`` is in ``[0.1 mm, 10 m]``, times in ``[0, 1e6 s]``; the gravity ramp may not
     exceed ``max_fill_time`` (filling would stop before gravity is complete; for ``"auto"``
@@ -917,11 +962,15 @@ class NumericsConfig:
     max_fill_time: float = 2.0
     min_open_fraction: float = 0.05
     formulation: str = "eulerian"
+    mirror_planes: str = "auto"
 
     def __post_init__(self):
         if not isinstance(self.formulation, str) or self.formulation not in FORMULATIONS:
             raise ConfigError(f"numerics.formulation = {_show(self.formulation)}: expected one "
                               f"of {', '.join(repr(f) for f in FORMULATIONS)}")
+        if not isinstance(self.mirror_planes, str) or self.mirror_planes not in MIRROR_PLANES:
+            raise ConfigError(f"numerics.mirror_planes = {_show(self.mirror_planes)}: expected "
+                              f"one of {', '.join(repr(m) for m in MIRROR_PLANES)}")
         _check_range("numerics.cell_size", self.cell_size, *CELL_SIZE_RANGE, unit=" m")
         _check_range("numerics.dt_safety", self.dt_safety, 0, 1, low_open=True)
         _check_range("numerics.transport_cfl", self.transport_cfl, 0, 0.5, low_open=True)
@@ -984,6 +1033,10 @@ class RunConfig:
     radius passes it.  0 (the default) removes the whole plate at once.  The discharge's time
     counts from the start of the opening; the at-rest rule waits for its end.
 
+    ``wall_sectors`` (``hopper.dimensions = 3`` only; 1 to 360, default 12): the sectors
+    around the circumference of the 3D wall-load maps (``wall_pressure.csv``'s ``theta_deg``),
+    centred on ``360 k / n`` deg from the outlet's offset.
+
     Times are at most 1e6 s; ``end_time <= max_time``; ``output_interval`` and
     ``load_window`` may not exceed the discharge (``end_time``, or ``max_time`` for
     ``"empty"``): the steady rate needs samples; ``output_interval >= 0.1 ms``,
@@ -1000,8 +1053,10 @@ class RunConfig:
     load_window: Union[float, str] = "auto"
     opening_time: float = 0.0
     wall_bin_width: Union[float, str] = "auto"
+    wall_sectors: int = 12
 
     def __post_init__(self):
+        _check_int("run.wall_sectors", self.wall_sectors, *WALL_SECTORS_RANGE)
         if isinstance(self.end_time, str):
             if self.end_time != "empty":
                 raise ConfigError(f'run.end_time = {_show(self.end_time)}: expected a time in '
@@ -1095,6 +1150,10 @@ class HopperConfig:
             if not isinstance(getattr(self, name), kind):
                 raise ConfigError(f"[{name}]: expected a {kind.__name__}, got "
                                   f"{_show(getattr(self, name))}")
+        if self.hopper.dimensions == 3:
+            self._check_three_d()
+        else:
+            self._check_section_only()
         cells_across_outlet = self.hopper.outlet_radius / self.numerics.cell_size
         across = "radius" if self.hopper.axisymmetric else "half-width"
         if cells_across_outlet < 3:
@@ -1167,6 +1226,48 @@ class HopperConfig:
                           "6 or more are recommended for a discharge rate", ResolutionWarning,
                           stacklevel=3)
 
+    def _check_section_only(self) -> None:
+        """A section (``hopper.dimensions = 2``) has no 3D options: refuse any set away from
+        its default."""
+        if self.numerics.mirror_planes != "auto":
+            raise ConfigError(f'numerics.mirror_planes = "{self.numerics.mirror_planes}" is for '
+                              'hopper.dimensions = 3 (a section is computed as drawn); allowed '
+                              'with dimensions = 2 is "auto"')
+        if self.run.wall_sectors != 12:
+            raise ConfigError(f"run.wall_sectors = {self.run.wall_sectors} is for "
+                              "hopper.dimensions = 3 (a section's wall has no circumference); "
+                              "allowed with dimensions = 2 is 12, the default")
+
+    def _check_three_d(self) -> None:
+        """What the 3D model (:mod:`fipy_hopper.space`) does not do yet, refused in one line
+        each: the Lagrangian formulation, the opening iris, markers (the default
+        ``run.markers_per_side = 2`` resolves to 0: a 3D run has none), the quarter with an
+        off-centre outlet."""
+        num, run = self.numerics, self.run
+        if num.formulation != "eulerian":
+            raise ConfigError(f'numerics.formulation = "{num.formulation}" is for sections; '
+                              'hopper.dimensions = 3 runs with "eulerian"')
+        if run.opening_time > 0.0:
+            raise ConfigError(f"run.opening_time = {run.opening_time:g} s: the 3D model "
+                              "(hopper.dimensions = 3) removes the outlet plate at once; "
+                              "allowed range with dimensions = 3 is [0, 0] s")
+        if run.markers_per_side == RunConfig.markers_per_side:
+            object.__setattr__(self, "run", dataclasses.replace(run, markers_per_side=0))
+        elif run.markers_per_side != 0:
+            raise ConfigError(f"run.markers_per_side = {run.markers_per_side}: the 3D model "
+                              "(hopper.dimensions = 3) carries no layer markers yet; allowed "
+                              "with dimensions = 3 is 0 (the default 2 is taken as 0)")
+        if num.mirror_planes == "quarter" and self.hopper.outlet_offset > 0.0:
+            raise ConfigError(f'numerics.mirror_planes = "quarter" needs a centred outlet; '
+                              f"hopper.outlet_offset = {self.hopper.outlet_offset:g} m is "
+                              'symmetric about y = 0 only: "auto", "half" or "none"')
+
+    def space_config(self):
+        """The 3D model's settings (:meth:`fipy_hopper.space.config.SpaceConfig.from_config`)
+        of a ``hopper.dimensions = 3`` configuration."""
+        from .space.config import SpaceConfig
+        return SpaceConfig.from_config(self)
+
     def _check_fill_depth(self) -> None:
         """The fill's surface at least :data:`FILL_CELLS` cells above the outlet plane: a
         thinner fill is not resolved by the grid (it has no cell of material at the wall to
@@ -1195,14 +1296,18 @@ class HopperConfig:
 
     # ------------------------------------------------------------ size of a run
     def grid_shape(self, cell_size: float = None) -> tuple:
-        """``(nr, nz)`` of the grid :func:`fipy_hopper.mesh.build_grid` builds (same rules)."""
-        return _grid_shape(self.hopper, self.numerics,
-                           self.numerics.cell_size if cell_size is None else cell_size)
+        """``(nr, nz)`` of the grid :func:`fipy_hopper.mesh.build_grid` builds (same rules);
+        in 3D ``(nx, ny, nz)`` of the computed part's grid
+        (:func:`fipy_hopper.space.estimate.grid_shape`)."""
+        h = self.numerics.cell_size if cell_size is None else cell_size
+        if self.hopper.dimensions == 3:
+            from .space.estimate import grid_shape
+            return grid_shape(self.space_config(), h)
+        return _grid_shape(self.hopper, self.numerics, h)
 
     @property
     def n_cells(self) -> int:
-        nr, nz = self.grid_shape()
-        return nr * nz
+        return math.prod(self.grid_shape())
 
     @property
     def wall_bin_width_m(self) -> float:
@@ -1277,7 +1382,9 @@ class HopperConfig:
                 f"no cell size fits: {smallest:.3g} m or more would leave fewer than 3 cells "
                 f"across the outlet radius; a smaller hopper or a wider outlet")
         raise ConfigError(
-            f"numerics.cell_size = {h:g} m makes a grid of {n:,} cells (about "
+            f"numerics.cell_size = {h:g} m makes a "
+            f"{'3D grid (its computed part) ' if self.hopper.dimensions == 3 else 'grid '}of "
+            f"{n:,} cells (about "
             f"{grid_memory(n) / 1e9:.3g} GB for the grid alone); at most {MAX_CELLS:,} cells "
             f"(about {grid_memory(MAX_CELLS) / 1e9:.2g} GB) are allowed: "
             f"{what}")
@@ -1394,6 +1501,9 @@ class HopperConfig:
             unused = PROFILE_KEYS + ("symmetry", "section") + (
                 ("bin_width", "outlet_width") if geom.shape == "conical"
                 else ("bin_diameter", "outlet_diameter"))
+        if geom.dimensions == 2:        # a section's file reads as before the 3D keys
+            unused += ("dimensions", "outlet_offset")
+            del out["numerics"]["mirror_planes"], out["run"]["wall_sectors"]
         for key in unused + (() if geom.inserts else ("inserts",)):
             del hopper[key]
         for item in hopper.get("inserts", ()):
@@ -1442,7 +1552,8 @@ def _reshaped(current: HopperGeometry, change: dict) -> HopperGeometry:
     and heights; always the inserts; to a profile, the symmetry), never what belongs to the
     old shape (a cone's symmetry into a wedge, a profile's points into a cone)."""
     shared = ("half_angle_deg", "bin_height", "fill_height")
-    carried = {"inserts": current.inserts}
+    carried = {"inserts": current.inserts, "dimensions": current.dimensions,
+               "outlet_offset": current.outlet_offset}
     if change["shape"] == "profile":
         carried["symmetry"] = current.symmetry
     elif current.shape != "profile":

@@ -621,6 +621,9 @@ class WallSampler:
     pointing up the wall.  Pressures are positive in compression (Pa).
     """
 
+    #: a section's bins have no angle around a circumference (3D: the patches' sectors)
+    theta = None
+
     def __init__(self, model, bins: "WallBins | None" = None):
         self.model = model
         self.bins = bins if bins is not None else wall_bins(model.cfg)
@@ -812,6 +815,14 @@ class WallLoads:
         ``transition`` flag (a record holds numbers and names only)."""
         _, corners = membrane_statics(self.model.cfg.boundary, self.bins, p_n, tau)
         return [{k: v for k, v in c.items() if k != "transition"} for c in corners]
+
+    def wall_k(self, p_n, state) -> float:
+        """:func:`wall_k` of a pressure profile at rest."""
+        return wall_k(self, p_n, state, self.model.cfg.hopper)
+
+    def summary(self, sim) -> dict:
+        """:func:`load_summary` of a run."""
+        return load_summary(sim)
 
     def balance(self, start: dict, end: dict) -> dict:
         """The vertical momentum balance of the whole grid over a window, as mean forces in N

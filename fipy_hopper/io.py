@@ -8,6 +8,8 @@ A run directory describes itself::
     summary.json         the run's headline numbers (see :meth:`Simulation.summary`)
     timeseries.csv       t_s, mass_in_hopper_kg, discharged_kg, discharge_rate_kg_s, ...
     wall_pressure.csv    stage, t_s, s_m, r_m, z_m, p_n_Pa, tau_Pa, ..., hoop and meridional forces
+                         (3D: theta_deg, segment, tau_theta_Pa, no forces; one row per patch)
+    wall_extremes.csv    3D: the largest and smallest pressure around the circumference
     fields/fields.pvd    the field snapshots over time for ParaView (a VTU series)
     fields/fields_NNNN.vtu, fields/snapshots.csv
     fields/markers_NNNN.vtu   the passive layer markers of snapshot NNNN (when the run has them)
@@ -73,6 +75,17 @@ WALL_PRESSURE_COLUMNS = ("stage", "wall", "t_s", "s_m", "r_m", "z_m", "p_n_Pa", 
                          "p_n_stress_Pa", "tau_stress_Pa", "p_n_raw_Pa", "tau_raw_Pa",
                          "window_s", "hoop_force_N_m",
                          "meridional_force_N_m")
+#: Columns of ``wall_pressure.csv`` in 3D (``hopper.dimensions = 3``): the sections' with
+#: ``theta_deg`` (the sector's centre around the axis, 0 towards the outlet's offset) and
+#: ``segment`` (the wall profile's) beside ``s_m``, and the hoop shear ``tau_theta_Pa``; no
+#: membrane forces (a shell of revolution's); one row per stage, height bin and sector.
+WALL_PRESSURE_COLUMNS_3D = ("stage", "wall", "t_s", "s_m", "r_m", "z_m", "theta_deg",
+                            "segment", "p_n_Pa", "tau_Pa", "tau_theta_Pa", "p_n_stress_Pa",
+                            "tau_stress_Pa", "p_n_raw_Pa", "tau_raw_Pa", "window_s")
+#: Columns of ``wall_extremes.csv`` (3D): per stage and height bin the largest and the
+#: smallest pressure around the circumference, their sectors and their ratio.
+WALL_EXTREMES_COLUMNS = ("stage", "s_m", "z_m", "p_max_Pa", "theta_max_deg", "p_min_Pa",
+                         "theta_min_deg", "max_over_min")
 #: Columns of ``wall_slip.csv``: the loaded contacts of the hopper wall at the last sample of
 #: the flow-mode window (:class:`fipy_hopper.diagnostics.FlowModeRule`).
 WALL_SLIP_COLUMNS = ("s_m", "r_m", "z_m", "slip_ratio", "sliding")
@@ -280,6 +293,8 @@ def write_wall_pressure(path: PathLike, record) -> None:
     (:meth:`fipy_hopper.diagnostics.WallLoads.membrane_forces`; the envelope has no
     meridional force, a wedge and a flat floor no hoop force: empty).
     """
+    if getattr(record, "wall_theta", None):
+        return _write_wall_pressure_3d(path, record)
     rows = []
     stress = getattr(record, "wall_stress", {})
     raw = getattr(record, "wall_raw", {})
@@ -298,6 +313,72 @@ def write_wall_pressure(path: PathLike, record) -> None:
                          _num(tau_r[k]), _num(window.get(stage, math.nan)), _num(hoop[k]),
                          _num(meridional[k])])
     _write_csv(path, WALL_PRESSURE_COLUMNS, rows)
+
+
+def _write_wall_pressure_3d(path: PathLike, record) -> None:
+    """``wall_pressure.csv`` of a 3D run (:data:`WALL_PRESSURE_COLUMNS_3D`): one row per
+    stage and patch (a height bin times a sector, the sectors of a bin together, the bins up
+    the wall), the whole silo.  ``s_m`` the bin's centre along the wall profile's meridian
+    from the outlet's lip, ``(r_m, z_m)`` that point about its part's axis (the silo's; an
+    eccentric cone's section centre; the outlet's centre on a flat floor with an off-centre
+    outlet), ``theta_deg`` the sector's centre around it (0 towards the outlet's offset,
+    positive towards +y), ``segment`` the wall profile's segment; ``p_n_Pa``, ``tau_Pa`` (up
+    the meridian), ``tau_theta_Pa`` (towards increasing theta): the patch's mean of the
+    traction recovered from the wall's reaction over the stage's window;
+    ``*_raw``: the plain binning; ``*_stress``: from the cells next to the wall
+    (:mod:`fipy_hopper.space.wall`)."""
+    theta, segment = record.wall_theta, record.wall_segment
+    stress = getattr(record, "wall_stress", {})
+    raw = getattr(record, "wall_raw", {})
+    window = getattr(record, "wall_window", {})
+    rows = []
+    for stage, values in record.wall.items():
+        t, s, r, z, p, tau = values[:6]
+        empty = np.full(len(s), np.nan)
+        hoop = values[6] if len(values) > 6 else empty
+        p_s, tau_s = stress.get(stage, (empty, empty))
+        p_r, tau_r = raw.get(stage, (empty, empty))
+        for k in range(len(s)):
+            rows.append([stage, "wall", _num(t), _num(s[k]), _num(r[k]), _num(z[k]),
+                         _num(theta[k]), int(segment[k]), _num(p[k]), _num(tau[k]),
+                         _num(hoop[k]), _num(p_s[k]), _num(tau_s[k]), _num(p_r[k]),
+                         _num(tau_r[k]), _num(window.get(stage, math.nan))])
+    _write_csv(path, WALL_PRESSURE_COLUMNS_3D, rows)
+
+
+def wall_extremes(record) -> dict:
+    """``{stage: (s, z, largest, theta_max, smallest, theta_min, ratio)}`` per height bin of a
+    3D run's recorded stages: the recovered pressure's largest and smallest around the
+    circumference (Pa), their sectors' angles (deg) and their ratio
+    (:func:`fipy_hopper.space.wall.circumference_extremes`); empty for a section."""
+    from .space.wall import circumference_extremes
+
+    theta = np.asarray(getattr(record, "wall_theta", []), float)
+    if not len(theta):
+        return {}
+    n = len(np.unique(theta))
+    sectors = theta[:n]
+    out = {}
+    for stage, values in record.wall.items():
+        p = np.asarray(values[4], float).reshape(-1, n)
+        big, small, ratio = circumference_extremes(p)
+        finite = np.isfinite(p)
+        k_max = np.argmax(np.where(finite, p, -np.inf), axis=1)
+        k_min = np.argmin(np.where(finite, p, np.inf), axis=1)
+        out[stage] = (np.asarray(values[1])[::n], np.asarray(values[3])[::n], big,
+                      sectors[k_max], small, sectors[k_min], ratio)
+    return out
+
+
+def write_wall_extremes(path: PathLike, record) -> None:
+    """``wall_extremes.csv`` of a 3D run (:data:`WALL_EXTREMES_COLUMNS`,
+    :func:`wall_extremes`)."""
+    rows = []
+    for stage, (s, z, big, t_max, small, t_min, ratio) in wall_extremes(record).items():
+        for b in range(len(s)):
+            rows.append([stage, _num(s[b]), _num(z[b]), _num(big[b]), _num(t_max[b]),
+                         _num(small[b]), _num(t_min[b]), _num(ratio[b])])
+    _write_csv(path, WALL_EXTREMES_COLUMNS, rows)
 
 
 def write_wall_slip(path: PathLike, record, slip_ratio: float) -> None:
@@ -359,6 +440,7 @@ class RunDirectory:
     WALL_PRESSURE = "wall_pressure.csv"
     LOADS = "loads.csv"
     WALL_SLIP = "wall_slip.csv"
+    WALL_EXTREMES = "wall_extremes.csv"
     CHECKPOINT = "checkpoint.npz"
     FIELDS = "fields"
     ERROR_LOG = "error.log"
@@ -600,7 +682,7 @@ class RunDirectory:
 
     #: every file a run writes at the top of its directory, besides the pictures
     OUTPUTS = (CONFIG, MANIFEST, SUMMARY, PROFILE, TIMESERIES, WALL_PRESSURE, LOADS, WALL_SLIP,
-               CHECKPOINT, ERROR_LOG)
+               WALL_EXTREMES, CHECKPOINT, ERROR_LOG)
 
     @classmethod
     def output_names(cls) -> tuple:
@@ -1143,12 +1225,12 @@ def _check_table(path: Path, columns, text_columns) -> None:
 
 
 # ---------------------------------------------------------------- checkpoints
-_WALL_ARRAY = re.compile(r"wall__(?P<stage>[A-Za-z_]\w*?)__(?P<k>[0-4])")
+_WALL_ARRAY = re.compile(r"wall__(?P<stage>[A-Za-z_]\w*?)__(?P<k>[0-5])")
 #: The measurement arrays :meth:`Simulation.checkpoint` writes beside the state's (regular
 #: expressions of their names; keep in step with it): any float64 array of up to 3 axes,
 #: NaN allowed.  The wall samples ``wall__<stage>__<k>`` must also match the stages of the
 #: metadata.
-CHECKPOINT_AUXILIARY = (r"wall__\w+?__[0-4]", r"wallstress__\w+?__[01]",
+CHECKPOINT_AUXILIARY = (r"wall__\w+?__[0-5]", r"wallstress__\w+?__[01]",
                         r"wallraw__\w+?__[01]", r"wallforces__\w+?__[0-2]",
                         r"reading__\w+?__(wall|plate|budget)", r"stresssum__\w+?__[0-2]",
                         r"envelope", r"envelope_raw")
@@ -1411,6 +1493,8 @@ def validate_checkpoint(path: PathLike, expected_shapes: dict, max_bytes: int,
     stages = meta["wall_times"]
     for stage in stages:
         parts = [arrays.get(f"wall__{stage}__{k}") for k in range(5)]
+        if f"wall__{stage}__5" in arrays:       # 3D: the hoop shear
+            parts.append(arrays[f"wall__{stage}__5"])
         if any(p is None or p.ndim != 1 for p in parts) or len({len(p) for p in parts}) != 1:
             fail(f"the wall samples of stage {stage!r} are incomplete")
     stray = [k for k in arrays if _WALL_ARRAY.fullmatch(k)

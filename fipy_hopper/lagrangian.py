@@ -110,6 +110,7 @@ from .config import HopperConfig
 from .dense_loose import close_loose_volume, separation_strain
 from .material import ELASTIC, equivalent_plastic_strain
 from .model import GRAVITY, InstabilityError, ramped_gravity, runaway_speed
+from .protocol import SectionMeasures
 
 __all__ = ["DistortionLimits", "LagrangianMesh", "LagrangianState",
            "LagrangianModel", "build_mesh", "element_gradients", "internal_force",
@@ -573,7 +574,7 @@ class LagrangianState:
 
 
 # ------------------------------------------------------------------------------------ model
-class LagrangianModel:
+class LagrangianModel(SectionMeasures):
     """Updated-Lagrangian axisymmetric hopper of a :class:`HopperConfig` (module docstring).
 
     It implements :class:`~fipy_hopper.protocol.HopperModelProtocol`, so

@@ -57,6 +57,7 @@ from . import (dense_loose, fipy_adapter, markers, material, momentum, profiling
                resources, stepping)
 from .config import HopperConfig, damped_step_factor
 from .mesh import HopperGrid, build_grid
+from .protocol import SectionMeasures
 from .material.law import compiled_refusal, transported_fields
 from .transport import material_rows
 
@@ -132,7 +133,7 @@ class State:
                         for k, v in self.__dict__.items()})
 
 
-class HopperModel:
+class HopperModel(SectionMeasures):
     """The hopper on its grid, with material, wall and numerics from a :class:`HopperConfig`.
 
     ``backend``: ``"numba"`` (the compiled steps of :mod:`fipy_hopper.stepping`, the compiled

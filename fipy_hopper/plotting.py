@@ -941,14 +941,62 @@ def _figure_file(make):
 def _run_facts(run) -> dict:
     """What a run directory holds, for :attr:`Picture.applies`: ``samples`` (the time
     series has rows: a discharge), ``wall`` (wall loads), ``snapshots``, ``discharge`` (a
-    snapshot of the discharge) and ``lagrangian`` (the formulation)."""
+    snapshot of the discharge), ``lagrangian`` (the formulation) and ``three_d`` (a 3D run,
+    ``hopper.dimensions = 3``: its own pictures of :mod:`fipy_hopper.space.pictures`)."""
     entries = snapshots(run)
     series = run / RunDirectory.TIMESERIES
+    cfg = _config(run)
+    three_d = cfg.hopper.dimensions == 3
+    wall = (run / RunDirectory.WALL_PRESSURE).is_file() and (
+        not three_d or len(read_csv(run / RunDirectory.WALL_PRESSURE)["stage"]) > 0)
     return {"samples": series.is_file() and len(read_csv(series)["t_s"]) > 0,
-            "wall": (run / RunDirectory.WALL_PRESSURE).is_file(),
-            "snapshots": bool(entries),
+            "wall": wall, "snapshots": bool(entries),
             "discharge": any(e["stage"] == "discharge" for e in entries),
-            "lagrangian": bool(entries) and _config(run).numerics.formulation == "lagrangian"}
+            "lagrangian": bool(entries) and cfg.numerics.formulation == "lagrangian",
+            "three_d": three_d}
+
+
+# ---------------------------------------------------------------- 3D
+def flow_plane(run, path):
+    """The 3D run's flow pattern and speed in the vertical plane through the axis and the
+    outlet (:func:`fipy_hopper.space.pictures.plane_picture`), from the snapshot of the
+    discharge in the middle of its snapshots (at least one after the opening)."""
+    from .space.pictures import plane_picture
+
+    entries = [e for e in snapshots(run) if e["stage"] == "discharge"]
+    if not entries:
+        return None
+    later = [e for e in entries if e["discharge_time_s"] > 0] or entries
+    entry = later[(len(later) - 1) // 2]
+    title = (f"the plane through the axis and the outlet,\n"
+             f"{entry['discharge_time_s']:.3g} s after the opening")
+    return plane_picture(Path(run) / RunDirectory.FIELDS / entry["file"], path, title)
+
+
+def _wall_stages(run) -> tuple:
+    """The recorded stages drawn in the 3D wall pictures: at rest and the first of the
+    discharge's (90 %, 50 % left, the envelope) the run has."""
+    stages = list(dict.fromkeys(read_csv(Path(run) / RunDirectory.WALL_PRESSURE)["stage"]))
+    shown = [s for s in ("filling",) if s in stages]
+    shown += [s for s in ("early_discharge", "mid_discharge", "discharge_envelope")
+              if s in stages][:1]
+    return tuple(shown)
+
+
+def wall_circumference(run, path):
+    """The 3D run's wall pressure around the circumference at a few heights, at rest and in
+    discharge (:func:`fipy_hopper.space.pictures.circumference_picture`)."""
+    from .space.pictures import circumference_picture
+    return circumference_picture(Path(run) / RunDirectory.WALL_PRESSURE, path,
+                                 stages=_wall_stages(run))
+
+
+def wall_unrolled(run, path):
+    """The 3D run's wall pressure over the unrolled wall, (theta, s), at rest and in
+    discharge (:func:`fipy_hopper.space.pictures.unrolled_picture`)."""
+    from .space.pictures import unrolled_picture
+    return unrolled_picture(Path(run) / RunDirectory.WALL_PRESSURE, path,
+                            stages=_wall_stages(run))
 
 
 #: Every picture :func:`plot_run` can draw, in the order drawn: the one list (the help of
@@ -959,18 +1007,26 @@ PICTURES = (
     Picture("discharge.png", "the mass in the hopper and the discharge rate",
             _figure_file(discharge_curves), lambda f: f["samples"]),
     Picture("wall_pressure.png", "the wall pressure against Janssen, Walker and EN 1991-4",
-            _figure_file(wall_pressure), lambda f: f["wall"]),
+            _figure_file(wall_pressure), lambda f: f["wall"] and not f["three_d"]),
     Picture("wall_forces.png", "the hoop and meridional forces in the wall",
-            _figure_file(wall_forces), lambda f: f["wall"]),
+            _figure_file(wall_forces), lambda f: f["wall"] and not f["three_d"]),
     Picture("lagrangian_mesh.png", "the mesh of a Lagrangian run",
             _figure_file(lagrangian_mesh), lambda f: f["lagrangian"]),
     Picture("stress_pattern.png", "the major principal stress trajectories",
-            _figure_file(stress_pattern), lambda f: f["snapshots"] and not f["lagrangian"]),
+            _figure_file(stress_pattern),
+            lambda f: f["snapshots"] and not f["lagrangian"] and not f["three_d"]),
     Picture("flow_pattern.png", "the layers and the speed in discharge",
-            _figure_file(flow_pattern), lambda f: f["discharge"] and not f["lagrangian"]),
+            _figure_file(flow_pattern),
+            lambda f: f["discharge"] and not f["lagrangian"] and not f["three_d"]),
     Picture("discharge.gif", "an animation of the snapshots",
             lambda run, path: animate(run, path),
-            lambda f: f["discharge"] and not f["lagrangian"]),
+            lambda f: f["discharge"] and not f["lagrangian"] and not f["three_d"]),
+    Picture("flow_plane.png", "3D: the flow pattern and speed in the plane through the axis "
+            "and the outlet", flow_plane, lambda f: f["discharge"] and f["three_d"]),
+    Picture("wall_circumference.png", "3D: the wall pressure around the circumference at a "
+            "few heights", wall_circumference, lambda f: f["wall"] and f["three_d"]),
+    Picture("wall_unrolled.png", "3D: the wall pressure over the unrolled wall (theta, s)",
+            wall_unrolled, lambda f: f["wall"] and f["three_d"]),
 )
 
 

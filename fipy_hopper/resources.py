@@ -83,10 +83,14 @@ def memory_estimate(cfg, cell_size: Optional[float] = None) -> float:
     what they keep plus the building of the wall loads
     (:meth:`~fipy_hopper.diagnostics.WallLoads.estimated_bytes` of :func:`wall_bins` and
     :func:`wall_entry_bound`), which comes after; and the markers (``markers_per_side``
-    squared a cell, three floats each, :data:`MARKER_PEAK_FACTOR`)."""
+    squared a cell, three floats each, :data:`MARKER_PEAK_FACTOR`).  A 3D run
+    (``hopper.dimensions = 3``): :func:`fipy_hopper.space.estimate.memory_estimate`."""
     from .diagnostics import WallLoads
 
     h = cfg.numerics.cell_size if cell_size is None else cell_size
+    if cfg.hopper.dimensions == 3:           # the 3D model's own measured estimate
+        from .space.estimate import memory_estimate as space_memory
+        return space_memory(cfg.space_config(), h)["bytes"]
     nr, n_below, n_above = grid_rows(cfg.hopper, cfg.numerics, h)
     cells = nr * (n_below + n_above)
     markers = cfg.run.markers_per_side ** 2 * cells * 3 * 8 * MARKER_PEAK_FACTOR

@@ -1,8 +1,11 @@
 """Simulation: owns a run of a hopper model — filling, discharge, stop rules, schedules.
 
-One loop for every formulation: the model is the Eulerian :class:`HopperModel` or the
-updated-Lagrangian :class:`~fipy_hopper.lagrangian.LagrangianModel`, and the simulation uses
-only what :class:`~fipy_hopper.protocol.HopperModelProtocol` declares.  The model steps;
+One loop for every model: the Eulerian section :class:`HopperModel`, the updated-Lagrangian
+section :class:`~fipy_hopper.lagrangian.LagrangianModel` or the 3D circular silo
+:class:`~fipy_hopper.space.model.SpaceModel`, and the simulation uses only what
+:class:`~fipy_hopper.protocol.HopperModelProtocol` declares (the wall loads are the model's,
+:meth:`~fipy_hopper.protocol.HopperModelProtocol.wall_measures`; in 3D a wall "bin" of the
+record is a patch, a height bin times a sector around the circumference).  The model steps;
 the simulation decides when to stop, measures on a schedule and calls the writers and
 diagnostics attached to it (callbacks that read the state and never change it).
 Every measurement reads the state between the run's own steps: nothing steps the model but
@@ -231,14 +234,22 @@ class RunRecord:
     # rows (s, r, z, slip / axis speed) of the loaded hopper-wall contacts at the last sample
     # of the flow-mode window (wall_slip.csv, the flow-pattern picture)
     wall_slip_profile: list = field(default_factory=list)
+    # 3D, per sample: the wall slip ratio of each hopper stretch in each sector (a section's
+    # samples: empty lists)
+    wall_slip_sectors: list = field(default_factory=list)
     bin_lateral_stress_ratio: list = field(default_factory=list)   # -, in the bin's full cells
     # stage -> (t since the outlet opened, s, r, z, p_n, tau): the traction recovered from the
-    # wall's reaction, its mean per bin (diagnostics.WallLoads.profile)
+    # wall's reaction, its mean per bin (diagnostics.WallLoads.profile); in 3D per patch, and
+    # the hoop shear tau_theta after tau (space.wall.PatchLoads.profile)
     wall: dict = field(default_factory=dict)
     # stage -> (p_n, tau) of the plain binning of the reaction (WallLoads.raw_profile)
     wall_raw: dict = field(default_factory=dict)
     # the wall (chain) of each bin: "wall", "left_wall", "insert_1", ...
     wall_names: list = field(default_factory=list)
+    # 3D: each bin's (patch's) angle around the circumference (deg, its sector's centre) and
+    # its profile segment; empty for a section
+    wall_theta: list = field(default_factory=list)
+    wall_segment: list = field(default_factory=list)
     # stage -> {wall or insert: [F_x, F_z]} (N, 3D) over the stage's window
     chain_forces: dict = field(default_factory=dict)
     # insert -> the largest downward load of the material on it over the discharge's windows
@@ -289,9 +300,12 @@ class Simulation:
                                                    self.state.t)]
         #: the discharge stages whose wall loads are measured (:class:`StageMark`)
         self.stage_marks: list[StageMark] = default_stage_marks()
-        self.wall_sampler = diagnostics.WallSampler(model)
-        self.wall_loads = diagnostics.WallLoads(model, self.wall_sampler)
+        #: the model's stress-sampled wall profile and wall loads from the wall's reaction
+        self.wall_sampler, self.wall_loads = model.wall_measures()
         self.record.wall_names = [str(name) for name in self.wall_sampler.bins.wall]
+        if self.wall_sampler.theta is not None:            # 3D: the patches' angles
+            self.record.wall_theta = [float(t) for t in self.wall_sampler.theta]
+            self.record.wall_segment = [int(k) for k in self.wall_sampler.segment]
         self._insert_names = [c.name for c in model.cfg.boundary.inserts]
         self.load_window = run.load_window_s
         self._started = None
@@ -401,8 +415,7 @@ class Simulation:
         self.record.fill_time = st.t
         self.record.rest_balance = loads.balance(*window)
         self._wall_stage("filling", *window)
-        self.record.wall_k = diagnostics.wall_k(loads, self.record.wall["filling"][4], st,
-                                                m.cfg.hopper)
+        self.record.wall_k = loads.wall_k(self.record.wall["filling"][4], st)
         return self.record.fill_at_rest
 
     def discharge(self) -> str:
@@ -508,7 +521,7 @@ class Simulation:
             return math.nan
         x0, x1 = m.cfg.boundary.outlet
         width = (x1 - x0) * (2.0 if m.cfg.boundary.section.half else 1.0)
-        speed = diagnostics.material_speed(m, self.state)
+        speed = m.material_speed(self.state)
         return dwindled if speed < AT_REST_SPEED * math.sqrt(GRAVITY * width) else math.nan
 
     def flow_stopped_time(self) -> float:
@@ -572,12 +585,13 @@ class Simulation:
         rec.mass_flow_index.append(index)
         rec.stagnant_fraction.append(stagnant)
         previous = self._readings.get("sample")     # the wall's impulse at the last sample
-        slip, share, ratios, shares, profile = diagnostics.wall_slip_measures(
-            m, st, previous["wall"] if previous is not None else None, self.flow_rule)
+        slip, share, ratios, shares, profile, sectors = m.wall_slip_measures(
+            st, previous["wall"] if previous is not None else None, self.flow_rule)
         rec.wall_slip_ratio.append(slip)
         rec.wall_slip_stretches.append([float(r) for r in ratios])
         rec.wall_slip_stretch_fractions.append([float(f) for f in shares])
         rec.wall_slip_fraction.append(share)
+        rec.wall_slip_sectors.append([] if sectors is None else np.asarray(sectors).tolist())
         if len(rec.t) > 1 and _before_flow_window_end(t, mass, rec.initial_mass) \
                 and len(profile):
             rec.wall_slip_profile = profile.tolist()
@@ -644,7 +658,8 @@ class Simulation:
         """Record the wall loads of ``stage`` over the window ``start``-``end``: the traction
         recovered from the reaction, its plain binning, and the stress-sampled profile
         (averaged over the window's checks, or at its end when it had none)."""
-        s, r, z, p_n, tau = self.wall_loads.profile(start, end)
+        values = self.wall_loads.profile(start, end)     # 3D: tau_theta after tau
+        s, r, z, p_n, tau = values[:5]
         self.record.wall_raw[stage] = self.wall_loads.raw_profile(start, end)[3:]
         sums = self._stress_sums.pop(stage, None)
         if sums is None or not np.any(sums[2]):
@@ -654,7 +669,7 @@ class Simulation:
             p_s = np.where(sums[2] > 0, sums[0] / count, np.nan)
             tau_s = np.where(sums[2] > 0, sums[1] / count, np.nan)
         t_open = self.t_open if np.isfinite(self.t_open) else end["t"]
-        self.record.wall[stage] = (end["t"] - t_open, s, r, z, p_n, tau)
+        self.record.wall[stage] = (end["t"] - t_open,) + tuple(values)
         hoop, meridional, at_transition = self.wall_loads.membrane_forces(start, end, p_n,
                                                                           tau)
         self.record.chain_forces[stage] = {k: list(v) for k, v in
@@ -776,7 +791,8 @@ class Simulation:
         self._check_checkpoint(arrays, meta, f"checkpoint {path}")
         wall, wall_stress, wall_forces, wall_raw = {}, {}, {}, {}
         for stage, t_stage in meta["wall_times"].items():
-            wall[stage] = (t_stage,) + tuple(arrays.pop(f"wall__{stage}__{k}") for k in range(5))
+            wall[stage] = (t_stage,) + tuple(arrays.pop(f"wall__{stage}__{k}") for k in range(
+                6 if f"wall__{stage}__5" in arrays else 5))      # 3D: tau_theta too
             wall_raw[stage] = tuple(arrays.pop(f"wallraw__{stage}__{k}") for k in range(2))
             wall_stress[stage] = tuple(arrays.pop(f"wallstress__{stage}__{k}") for k in range(2))
             wall_forces[stage] = tuple(arrays.pop(f"wallforces__{stage}__{k}") for k in range(3))
@@ -796,9 +812,10 @@ class Simulation:
         self.record = RunRecord(**meta["record"], wall=wall, wall_stress=wall_stress,
                                 wall_forces=wall_forces, wall_raw=wall_raw)
         n = len(self.record.wall_slip_stretches[-1]) if self.record.wall_slip_stretches else 0
-        for name in ("wall_slip_stretch_fractions",):    # a per-sample measure this version
+        for name, unknown in (("wall_slip_stretch_fractions", [math.nan] * n),
+                              ("wall_slip_sectors", [])):  # per-sample measures this version
             values = getattr(self.record, name)          # adds: not measured before it
-            values[:0] = [[math.nan] * n] * (len(self.record.t) - len(values))
+            values[:0] = [unknown] * (len(self.record.t) - len(values))
         self.t_open = meta["t_open"]
         self.next_sample = meta["next_sample"]
         self.next_load_sample = meta.get("next_load_sample", math.nan)
@@ -878,7 +895,7 @@ class Simulation:
                 for k in range(count):
                     if f"{name}__{stage}__{k}" not in arrays:
                         fail(f"array '{name}__{stage}__{k}' is missing")
-            shapes.update({f"wall__{stage}__{k}": (n_bins,) for k in range(5)})
+            shapes.update({f"wall__{stage}__{k}": (n_bins,) for k in range(6)})
             shapes.update({f"wallstress__{stage}__{k}": (n_bins,) for k in range(2)})
             shapes.update({f"wallraw__{stage}__{k}": (n_bins,) for k in range(2)})
             shapes.update({f"wallforces__{stage}__{k}": (n_bins,) for k in range(2)})
@@ -967,8 +984,7 @@ class Simulation:
             "remaining_mass_fraction": left,
             "flow_stopped_time_s": stopped,
             "rathole_diameter_m": channel if mode == "rathole" else math.nan,
-            "heap_angle_deg": (diagnostics.heap_angle(m, st) if math.isfinite(stopped)
-                               else math.nan),
+            "heap_angle_deg": m.heap_angle(st) if math.isfinite(stopped) else math.nan,
             "discharged_kg": st.discharged,
             "mass_balance_error": balance,
             "discharge_time_s": float(t[-1]) if len(t) else 0.0,
@@ -989,7 +1005,7 @@ class Simulation:
             "grain_diameter_m": m.cfg.material.grain_diameter,
         }
         out["hopper_stretches"] = stretches
-        out.update(diagnostics.load_summary(self))
+        out.update(self.wall_loads.summary(self))
         out.update(m.summary_extras(st))
         return out
 

@@ -357,14 +357,18 @@ def test_help_everywhere(argv, capsys):
 
 def test_force_leaves_nothing_of_the_earlier_run(run_dir, tmp_path, capsys):
     """A directory with every picture the package draws (:data:`plotting.PICTURES`: the
-    discharge run's six and a Lagrangian mesh picture drawn into it), then ``--force`` with a
-    fill-only configuration, which draws fewer: the directory holds exactly what the same
-    run writes into an empty one (no picture, table or snapshot of the earlier run)."""
+    discharge run's six, a Lagrangian mesh picture drawn into it and a 3D run's three and its
+    ``wall_extremes.csv`` put there), then ``--force`` with a fill-only configuration, which
+    draws fewer: the directory holds exactly what the same run writes into an empty one (no
+    picture, table or snapshot of the earlier run)."""
     from fipy_hopper import plotting
 
     old = tmp_path / "old"
     shutil.copytree(run_dir, old)
     plotting._save(plotting.lagrangian_mesh(old), old / "lagrangian_mesh.png")
+    for name in ("flow_plane.png", "wall_circumference.png", "wall_unrolled.png"):
+        shutil.copy(old / "discharge.png", old / name)          # as a 3D run's
+    (old / "wall_extremes.csv").write_text("stage,s_m\n")
     every = {p.name for p in plotting.PICTURES}
     assert every <= {p.name for p in old.iterdir()}
     assert {"wall_forces.png", "lagrangian_mesh.png", "discharge.gif"} <= every

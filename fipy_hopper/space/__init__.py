@@ -1,5 +1,7 @@
-"""The 3D Eulerian model of a circular silo (in progress): the same physics as the sections
-(:mod:`fipy_hopper.model`) on a fixed Cartesian grid.
+"""The 3D Eulerian model of a circular silo: the same physics as the sections
+(:mod:`fipy_hopper.model`) on a fixed Cartesian grid, run by the shared loop
+(:class:`fipy_hopper.simulation.Simulation`) for a configuration with ``[hopper] dimensions = 3``
+(``fipy-hopper run``, ``fipy_hopper.run``).
 
 Coordinates ``(x, y, z)`` in m, ``z`` up, the outlet plane ``z = 0``, the silo's axis the
 line ``x = y = 0``; an off-centre outlet lies on ``+x``.  Arrays of cells are ``(nz, ny, nx)``
@@ -21,7 +23,15 @@ Modules:
 * ``contact``: the wall and plate constraints as data and the numpy reference of the contact;
 * ``stepping``: the compiled material steps (forces, node update, contact, stress update,
   faces);
-* ``model``: :class:`SpaceModel`, the model (initial state, steps, transport, masses).
+* ``model``: :class:`SpaceModel`, the model (initial state, steps, transport, masses; the
+  model protocol of :mod:`fipy_hopper.protocol`);
+* ``wall``: the wall's patches (height bins times sectors), the wall loads from the wall's
+  reaction and the stresses, the vertical balance (:class:`SpaceWallLoads`) and the loop's
+  view of them (:class:`PatchLoads`);
+* ``flow``: the wall slip per sector, the flow-mode measures, the plane through the axis and
+  the outlet, the flow channel;
+* ``estimate``: the grid, memory and time of a run from its settings alone;
+* ``output``, ``pictures``: the hexahedral snapshots; the 3D pictures.
 
 What exists and what is tested: ``docs/three_d.md``.
 """

@@ -59,6 +59,26 @@ from ..boundary import Boundary, build
 _DEEP = 100.0
 
 
+def outlet_offset_error(wall, outlet_offset) -> str:
+    """Why an outlet ``outlet_offset`` (m) off the axis of the silo of profile ``wall``
+    ``[(r, z), ...]`` cannot be (one line, naming ``outlet_offset``), or ``""``: a negative or
+    non-finite distance, or an outlet (of the lip's radius ``R_0``) outside the floor or the
+    hopper, ``e + R_0 >= R`` (``R`` the widest radius of the wall)."""
+    try:
+        e = float(outlet_offset)
+    except (TypeError, ValueError):
+        return f"outlet_offset = {outlet_offset!r}: expected a distance in m >= 0"
+    r0 = float(wall[0][0])
+    radius = max(float(r) for r, _ in wall)
+    if not (math.isfinite(e) and e >= 0.0):
+        return f"outlet_offset = {outlet_offset!r} m: expected a distance >= 0"
+    if e > 0.0 and e + r0 >= radius:
+        return (f"outlet_offset = {e:g} m puts the outlet (radius {r0:g} m) outside the floor "
+                f"or the hopper (bin radius {radius:g} m): allowed range is "
+                f"[0, {radius - r0:g}) m")
+    return ""
+
+
 @dataclass(frozen=True)
 class Part:
     """A sections' boundary revolved about the vertical line through ``(c(z), 0)``,
@@ -141,15 +161,12 @@ class SiloBoundary:
         angle per segment (deg).  Refuses an offset that puts the outlet outside the floor or
         the hopper (``e + R_0 >= R``)."""
         wall = tuple((float(r), float(z)) for r, z in wall)
+        error = outlet_offset_error(wall, outlet_offset)
+        if error:
+            raise ValueError(error)
         e = float(outlet_offset)
         r0 = wall[0][0]
         radius = max(r for r, _ in wall)
-        if not (math.isfinite(e) and e >= 0.0):
-            raise ValueError(f"outlet_offset = {outlet_offset!r} m: expected a distance >= 0")
-        if e > 0.0 and e + r0 >= radius:
-            raise ValueError(f"outlet_offset = {e:g} m puts the outlet (radius {r0:g} m) "
-                             f"outside the floor or the hopper (bin radius {radius:g} m): "
-                             f"allowed range is [0, {radius - r0:g}) m")
         n_seg = len(wall) - 1
         fr = (tuple(float(f) for f in segment_friction_deg) if segment_friction_deg is not None
               else (float(friction_deg),) * n_seg)

@@ -1,9 +1,13 @@
-"""The settings of a 3D run, until the run configuration takes them: the sections' dataclasses
-(:mod:`fipy_hopper.config`) and the two 3D choices."""
+"""The settings of a 3D run: the sections' dataclasses (:mod:`fipy_hopper.config`) and the 3D
+choices.  A run configuration with ``[hopper] dimensions = 3`` maps to them in one place,
+:meth:`SpaceConfig.from_config` (and back, :meth:`SpaceConfig.to_config`): ``outlet_offset``
+is ``hopper.outlet_offset``, ``mirror_planes`` ``numerics.mirror_planes``, ``wall_sectors``
+``run.wall_sectors``."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from typing import Optional
 
 from ..config import (HopperConfig, HopperGeometry, MaterialConfig, NumericsConfig,
                       RunConfig, WallConfig, damped_step_factor)
@@ -32,11 +36,42 @@ class SpaceConfig:
     mirror_planes: str = "auto"
     run: RunConfig = field(default_factory=RunConfig)
     wall_sectors: int = 12
+    #: the run configuration this was made from (:meth:`from_config`), if any
+    source: Optional[HopperConfig] = field(default=None, compare=False, repr=False)
 
     def __post_init__(self):
         if not (isinstance(self.wall_sectors, int) and 1 <= self.wall_sectors <= 360):
             raise ValueError(f"wall_sectors = {self.wall_sectors!r}: expected a whole number "
                              "in [1, 360]")
+
+    @classmethod
+    def from_config(cls, cfg: HopperConfig) -> "SpaceConfig":
+        """The 3D settings of a run configuration with ``hopper.dimensions = 3`` (the one
+        mapping: module docstring)."""
+        if cfg.hopper.dimensions != 3:
+            raise ValueError("a SpaceConfig is made from a configuration with "
+                             f"hopper.dimensions = 3, not {cfg.hopper.dimensions}")
+        return cls(hopper=cfg.hopper, material=cfg.material, wall=cfg.wall,
+                   numerics=cfg.numerics, outlet_offset=float(cfg.hopper.outlet_offset),
+                   mirror_planes=cfg.numerics.mirror_planes, run=cfg.run,
+                   wall_sectors=cfg.run.wall_sectors, source=cfg)
+
+    def to_config(self) -> HopperConfig:
+        """The run configuration of these settings: the one they were made from, or one built
+        from them (validated as any configuration: :class:`~fipy_hopper.config.ConfigError`
+        for settings a run configuration refuses)."""
+        if self.source is not None:
+            return self.source
+        return HopperConfig(
+            hopper=replace(self.hopper, dimensions=3, outlet_offset=float(self.outlet_offset)),
+            material=self.material, wall=self.wall,
+            numerics=replace(self.numerics, mirror_planes=self.mirror_planes),
+            run=replace(self.run, wall_sectors=self.wall_sectors))
+
+    def to_toml(self) -> str:
+        """The run configuration's resolved TOML (:meth:`to_config`): what a run's
+        fingerprint and ``config.toml`` hold."""
+        return self.to_config().to_toml()
 
     @property
     def boundary(self):
@@ -48,10 +83,11 @@ class SpaceConfig:
 
     def wall_bin_width_at(self, cell_size: float) -> float:
         """The wall bins' width along the meridian (m), the sections' rule:
-        ``run.wall_bin_width``, or a twentieth of the bin's diameter, at least three cells."""
+        ``run.wall_bin_width``, or a twentieth of the silo's widest span (the bin's diameter),
+        at least three cells."""
         if self.run.wall_bin_width != "auto":
             return float(self.run.wall_bin_width)
-        return max(3.0 * cell_size, self.hopper.bin_diameter / 20.0)
+        return max(3.0 * cell_size, self.hopper.width / 20.0)
 
     @property
     def wall_bin_width_m(self) -> float:
@@ -61,10 +97,11 @@ class SpaceConfig:
         """The axisymmetric section of the same silo, material, wall and numerics (the 3D
         model's comparison; its outlet is centred whatever ``outlet_offset``); ``run``: keys
         of its ``[run]`` replacing this one's."""
-        from dataclasses import replace
-        return HopperConfig(hopper=self.hopper, material=self.material, wall=self.wall,
-                            numerics=self.numerics, run=replace(self.run, **run) if run
-                            else self.run)
+        section = replace(self.run, wall_sectors=12, **run)
+        return HopperConfig(hopper=replace(self.hopper, dimensions=2, outlet_offset=0.0),
+                            material=self.material, wall=self.wall,
+                            numerics=replace(self.numerics, mirror_planes="auto"),
+                            run=section)
 
     @property
     def bulk_viscosity(self) -> float:
@@ -94,8 +131,7 @@ class SpaceConfig:
 
     def with_(self, **changes) -> "SpaceConfig":
         """A copy with sections or fields replaced (sections given as dicts of changes)."""
-        from dataclasses import replace
-        out = {}
+        out = {"source": None}
         for key, value in changes.items():
             if isinstance(value, dict):
                 value = replace(getattr(self, key), **value)

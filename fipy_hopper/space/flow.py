@@ -74,18 +74,20 @@ def hopper_stretches(patches) -> np.ndarray:
                      if abs(st3.stretch.tangent[0]) > 1e-9], dtype=np.int64)
 
 
-def wall_slip_by_sector(run, start: dict, rule=diagnostics.FlowModeRule()) -> np.ndarray:
-    """The wall slip ratio of every hopper stretch in every sector since the reading
-    ``start`` (:meth:`SpaceWallLoads.reading`): ``(n_hopper_stretches, n_sectors)``, NaN where
-    no loaded entry under a moving axis lies (module docstring)."""
-    model, state = run.model, run.state
+def wall_slip_by_sector(model, state, previous_impulse=None,
+                        rule=diagnostics.FlowModeRule()) -> np.ndarray:
+    """The wall slip ratio of every hopper stretch in every sector, the loads since
+    ``previous_impulse`` (``state.wall_impulse`` then; None: since the start):
+    ``(n_hopper_stretches, n_sectors)``, NaN where no loaded entry under a moving axis lies
+    (module docstring)."""
     W = model.wall_loads
     P = W.patches
     hop = hopper_stretches(P)
     out = np.full((len(hop), P.n_sectors), np.nan)
     if not len(hop):
         return out
-    impulse = state.wall_impulse - start["wall"]
+    impulse = state.wall_impulse if previous_impulse is None else \
+        state.wall_impulse - previous_impulse
     load = -np.einsum("ec,ce->e", impulse, W.entry_normal)
     slip, axis = contact_slip(model, state)
     label_of = np.full(len(P.stretches), -1)
@@ -107,27 +109,69 @@ def wall_slip_by_sector(run, start: dict, rule=diagnostics.FlowModeRule()) -> np
     return full.reshape(len(hop), P.n_sectors)
 
 
-def flow_mode_by_sector(samples, t, mass, m0, rule=diagnostics.FlowModeRule()) -> tuple:
-    """``(ratio (n_sectors,), calls)`` from the samples of :func:`wall_slip_by_sector` at
-    times ``t`` (s since the opening) with ``mass`` left: the median of each stretch's ratio
-    over the sections' flow-mode window (at most 90 % and at least 40 % of ``m0`` left, later
-    than 0.1 s; all samples but the first if none), the smallest over the hopper stretches per
-    sector, and the call (``"mass"`` or ``"funnel"``) per sector."""
-    t, mass = np.asarray(t, float), np.asarray(mass, float)
-    if not len(samples):
-        return np.zeros(0), []
-    window = (mass <= 0.9 * m0) & (mass >= 0.4 * m0) & (t > 0.1)
-    arr = np.asarray(samples, float)                     # (n_samples, n_stretches, n_sectors)
-    n = min(len(arr), len(window))
-    chosen = arr[:n][window[:n]] if window[:n].any() else arr[1:]
-    with np.errstate(all="ignore"):
+def wall_slip_measures(model, state, previous_impulse=None,
+                       rule=diagnostics.FlowModeRule()) -> tuple:
+    """The protocol's ``(ratio, fraction, stretch ratios, stretch fractions, profile,
+    sectors)`` at one sample (:meth:`fipy_hopper.protocol.HopperModelProtocol.
+    wall_slip_measures`): ``sectors`` the ratio per hopper stretch and sector
+    (:func:`wall_slip_by_sector`); per hopper stretch of the silo's section
+    (:func:`fipy_hopper.diagnostics.hopper_rows` of ``cfg.boundary``, NaN for one the
+    material does not reach) its ratio, the smallest over the sectors (the stretch slides
+    everywhere around when it reaches the rule's), and its fraction, the share of the measured
+    sectors where it slides; ``ratio`` and ``fraction`` those of the stretch of the smallest
+    ratio; ``profile`` the loaded hopper entries' ``(s, r, z, slip / axis speed)``."""
+    sectors = wall_slip_by_sector(model, state, previous_impulse, rule)
+    W = model.wall_loads
+    P = W.patches
+    hop = hopper_stretches(P)
+    bnd = model.cfg.boundary
+    rows = diagnostics.hopper_rows(bnd)
+    ratios, fractions = np.full(len(rows), np.nan), np.full(len(rows), np.nan)
+    by_segment = {P.stretches[k].stretch.segment: n for n, k in enumerate(hop)}
+    for i, row in enumerate(rows):
+        n = by_segment.get(int(bnd.table.segment[row]))
+        values = sectors[n] if n is not None else np.zeros(0)
+        values = values[np.isfinite(values)]
+        if values.size:
+            ratios[i] = float(values.min())
+            fractions[i] = float(np.mean(values >= rule.slip_ratio))
+    impulse = state.wall_impulse if previous_impulse is None else \
+        state.wall_impulse - previous_impulse
+    load = -np.einsum("ec,ce->e", impulse, W.entry_normal)
+    slip, axis = contact_slip(model, state)
+    on_hopper = np.isin(W.entry_stretch, hop)
+    on = np.flatnonzero(on_hopper & (load > 0.0) & (axis > 0.0) & np.isfinite(slip))
+    on = on[np.argsort(W.entry_s[on], kind="stable")]
+    r_w, z_w = np.zeros(len(on)), np.zeros(len(on))
+    for k in np.unique(W.entry_stretch[on]):
+        at = W.entry_stretch[on] == k
+        r_w[at], z_w[at] = P.stretches[k].stretch.point(W.entry_s[on][at])
+    profile = np.column_stack([W.entry_s[on], r_w, z_w, slip[on] / axis[on]])
+    if not np.isfinite(ratios).any():
+        return math.nan, math.nan, ratios, fractions, profile, sectors
+    worst = int(np.nanargmin(ratios))
+    return (float(ratios[worst]), float(fractions[worst]), ratios, fractions, profile,
+            sectors)
+
+
+def flow_mode_by_sector(samples, window=None, n_sectors: int = 0,
+                        rule=diagnostics.FlowModeRule()) -> tuple:
+    """``(ratio (n_sectors,), calls)`` from the samples of :func:`wall_slip_by_sector`
+    (matrices ``(n_hopper_stretches, n_sectors)``; empty ones are left out) chosen by
+    ``window`` (a bool per sample, default all: the loop's flow-mode window,
+    :func:`fipy_hopper.simulation.flow_mode_window`): the median of each stretch's ratio in
+    each sector over them, the smallest over the hopper stretches per sector, and the call
+    (``"mass"``, ``"funnel"``, ``"unknown"`` unmeasured) per sector."""
+    window = [True] * len(samples) if window is None else list(window)
+    chosen = [np.asarray(s, float) for s, w in zip(samples, window) if w and np.size(s)]
+    ratio = np.full(n_sectors or (chosen[0].shape[1] if chosen else 0), np.nan)
+    if chosen:
         import warnings
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
-            median = np.nanmedian(chosen, axis=0) if len(chosen) else np.full(arr.shape[1:],
-                                                                              np.nan)
-            ratio = np.nanmin(median, axis=0) if median.shape[0] else np.full(
-                arr.shape[2], np.nan)
+            median = np.nanmedian(np.stack(chosen), axis=0)
+            if median.shape[0]:
+                ratio = np.nanmin(median, axis=0)
     return ratio, [diagnostics.classify_flow_mode(r, rule) for r in ratio]
 
 

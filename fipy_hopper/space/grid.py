@@ -36,9 +36,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import fipy_adapter
+from ..config import MIRROR_PLANES
 from .boundary import SiloBoundary
-
-MIRROR_PLANES = ("auto", "none", "quarter", "half")
 
 
 def computed_part(mirror_planes: str, outlet_offset: float) -> tuple:

@@ -21,11 +21,10 @@ The sections' method (docs/physics_and_numerics.md, sections 3-7) on the 3D grid
 Masses, forces and momenta of the computed part (a quarter, a half or all of the silo) are
 reported for the whole silo by ``section_factor`` (4, 2, 1) where a method says so.
 
-The model implements :class:`fipy_hopper.protocol.HopperModelProtocol` and the methods the
-loop and the diagnostics call beyond it (``contact_slip``, ``bin_lateral_stress_ratio``,
-``material``); the wall loads and flow measures are 3D (:mod:`fipy_hopper.space.wall`,
-:mod:`fipy_hopper.space.flow`).  Not yet: markers, layers, the opening iris (the plate goes at
-once), the loop of :mod:`fipy_hopper.simulation` (:mod:`fipy_hopper.space.run` drives it).
+The model implements :class:`fipy_hopper.protocol.HopperModelProtocol`, so the shared loop
+(:class:`fipy_hopper.simulation.Simulation`) runs it as it runs the sections; its wall loads
+and flow measures are 3D (:mod:`fipy_hopper.space.wall`, :mod:`fipy_hopper.space.flow`).  Not
+yet: markers, layers, the opening iris (the plate goes at once).
 """
 
 from __future__ import annotations
@@ -100,10 +99,16 @@ class SpaceModel:
     numba threads."""
 
     formulation = "eulerian"
+    #: the whole silo (fipy_hopper.protocol)
+    dimensions = 3
 
-    def __init__(self, cfg: SpaceConfig, backend: str = "numba", threads: int | None = None):
+    def __init__(self, cfg, backend: str = "numba", threads: int | None = None):
+        """``cfg``: a :class:`SpaceConfig`, or a run configuration with ``hopper.dimensions
+        = 3`` (:meth:`SpaceConfig.from_config`)."""
         if backend not in ("numba", "numpy"):
             raise ValueError(f"backend must be 'numba' or 'numpy', not {backend!r}")
+        if not isinstance(cfg, SpaceConfig):
+            cfg = SpaceConfig.from_config(cfg)
         self.cfg, self.backend = cfg, backend
         #: numba threads of the compiled steps (default: one per core this process may use,
         #: :func:`fipy_hopper.resources.thread_limit`); the results do not depend on them
@@ -321,6 +326,60 @@ class SpaceModel:
         """:func:`fipy_hopper.space.flow.bin_lateral_stress_ratio`."""
         from .flow import bin_lateral_stress_ratio
         return bin_lateral_stress_ratio(self, state)
+
+    def wall_measures(self) -> tuple:
+        """``(sampler, loads)`` of the loop: one :class:`fipy_hopper.space.wall.PatchLoads`
+        in both roles."""
+        from .wall import PatchLoads
+        loads = PatchLoads(self)
+        return loads, loads
+
+    def wall_slip_measures(self, state, previous_impulse, rule) -> tuple:
+        """:func:`fipy_hopper.space.flow.wall_slip_measures`."""
+        from .flow import wall_slip_measures
+        return wall_slip_measures(self, state, previous_impulse, rule)
+
+    def material_speed(self, state, full: float = 0.5) -> float:
+        """The rms speed (m/s) of the material above the outlet plane: the cells holding more
+        than ``full`` (the mean of their eight nodes' velocities), weighted by ``alpha kappa
+        V``, as the sections' :func:`fipy_hopper.diagnostics.material_speed`; 0 where there
+        is no material."""
+        g, v = self.grid, state.v
+        vc = 0.125 * sum(v[:, dk:dk + g.nz, dj:dj + g.ny, di:di + g.nx]
+                         for dk in (0, 1) for dj in (0, 1) for di in (0, 1))
+        sel = (state.alpha > full) & (g.centres(2) > 0.0)[:, None, None] & (g.kappa > 0)
+        w = (state.alpha * self.open_volume)[sel]
+        speed2 = (vc ** 2).sum(axis=0)[sel]
+        return float(math.sqrt(np.sum(w * speed2) / np.sum(w))) if np.sum(w) > 0 else 0.0
+
+    def heap_angle(self, state, full: float = 0.5) -> float:
+        """The angle (deg from the horizontal) of the surface of the material left once the
+        flow has stopped, the sections' rule (:func:`fipy_hopper.diagnostics.heap_angle`) on
+        the cell columns: in each column above the outlet plane whose top loaded cell has an
+        open cell above it and is not cut by the wall, the height where ``alpha`` falls below
+        ``full``; the slope of the least-squares line of those heights against the distance
+        from the outlet's axis ``(e, 0)``.  NaN with fewer than three columns."""
+        g = self.grid
+        alpha, kappa = state.alpha, g.kappa
+        zc = g.centres(2)
+        held = (alpha > full) & (zc > 0.0)[:, None, None]
+        any_held = held.any(axis=0)
+        top = held.shape[0] - 1 - np.argmax(held[::-1], axis=0)          # (ny, nx)
+        jj, ii = np.nonzero(any_held)
+        k = top[jj, ii]
+        ok = (k + 1 < alpha.shape[0]) & (kappa[np.minimum(k + 1, alpha.shape[0] - 1), jj, ii]
+                                         > 0.0) & (kappa[k, jj, ii] >= 1.0)
+        jj, ii, k = jj[ok], ii[ok], k[ok]
+        if len(k) < 3:
+            return math.nan
+        a0, a1 = alpha[k, jj, ii], alpha[k + 1, jj, ii]
+        frac = np.minimum((a0 - full) / np.maximum(a0 - a1, 1e-12), 1.0)
+        height = zc[k] + frac * g.h
+        radius = np.hypot(g.centres(0)[ii] - self.boundary.outlet_offset, g.centres(1)[jj])
+        if np.ptp(radius) <= 0.0:
+            return math.nan
+        slope = np.polyfit(radius, height, 1)[0]
+        return float(np.degrees(np.arctan(abs(slope))))
 
     # ------------------------------------------------------------------ steps
     def advance(self, state: SpaceState, max_steps: int) -> int:

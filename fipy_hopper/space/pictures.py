@@ -1,4 +1,5 @@
-"""Pictures of a 3D run, drawn from the files it wrote (:mod:`fipy_hopper.space.output`):
+"""Pictures of a 3D run, drawn from the files it wrote (``fipy-hopper plot``,
+:func:`fipy_hopper.plotting.plot_run`, draws them into a 3D run's directory):
 
 * :func:`plane_picture`: the flow pattern and the speed in the vertical plane through the
   axis and the outlet (``y = 0``), from a field snapshot (``fields_NNNN.vtu``): the speed of
@@ -124,7 +125,7 @@ def circumference_picture(csv_path, png_path, stages=("filling", "early_discharg
     plt = _figure()
     stages = [s for s in stages if np.any(np.asarray(read_csv(csv_path)["stage"]) == s)]
     fig, axes = plt.subplots(1, max(len(stages), 1), subplot_kw={"projection": "polar"},
-                             figsize=(4.5 * max(len(stages), 1), 4.8), squeeze=False)
+                             figsize=(4.5 * max(len(stages), 1), 5.6), squeeze=False)
     for ax, stage in zip(axes[0], stages):
         bins, z, sectors, grid = _stage_table(csv_path, stage)
         pick = np.unique(np.linspace(0, len(bins) - 1, n_heights).round().astype(int))
@@ -133,10 +134,10 @@ def circumference_picture(csv_path, png_path, stages=("filling", "early_discharg
             ax.plot(closed, np.append(grid[b], grid[b, 0]), marker="o", ms=3,
                     label=f"s = {bins[b]:.3f} m (z = {z[b]:.3f} m)")
         ax.set_title(stage.replace("_", " "))
-        ax.legend(fontsize=7, loc="lower left", bbox_to_anchor=(-0.1, -0.25))
+        ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.08))
     fig.suptitle("wall pressure p_n (Pa) around the circumference; 0 deg: the outlet's side",
                  y=0.99)
-    fig.tight_layout(rect=(0, 0, 1, 0.94))
+    fig.tight_layout(rect=(0, 0.1, 1, 0.94))
     return _save(fig, png_path)
 
 
@@ -158,7 +159,8 @@ def unrolled_picture(csv_path, png_path, stages=("filling", "early_discharge")) 
         mesh = ax.pcolormesh(t_edges, rows, grid, vmin=0.0, vmax=top, cmap="magma",
                              shading="flat")
         ax.set_yticks(np.arange(len(bins)))
-        ax.set_yticklabels([f"{a:.3f} ({b:.3f})" for a, b in zip(bins, z)], fontsize=7)
+        ax.set_yticklabels([f"{a:.3f} ({b:.3f})" for a, b in zip(bins, z)]
+                           if ax is axes[0, 0] else [], fontsize=7)
         ax.set_xlabel("theta (deg): 0 the outlet's side, 180 the far wall")
         ax.set_title(stage.replace("_", " "))
     axes[0, 0].set_ylabel("bin centre: s along the meridian (z) (m)")

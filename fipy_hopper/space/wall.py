@@ -354,9 +354,10 @@ def wall_patches(boundary, fill_level: float, width: float, n_sectors: int,
         st3 = stretches[cols["stretch"][b]]
         S, T = np.full(n_sectors, cols["s"][b]), theta
         centre[:, b], normal[:, b], tangent[:, b], hoop[:, b], _ = _surface(boundary, st3, S, T)
+    theta_deg = 360.0 * np.arange(n_sectors) / n_sectors        # exact: 30.0, not 29.99...
     patches = WallPatches(stretches, cols["stretch"], cols["segment"], cols["s"], cols["lo"],
-                          cols["hi"], cols["r"], cols["z"], np.degrees(theta), area, centre,
-                          normal, tangent, hoop)
+                          cols["hi"], cols["r"], cols["z"], theta_deg, area, centre, normal,
+                          tangent, hoop)
     return patches, tuple(maps)
 
 
@@ -577,26 +578,42 @@ class SpaceWallLoads:
         ``alpha > 1/2``; NaN where a patch holds no material."""
         from ..material.principal3d import to_matrix
         cells, stretch, s, theta, n, t, hv = self._wall_band()
-        P = self.patches
-        alpha = state.alpha.ravel()[cells]
-        w = np.where(alpha > 0.5, (state.alpha * self.model.open_volume).ravel()[cells], 0.0)
         sig = to_matrix(state.sigma.reshape(-1, 6)[cells])        # (m, 3, 3)
         trac = np.einsum("mij,jm->im", sig, n)
         vals = np.stack([-(trac * n).sum(axis=0), (trac * t).sum(axis=0),
                          (trac * hv).sum(axis=0)], axis=1)
+        mean = self._patch_means(state, vals, (1.0, 1.0, -1.0))
+        return mean[..., 0], mean[..., 1], mean[..., 2]
+
+    def vertical_stress_map(self, state) -> np.ndarray:
+        """The mean vertical stress ``sigma_zz`` (Pa, tension positive) of the cells next to
+        the wall of each patch (n_bins, n_sectors), weighted as :meth:`stress_maps`; NaN where
+        a patch holds no material."""
+        cells = self._wall_band()[0]
+        return self._patch_means(state, state.sigma.reshape(-1, 6)[cells, 2:3], (1.0,))[..., 0]
+
+    def _patch_means(self, state, vals, reflected) -> np.ndarray:
+        """The weighted means per patch (n_bins, n_sectors, k) of the band cells' values
+        ``vals`` (m, k), over every image (``reflected``: each column's sign in a reflected
+        image), weights ``alpha kappa V`` where ``alpha > 1/2``; NaN where there is none."""
+        cells, stretch, s, theta = self._wall_band()[:4]
+        P = self.patches
+        alpha = state.alpha.ravel()[cells]
+        w = np.where(alpha > 0.5, (state.alpha * self.model.open_volume).ravel()[cells], 0.0)
         bins = P.bin_of(stretch, s)
-        total = np.zeros((P.n_bins, P.n_sectors, 3))
+        k = vals.shape[1]
+        total = np.zeros((P.n_bins, P.n_sectors, k))
         weight = np.zeros(P.n_bins * P.n_sectors)
         for tmap, hsign, _ in self.images:
             flat = bins * P.n_sectors + P.sector_of(np.degrees(tmap(theta)))
             weight += np.bincount(flat, w, len(weight))
-            for c, sign in ((0, 1.0), (1, 1.0), (2, hsign)):
+            for c in range(k):
+                sign = reflected[c] if hsign < 0 else 1.0
                 total[..., c] += np.bincount(flat, sign * w * vals[:, c],
                                              len(weight)).reshape(P.n_bins, -1)
         weight = weight.reshape(P.n_bins, -1)
-        mean = np.where(weight[..., None] > 0, total / np.where(weight > 0, weight, 1.0)[
-            ..., None], np.nan)
-        return mean[..., 0], mean[..., 1], mean[..., 2]
+        return np.where(weight[..., None] > 0,
+                        total / np.where(weight > 0, weight, 1.0)[..., None], np.nan)
 
     # ------------------------------------------------------------------ balances
     def balance(self, start: dict, end: dict) -> dict:
@@ -648,3 +665,136 @@ def circumference_extremes(p) -> tuple:
     small[finite] = np.nanmin(p[finite], axis=1)
     ratio = np.where(small > 0, big / np.where(small > 0, small, 1.0), np.nan)
     return big, small, ratio
+
+
+@dataclass(frozen=True)
+class _PatchNames:
+    """The loop's ``sampler.bins.wall``: the wall each patch is on (all ``"wall"``)."""
+
+    wall: np.ndarray
+
+
+class PatchLoads:
+    """The 3D wall loads as the shared loop (:class:`fipy_hopper.simulation.Simulation`) reads
+    a model's (:class:`fipy_hopper.protocol.WallLoadsProtocol`), in both of its roles, the
+    stress-sampled profile and the loads from the wall's reaction: the model's
+    :class:`SpaceWallLoads` with each patch (height bin times sector, bin-major) as one of the
+    loop's bins.  ``centres`` (the bins' ``s``), ``r``, ``z``, ``theta`` (deg, the sector's
+    centre) and ``segment`` (the profile's) per patch.  What a shell of revolution has and a
+    3D map has not (membrane forces, the corners' forces) is NaN or empty."""
+
+    def __init__(self, model):
+        self.model = model
+        self.space = W = model.wall_loads
+        P = self.patches = W.patches
+        ns = P.n_sectors
+        self.centres = np.repeat(P.s, ns)
+        self.r = np.repeat(P.r, ns)
+        self.z = np.repeat(P.z, ns)
+        self.theta = np.tile(P.theta_deg, P.n_bins)
+        self.segment = np.repeat(P.segment, ns)
+        self.bins = _PatchNames(np.full(P.n_bins * ns, "wall"))
+        self.sampler = self
+
+    # -------------------------------------------------------------- the loop's interface
+    reading = staticmethod(SpaceWallLoads.reading)
+
+    def balance(self, start: dict, end: dict) -> dict:
+        return self.space.balance(start, end)
+
+    def profile(self, start: dict, end: dict) -> tuple:
+        """``(s, r, z, p_n, tau, tau_theta)`` per patch over a window: the recovered
+        traction's means (:meth:`SpaceWallLoads.maps`)."""
+        p, tau, hoop = self.space.maps(start, end)
+        return self.centres, self.r, self.z, p.ravel(), tau.ravel(), hoop.ravel()
+
+    def raw_profile(self, start: dict, end: dict) -> tuple:
+        p, tau, _ = self.space.raw_maps(start, end)
+        return self.centres, self.r, self.z, p.ravel(), tau.ravel()
+
+    def profile_all(self, state) -> tuple:
+        """``(s, r, z, p_n, tau)`` per patch from the stresses next to the wall."""
+        p, tau, _ = self.space.stress_maps(state)
+        return self.centres, self.r, self.z, p.ravel(), tau.ravel()
+
+    def membrane_forces(self, start: dict, end: dict, p_n, tau=None) -> tuple:
+        nan = np.full(len(self.centres), np.nan)
+        return nan, nan.copy(), np.full(2, np.nan)
+
+    def hoop_force(self, p_n) -> np.ndarray:
+        return np.full(len(self.centres), np.nan)
+
+    def chain_forces(self, start: dict, end: dict) -> dict:
+        """``{"wall": [F_x, F_z]}``: the wall's mean force on the material over a window (N,
+        whole silo; ``F_x`` towards the outlet's offset, the tube left out)."""
+        forces = self.space.segment_forces(start, end).values()
+        return {"wall": [float(sum(f[0] for f in forces)), float(sum(f[2] for f in forces))]}
+
+    def corner_forces(self, p_n, tau) -> list:
+        return []
+
+    def wall_k(self, p_n, state) -> float:
+        """The lateral pressure ratio at the bin wall: the median over the bin wall's patches
+        (its vertical stretch, two bins clear of the transition and of the fill level, as the
+        sections' :func:`fipy_hopper.diagnostics.wall_k`) of ``p_n / (-sigma_zz)`` of the
+        cells next to it; NaN without a bin wall."""
+        bnd = self.model.cfg.boundary
+        if bnd.transition("wall") is None:
+            return math.nan
+        P = self.patches
+        s_t = bnd.transition_s("wall")
+        s_top = bnd.arc_at_height("wall", bnd.fill_level)
+        width = np.repeat(P.hi - P.lo, P.n_sectors)
+        vertical = np.repeat([abs(P.stretches[k].stretch.tangent[0]) < 1e-9
+                              for k in P.stretch], P.n_sectors)
+        szz = self.space.vertical_stress_map(state).ravel()
+        keep = (vertical & (self.centres > s_t + 2 * width) & (self.centres < s_top - 2 * width)
+                & np.isfinite(szz) & (szz < 0.0) & np.isfinite(p_n))
+        if not keep.any():
+            return math.nan
+        return float(np.median(np.asarray(p_n)[keep] / -szz[keep]))
+
+    def summary(self, sim) -> dict:
+        """The sections' wall-load numbers (:func:`fipy_hopper.diagnostics.load_summary`: the
+        rest balance, the balance's residuals, ``wall_k_bin``, the largest overpressure over
+        the patches, Janssen and Walker for the bin; the membrane and corner forces NaN) and
+        the 3D ones (:func:`summary_3d`)."""
+        from ..diagnostics import load_summary
+        return {**load_summary(sim), **summary_3d(sim, self.patches)}
+
+
+def stage_maps(record, n_sectors: int) -> dict:
+    """``{stage: p_n (n_bins, n_sectors)}`` of a run's recorded wall stages (Pa)."""
+    return {stage: np.asarray(values[4], float).reshape(-1, n_sectors)
+            for stage, values in record.wall.items()}
+
+
+def summary_3d(sim, patches) -> dict:
+    """The 3D keys of ``summary.json``: the height bins (``wall_bins_s_m``, ``wall_bins_z_m``)
+    and the sectors (``sector_theta_deg``); per recorded stage the largest and the smallest
+    pressure around the circumference at each height bin and their ratio
+    (``<stage>_wall_pressure_max_Pa``, ``..._min_Pa``, ``..._max_over_min``, and the largest
+    ratio ``..._max_over_min_largest``; :func:`circumference_extremes`); the flow-mode call by
+    wall slip per sector over the flow-mode window (``wall_slip_ratio_by_sector``, the
+    smallest over the hopper stretches, and ``flow_mode_by_sector``,
+    :func:`fipy_hopper.space.flow.flow_mode_by_sector`)."""
+    from ..simulation import flow_mode_window
+    from .flow import flow_mode_by_sector
+
+    rec, P = sim.record, patches
+    out = {"wall_bins_s_m": P.s.tolist(), "wall_bins_z_m": P.z.tolist(),
+           "sector_theta_deg": P.theta_deg.tolist()}
+    for stage, p in stage_maps(rec, P.n_sectors).items():
+        big, small, ratio = circumference_extremes(p)
+        out[f"{stage}_wall_pressure_max_Pa"] = big.tolist()
+        out[f"{stage}_wall_pressure_min_Pa"] = small.tolist()
+        out[f"{stage}_wall_pressure_max_over_min"] = ratio.tolist()
+        out[f"{stage}_wall_pressure_max_over_min_largest"] = (
+            float(np.nanmax(ratio)) if np.isfinite(ratio).any() else math.nan)
+    samples = [s for s in rec.wall_slip_sectors]
+    window, _ = flow_mode_window(rec.t, rec.mass_in_hopper, rec.initial_mass)
+    ratio, calls = flow_mode_by_sector(samples, window=window, n_sectors=P.n_sectors,
+                                       rule=sim.flow_rule)
+    out["wall_slip_ratio_by_sector"] = [float(r) for r in ratio]
+    out["flow_mode_by_sector"] = calls
+    return out
