@@ -90,12 +90,20 @@ def _config(config: dict):
 
 
 def estimated_cost(config: dict) -> float:
-    """Cells times steps of a case (a relative cost, used to start the longest cases first)."""
+    """Cells times steps of a case (a relative cost, used to start the longest cases first;
+    a 3D case's cells are its computed part's cubes)."""
     cfg = _config(config)
     geom, num = cfg.hopper, cfg.numerics
     h = num.cell_size
-    x_min, x_max = geom.x_extent
-    cells = ((x_max - x_min) / h) * (geom.top + num.free_fall_depth * geom.outlet_diameter) / h
+    if geom.dimensions == 3:      # the computed part's cubes (space.estimate's grid)
+        from fipy_hopper.space.config import SpaceConfig
+        from fipy_hopper.space.estimate import memory_estimate
+
+        cells = memory_estimate(SpaceConfig.from_config(cfg))["cells"]
+    else:
+        x_min, x_max = geom.x_extent
+        cells = ((x_max - x_min) / h) * (geom.top + num.free_fall_depth
+                                         * geom.outlet_diameter) / h
     dt = cfg.time_step
     if cfg.run.end_time == "empty":
         from fipy_hopper.api import expected_quantities   # any shape: Beverloo where it applies
