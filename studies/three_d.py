@@ -25,18 +25,24 @@ size (``reference_section``), both filled to rest and emptied (``reference_end_t
   difference across the row, and the speed of the cell next to the wall over the axis's.
 
 **(b) Off-centre outlets: a flat-bottomed circular silo and an eccentric cone**
-(``families``), the bin ``bin_diameter`` (0.6 m), the outlet ``outlet_diameter`` (0.12 m),
-filled level to ``fill_level`` (1.2 m above the outlet plane: H/D = 2), the cone's (centred)
+(``families``), the bin ``bin_diameter`` (0.64 m), the outlet ``outlet_diameter`` (0.12 m),
+filled level to ``fill_level`` (1.28 m above the outlet plane: H/D = 2), the cone's (centred)
 half-angle ``half_angle_deg`` (30 deg: steeper than Jenike's 36.9 deg for phi_w = 15 deg,
 so mass flow when centred), the reference's material and wall; the outlet's centre at
 ``eccentricities`` e/R = 0, 0.25, 0.5 and 0.75 along +x (``hopper.outlet_offset = e``; the
 eccentric cone's sections are circles sliding from the outlet's centre to the axis at the
 bin wall's foot), cubes of ``cell_size`` (2 cm: 3 cells across the outlet's radius, the least
 the configuration accepts), by the default mirror planes (a quarter when centred, else the
-half ``y >= 0``), ``wall_sectors`` (12) sectors.  Each runs ``end_time`` s of discharge: by
-default the time Beverloo's rate (:func:`fipy_hopper.api.expected_quantities`) takes to
-discharge ``drained_fraction`` (0.15) of the fill, rounded up to half a second: past the 90 %
-stage and its load window, with the loop's steady rate measured from 90 % left on.
+half ``y >= 0``), ``wall_sectors`` (12) sectors.  The bin's radius is 16 cells so that every
+offset (0.08, 0.16 and 0.24 m) is a whole number of cells, and 1 cell of floor is left beside
+the outlet at e/R = 0.75: the 3D grid flags its outlet faces by their centres, and with the
+outlet's centre between nodes the faces at the hole's edge that are partly open but centred
+outside it pass material down uncounted (the discharged mass, the rate and the mass balance
+come out low: 0.3-1.5 % of the fill in 0.3 s of discharge, measured at 2 cm with offsets of
+2.5 and 3.25 cells); :func:`setup` warns of such offsets.  Each runs ``end_time`` s of
+discharge: by default the time Beverloo's rate (:func:`fipy_hopper.api.expected_quantities`)
+takes to discharge ``drained_fraction`` (0.15) of the fill, rounded up to half a second: past
+the 90 % stage and its load window, with the loop's steady rate measured from 90 % left on.
 Measured per case:
 
 * the steady rate, against the centred case of its family and Beverloo's;
@@ -60,21 +66,26 @@ Measured per case:
 
 **Cost of the default** (``python studies/three_d.py --estimate`` prints it from the settings,
 nothing run): :func:`fipy_hopper.space.estimate.time_estimate` per 3D case, one thread at its
-``COST_PER_LOADED_CELL_STEP`` (1.4 us a loaded cell and step, measured on a busy shared
+``COST_PER_LOADED_CELL_STEP`` (1.4 us a loaded cell and step, measured on the busy shared
 machine; 0.97 us at a quieter time), the fill 1.2 gravity ramps, the reference's discharge
-Beverloo's time (14.4 s) with its loaded cells falling steadily, each family's discharge with
-all its loaded cells: the reference in 3D about 1,580 s (8,198 loaded cells of 21,675, 268,000
-steps); each family's centred case (a quarter: 9,117 loaded cells for the cone, 11,285 for the
-flat silo) about 550 and 970 s, each off-centre case (a half: 18,200 and 22,570) about 1,100 s
-(cone, 4.0 s of discharge) and 1,930 s (flat, 6.0 s): 10,600 s for the eight, 12,200 s with
-the reference; the section at 1 cm (2D, about 1,300 cells) a few minutes.  About 1.7 hours on
-two cores kept busy, up to 2.5 hours at the busy machine's cost per cell and step; memory 0.4
-GB a worker (``space.estimate.memory_estimate``).  Not measured end to end.
+Beverloo's time to empty (14.4 s) with its loaded cells falling steadily, each family's
+discharge with all its loaded cells: the reference in 3D 1,560 s (17 x 17 x 75 cubes,
+8,198 loaded, 264,000 steps); the flat silo centred (a quarter, 13,568 loaded) 1,420 s and
+off centre (a half, 27,136 loaded) 2,840 s each, 7.5 s of discharge, 74,800 steps; the
+eccentric cone centred (10,822 loaded) 800 s and off centre (21,650 loaded) 1,600 s each,
+5.0 s of discharge, 52,600 steps: 15,500 s for the eight, 17,100 s (4.7 hours) with the
+reference, so about 2.4 hours on two cores kept busy (the longest case, 2,840 s, is a sixth
+of the total: the two workers share it evenly), 1.7 hours at the quieter cost.  The section
+at 1 cm (2D, 1,275 cells) about a minute by the demo's cost per cell and step
+(``docs/performance.md``): an order of magnitude.  Memory 0.42 GB a worker at most
+(``space.estimate.memory_estimate``).  An estimate from the settings, not a measurement of
+this study.
 
 **Quick** (``--quick``, the tests): 2 cm cubes, the small conical silo of
 :func:`fipy_hopper.space.config.small_silo` (0.28 m bin, 30 deg cone, 0.12 m outlet, 0.1 m of
-fill) as the reference and its section, 0.3 s of discharge; the families in a 0.28 m bin with
-the 0.12 m outlet filled to 0.26 m at e/R = 0 and 0.5, 0.3 s of discharge.
+fill) as the reference and its section, 0.3 s of discharge; the families in a 0.32 m bin with
+the 0.12 m outlet filled to 0.26 m at e/R = 0 and 0.5 (0.08 m: 4 cells), 0.4 s of
+discharge; about 30 s on one thread by the estimate.
 
 Written to ``--out`` (default ``studies/output/three_d``): ``results.csv`` (one row per case),
 ``reference_bins.csv`` (the reference's bins: section, 3D mean, extremes, per stage),
@@ -120,16 +131,16 @@ SMALL_SILO = {"bin_diameter": 0.28, "half_angle_deg": 30.0, "outlet_diameter": 0
 DEFAULTS = {
     "reference_cell_size": 0.01, "reference_hopper": {}, "reference_end_time": "empty",
     "reference_field_interval": 1.0, "mirror_planes": "auto",
-    "cell_size": 0.02, "bin_diameter": 0.6, "outlet_diameter": 0.12, "half_angle_deg": 30.0,
-    "fill_level": 1.2, "headroom": 0.05, "eccentricities": (0.0, 0.25, 0.5, 0.75),
+    "cell_size": 0.02, "bin_diameter": 0.64, "outlet_diameter": 0.12, "half_angle_deg": 30.0,
+    "fill_level": 1.28, "headroom": 0.05, "eccentricities": (0.0, 0.25, 0.5, 0.75),
     "families": FAMILIES, "drained_fraction": 0.15, "end_time": None, "field_interval": 0.5,
     "wall_sectors": 12, "channel_fraction": 0.1, "loaded_fraction": 0.05,
     "profile_heights": (0.3, 0.5, 0.7, 1.2), "case_plots": True,
 }
 QUICK = {"reference_cell_size": 0.02, "reference_hopper": SMALL_SILO,
          "reference_end_time": 0.3, "reference_field_interval": 0.1, "cell_size": 0.02,
-         "bin_diameter": 0.28, "outlet_diameter": 0.12, "fill_level": 0.26,
-         "eccentricities": (0.0, 0.5), "end_time": 0.3, "field_interval": 0.1}
+         "bin_diameter": 0.32, "outlet_diameter": 0.12, "fill_level": 0.26,
+         "eccentricities": (0.0, 0.5), "end_time": 0.4, "field_interval": 0.1}
 
 
 def num(value, spec: str = ".3g") -> str:
@@ -223,6 +234,11 @@ def end_time(config: dict, opts) -> float:
                            * expected["expected_discharge_time_s"])
 
 
+def offset_cells(e_over_r: float, opts) -> float:
+    """The outlet's offset in cells (:func:`setup` warns when it is not a whole number)."""
+    return float(e_over_r) * 0.5 * opts["bin_diameter"] / opts["cell_size"]
+
+
 def case_of(family: str, e_over_r: float) -> str:
     return _sweep.case_name((f"{family}_e", float(e_over_r)))
 
@@ -239,12 +255,25 @@ def setup(quick: bool = False, **options) -> dict:
                                              "dimensions": config["hopper"].get("dimensions", 2),
                                              "e_over_R": 0.0}, config,
                                       plots=opts["case_plots"]))
+    uneven = [e for e in opts["eccentricities"]
+              if abs(offset_cells(e, opts) - round(offset_cells(e, opts))) > 1e-6]
+    if uneven and opts["families"]:
+        import warnings
+
+        warnings.warn(
+            f"outlet offsets e/R = {', '.join(f'{e:g}' for e in uneven)} are not whole cells "
+            f"({', '.join(f'{offset_cells(e, opts):.3g}' for e in uneven)} cells): the 3D grid "
+            "flags its outlet faces by their centres, and faces at the hole's edge that are "
+            "partly open but centred outside it pass material down uncounted, so the "
+            "discharged mass, the rate and the mass balance come out low (measured here: "
+            "0.3-1.5 % of the fill in 0.3 s at 2 cm)", stacklevel=2)
     for family in opts["families"]:
         for e in opts["eccentricities"]:
             config = family_config(family, e, opts)
             cases.append(_sweep.make_case(case_of(family, e), {
                 "part": "eccentric", "family": family, "dimensions": 3,
                 "e_over_R": float(e), "outlet_offset_m": config["hopper"]["outlet_offset"],
+                "outlet_offset_cells": _r(offset_cells(e, opts), 6),
                 "end_time_s": config["run"]["end_time"]}, config, plots=opts["case_plots"]))
     return {"options": opts, "cases": cases, "setting": _sweep.setting_label(quick, options)}
 
@@ -1019,6 +1048,29 @@ def family_findings(numbers, options) -> list:
     return out
 
 
+def headline_of(numbers) -> str:
+    """One line for the report's overview: the reference's rate and wall pressure at rest
+    against the section, and each family's largest ratio around the bin wall at 90 % left
+    at its largest e/R."""
+    parts = []
+    ref = numbers.get("reference")
+    if ref:
+        rest = ref["loads"].get("filling", {})
+        parts.append(f"3D reference against its section: rate {num(ref['rate_diff_pct'], '+.1f')}"
+                     f" %, wall pressure at rest {num(rest.get('rms_above_lip_pct'), '.1f')} % "
+                     "RMS above the lip's bin")
+    for family in FAMILIES:
+        cases = _family_cases(numbers, family) if "eccentric" in numbers else []
+        if len(cases) > 1:
+            (e0, _, n0), (e1, _, n1) = cases[0], cases[-1]
+            ratio = [n["circumference"].get("early_discharge", {}).get("bin_wall", {}).get(
+                "largest") for n in (n0, n1)]
+            parts.append(f"{FAMILY_TITLES[family]}: the bin wall's largest / smallest pressure "
+                         f"at 90 % left {num(ratio[0], '.2f')} at e/R = {e0:g}, "
+                         f"{num(ratio[1], '.2f')} at {e1:g}")
+    return "; ".join(parts) + "." if parts else ""
+
+
 # ---------------------------------------------------------------- outputs
 def write_outputs(out, rows, numbers, tables, options, setting, argv=None):
     out = Path(out)
@@ -1112,7 +1164,7 @@ def write_outputs(out, rows, numbers, tables, options, setting, argv=None):
     findings = (reference_findings(ref) if ref else []) + family_findings(numbers, options)
     settings = {k: (list(v) if isinstance(v, tuple) else v) for k, v in options.items()}
     _sweep.write_study_json(out, NAME, TITLE, setting, settings, numbers, findings, figures,
-                            tables_out, rows, argv)
+                            tables_out, rows, argv, headline=headline_of(numbers))
 
 
 def main(argv=None) -> int:
@@ -1136,8 +1188,9 @@ def main(argv=None) -> int:
                 print(f"{r['case']}: a section, {r['cells']:,} cells")
             else:
                 print(f"{r['case']}: {r['grid']} cubes ({r['cells']:,}), {r['loaded_cells']:,} "
-                      f"loaded, {r['steps']:,} steps, {r['memory_GB']:.2f} GB, about "
-                      f"{r['seconds']:,.0f} s on one thread")
+                      f"loaded, {r['discharge_s']:.3g} s of discharge"
+                      f"{' (to empty)' if r['emptied'] else ''}, {r['steps']:,} steps, "
+                      f"{r['memory_GB']:.2f} GB, about {r['seconds']:,.0f} s on one thread")
         total = sum(r.get("seconds", 0.0) for r in rows)
         print(f"3D cases: about {total:,.0f} s on one thread ({total / 3600:.1f} h; "
               f"{total / 7200:.1f} h on two cores kept busy)")

@@ -158,7 +158,7 @@ def test_case_pictures_are_the_study_setting_unless_asked_for():
 @pytest.mark.parametrize("name", ["flow_mode_map", "plane_flow", "discharge_rate",
                                   "wall_pressure", "stiffness_spread", "convergence",
                                   "robustness", "funnel_channel", "lagrangian_vs_eulerian",
-                                  "arching"])
+                                  "arching", "three_d"])
 def test_a_study_refuses_an_option_it_does_not_have(name):
     with pytest.raises(TypeError, match=r"unknown options \['bogus'\]; known: "):
         load(name).setup(bogus=1)
@@ -566,6 +566,153 @@ def test_geometries_study_measures_each_silo(root):
         assert_png(out / name)
 
 
+# ---------------------------------------------------------------- three dimensions
+@pytest.fixture(scope="module")
+def three_d(root):
+    return run_quick(root, "three_d")
+
+
+def test_three_d_study_sets_3d_against_the_section_and_off_centre_outlets(three_d):
+    """The quick 3D study (2 cm cubes, the small conical silo as the reference, 0.3 s of
+    discharge; a flat-bottomed silo and an eccentric cone, 0.32 m, with the outlet at e/R = 0
+    and 0.5, 0.4 s):
+    its files and pictures; the reference in 3D against its section: the fill within 1 %,
+    the rate within 5 % (measured +0.02 % and -4.1 %), the wall pressure at rest above the
+    lip's bin within 5 % RMS (measured 4.4 %) and round (largest over smallest 1.007); the
+    centred silos round at rest (the largest over the smallest pressure around the
+    circumference below 1.05 on the flat silo's bin wall and the cone, measured at most 1.011;
+    the cone's one bin-wall bin below 1.1), and so the flat silo's bin wall with its outlet
+    off the axis (measured 1.011); off centre the discharge is unsymmetric: the flat silo's
+    bin wall at 90 % left above 1.2 (measured 1.47), the cone's wall slides on the outlet's side and not on
+    the far side; the mass balance to 1e-9 (the offsets whole cells)."""
+    data = study_json(three_d)
+    assert data["setting"] == "quick" and data["cases"] == 6 and data["cases_failed"] == 0
+    numbers = data["numbers"]
+    for name in ("reference.png", "flat_summary.png", "flat_channels.png", "cone_summary.png",
+                 "cone_channels.png", "flow_plane_reference_3d.png",
+                 "wall_unrolled_flat_e0p5.png", "wall_circumference_cone_e0p5.png"):
+        assert_png(three_d / name)
+    for name in ("results.csv", "reference_bins.csv", "reference_profiles.csv",
+                 "circumference.csv", "channel.csv"):
+        assert rows_of(three_d / name), name
+    assert len(data["findings"]) == 9 and all(data["findings"])
+    ref = numbers["reference"]
+    assert abs(ref["fill_mass_diff_pct"]) < 1.0 and abs(ref["rate_diff_pct"]) < 5.0
+    assert ref["loads"]["filling"]["rms_above_lip_pct"] < 5.0
+    assert ref["loads"]["filling"]["max_over_min_largest"] < 1.05
+    assert ref["three_d"]["flow_mode_by_sector"] == ["mass"] * 12
+    assert len(ref["plane"]["heights"]) == 4
+    for r in rows_of(three_d / "results.csv"):
+        assert float(r["mass_balance_error"]) < 1e-9, r["case"]
+    circ = rows_of(three_d / "circumference.csv")
+    for case, part in (("flat_e0", "bin wall"), ("cone_e0", "hopper"),
+                       ("flat_e0p5", "bin wall")):
+        rest = [float(r["max_over_min"]) for r in circ if r["case"] == case and
+                r["stage"] == "filling" and r["loaded"] == "True" and r["part"] == part]
+        assert len(rest) >= 3 and max(rest) < 1.05, (case, rest)
+    # the centred cone's one bin-wall bin, just above the transition, carries 9 % of the
+    # stage's largest pressure (164 Pa) and is round within 9 % (measured 1.086)
+    rest = [float(r["max_over_min"]) for r in circ if r["case"] == "cone_e0" and
+            r["stage"] == "filling" and r["part"] == "bin wall"]
+    assert len(rest) == 1 and rest[0] < 1.1
+    ecc = numbers["eccentric"]
+    assert ecc["flat_e0"]["circumference"]["early_discharge"]["bin_wall"]["largest"] < 1.05
+    assert ecc["flat_e0p5"]["circumference"]["early_discharge"]["bin_wall"]["largest"] > 1.2
+    calls = ecc["cone_e0p5"]["flow_mode_by_sector"]
+    assert calls[0] == "mass" and calls[6] == "funnel"       # 0 deg: the outlet's side
+
+
+def test_three_d_study_measures_the_channel(three_d):
+    """The flow channel per discharge snapshot of each 3D case (``channel.csv``): off centre
+    (the flat silo, e/R = 0.5) it touches the wall on the outlet's side at every plane of the
+    band (contact angle 0) with its centre on that side (measured theta_c 49 deg, e_c/R 0.49
+    at 0.4 s); centred it does not lean (e_c/R below 0.1, contact at no more than a plane);
+    the centred cone flows at the whole wall (mass flow, theta_c 180)."""
+    rows = rows_of(three_d / "channel.csv")
+    assert {r["case"] for r in rows} == {"flat_e0", "flat_e0p5", "cone_e0", "cone_e0p5"}
+    ecc = study_json(three_d)["numbers"]["eccentric"]
+    off = ecc["flat_e0p5"]["channel"]
+    assert off["heights"] >= 4 and off["touching"] == off["heights"]
+    assert 10.0 < off["theta_c_deg"] < 180.0 and off["e_c_over_R"] > 0.2
+    last = max(float(r["t_s"]) for r in rows if r["case"] == "flat_e0p5")
+    band = [r for r in rows if r["case"] == "flat_e0p5" and float(r["t_s"]) == last
+            and r["in_band"] == "True"]
+    assert len(band) == off["heights"]
+    assert all(abs(float(r["contact_angle_deg"])) < 1e-6 for r in band)
+    assert all(float(r["centroid_x_m"]) > 0.0 for r in band)
+    centred = ecc["flat_e0"]["channel"]
+    assert centred["e_c_over_R"] < 0.1 and centred["touching"] <= 1
+    assert ecc["cone_e0"]["channel"]["theta_c_deg"] == 180.0
+    assert ecc["cone_e0"]["channel"]["whole_wall"] == ecc["cone_e0"]["channel"]["heights"]
+
+
+def test_three_d_study_reads_the_channel_of_a_snapshot_as_the_model_does(tmp_path):
+    """The study reads a written 3D snapshot (``space.output.SpaceFieldWriter``: the whole
+    silo, mirror images included) back to the nodes' downward speed and material and finds
+    the channel :func:`fipy_hopper.space.channel.model_channel` finds on the state it was
+    written from, to round-off: the flat-bottomed silo's grid (the half y >= 0, 2 cm), every
+    open cell full to 0.26 m, the nodes moving down in EN 1991-4's G = 0.6 channel."""
+    from types import SimpleNamespace
+
+    from fipy_hopper import theory
+    from fipy_hopper.space import channel as ch
+    from fipy_hopper.space.boundary import SiloBoundary
+    from fipy_hopper.space.grid import build_grid
+    from fipy_hopper.space.output import SpaceFieldWriter
+
+    study = load("three_d")
+    b = SiloBoundary.from_profile(((0.06, 0.0), (0.14, 0.0), (0.14, 0.4)), 0.26, 0.04, 20.0)
+    g = build_grid(b, 0.02, 1.0, 0.0, "auto")
+    R = b.radius
+    en = theory.en1991_eccentric_channel(R, 0.6, math.tan(math.radians(15.0)), 30.0)
+    Z, Y, X = np.meshgrid(g.z_nodes, g.y_nodes, g.x_nodes, indexing="ij")
+    v = np.zeros((3,) + Z.shape)
+    v[2] = -np.where(np.hypot(X - en.e_c, Y) < 0.6 * R, 1.0, -0.01) * (1.0 + Z)
+    alpha = np.where(g.kappa > 0, 1.0, 0.0)
+    alpha[g.centres(2) > 0.26] = 0.0
+    state = SimpleNamespace(v=v, alpha=alpha, sigma=np.zeros(alpha.shape + (6,)),
+                            eps_p=np.zeros_like(alpha), loose=np.zeros_like(alpha),
+                            t=0.5, step=10, stage="discharge")
+    model = SimpleNamespace(grid=g, boundary=b)
+    path = SpaceFieldWriter(tmp_path, model).write(state, t_open=0.0)
+    read = study.snapshot_channel(path, R, 0.0)
+    direct = ch.model_channel(model, state)
+    assert len(read.z) >= 12
+    np.testing.assert_allclose(read.z, direct.z, atol=1e-12)
+    for name in ("area", "theta_c", "contact_angle", "r_c", "e_c"):
+        np.testing.assert_allclose(getattr(read, name), getattr(direct, name), rtol=1e-9,
+                                   atol=1e-12, err_msg=name)
+    assert np.all(np.abs(read.r_c - 0.6 * R) < g.h)
+
+
+def test_three_d_study_estimates_its_default_from_the_settings():
+    """The default setting's cases and their cost by ``space.estimate`` (nothing run): the
+    reference in 3D (1 cm, a quarter) and its section, each family at e/R = 0, 0.25, 0.5,
+    0.75 (2 cm, a quarter centred, else a half, H/D = 2; the offsets whole cells); a few hours
+    on two cores at most (estimated 17,100 s on one thread)."""
+    study = load("three_d")
+    setup = study.setup()
+    names = [c["name"] for c in setup["cases"]]
+    assert names == ["reference_3d", "reference_section", "flat_e0", "flat_e0p25",
+                     "flat_e0p5", "flat_e0p75", "cone_e0", "cone_e0p25", "cone_e0p5",
+                     "cone_e0p75"]
+    rows = {r["case"]: r for r in study.estimate(setup)}
+    assert rows["reference_3d"]["grid"] == "17x17x75"
+    assert rows["reference_section"]["dimensions"] == 2
+    assert rows["flat_e0p75"]["cells"] == 2 * rows["flat_e0"]["cells"]
+    total = sum(r.get("seconds", 0.0) for r in rows.values())
+    assert 2 * 3600 < total < 6 * 3600          # about 3.3 h on one thread
+    assert max(r.get("memory_GB", 0.0) for r in rows.values()) < 1.0
+    config = setup["cases"][5]["config"]["hopper"]
+    assert config["outlet_offset"] == pytest.approx(0.24)    # e/R = 0.75 of a 0.32 m radius
+    # every offset a whole number of cells (the outlet's edge faces: the module docstring)
+    assert [c["params"]["outlet_offset_cells"] for c in setup["cases"][2:6]] == [0, 4, 8, 12]
+    with pytest.warns(UserWarning, match="not whole cells"):
+        study.setup(cell_size=0.015)
+    opts = setup["options"]
+    assert 2.0 <= opts["fill_level"] / opts["bin_diameter"] <= 3.0
+
+
 # ---------------------------------------------------------------- the report
 def test_stiffness_spread_runs_both_hoppers_with_and_without_the_viscosities(root):
     out = run_quick(root, "stiffness_spread")
@@ -622,7 +769,8 @@ def test_report_is_generated_from_the_outputs(root, flow_map, discharge, wall, c
                                       "robustness", "funnel_channel", "grain_size",
                                       "shear_band",
                                       "element_tests",
-                                      "lagrangian_vs_eulerian", "arching", "geometries"}
+                                      "lagrangian_vs_eulerian", "arching", "geometries",
+                                      "three_d"}
     assert "python studies/robustness.py" in (tmp_path / "partial.md").read_text()
 
 
