@@ -13,12 +13,16 @@ The benchmarks (run them alone on the machine: what else runs changes the times)
 
 * ``emptying``: ``tests/benchmarks/test_bench_emptying.py``, the reference hopper from filling
   to empty as ``fipy-hopper run`` runs it, at 5 mm (the demo) and 2.5 mm;
+* ``emptying_3d``: ``tests/benchmarks/test_bench_emptying_3d.py``, the reference hopper in 3D
+  (1 cm cubes, centred, the default mirror planes: a quarter) from filling to empty the same
+  way, written beside the demo with their ratio;
 * ``step``: ``tests/benchmarks/test_bench_step.py``, a discharge step and its phases;
 * ``flow_mode_map``: ``tests/benchmarks/test_bench_flow_mode_map.py``, the whole map.
 
 Usage::
 
-    python studies/performance.py [--only emptying step flow_mode_map]   # run, then write
+    python studies/performance.py [--only emptying emptying_3d step flow_mode_map]
+                                                                  # run, then write
     python studies/performance.py --from-json BENCH.json [...]            # write from saved runs
     python studies/performance.py --drop KEY [...]                        # forget figures
     python studies/performance.py --render    # rewrite the page and the README from the store
@@ -49,6 +53,7 @@ PAGE = ROOT / "docs" / "performance.md"
 README = ROOT / "README.md"
 COMMAND = "python studies/performance.py"
 BENCHMARKS = {"emptying": "tests/benchmarks/test_bench_emptying.py",
+              "emptying_3d": "tests/benchmarks/test_bench_emptying_3d.py",
               "step": "tests/benchmarks/test_bench_step.py",
               "flow_mode_map": "tests/benchmarks/test_bench_flow_mode_map.py"}
 PHASES = ("step", "forces", "nodes", "strain_predictor", "stress_update", "faces", "transport",
@@ -58,6 +63,10 @@ RUNS = {0.005: ("demo", "The demo: the reference hopper from filling to empty, 5
                  "(`examples/fine_2p5mm.toml`)")}
 RUN_VALUES = ("total_s", "simulation_s", "pictures_and_writing_s", "peak_rss_mb", "steps",
               "cells", "threads")
+#: the 3D reference's record (``tests/benchmarks/test_bench_emptying_3d.py``)
+RUN_3D = ("reference_3d_1cm", "The reference hopper in 3D, 1 cm cubes (centred; a quarter by "
+          "the default mirror planes)")
+RUN_3D_VALUES = RUN_VALUES + ("loaded_cells", "mirror_factor", "snapshots")
 
 
 # ---------------------------------------------------------------------- from the benchmarks
@@ -86,7 +95,11 @@ def records(bench: dict) -> list:
     for b in bench.get("benchmarks", []):
         name, params = b["fullname"], b.get("params") or {}
         extra, stats = b.get("extra_info") or {}, b.get("stats") or {}
-        if "test_bench_reference_hopper_run" in name:
+        if "test_bench_reference_3d_run" in name:
+            key, title = RUN_3D
+            out.append({"key": key, "title": title, "source": name, **common,
+                        "values": {k: extra[k] for k in RUN_3D_VALUES if k in extra}})
+        elif "test_bench_reference_hopper_run" in name:
             key, title = RUNS[float(params["cell_size"])]
             out.append({"key": key, "title": title, "source": name, **common,
                         "values": {k: extra[k] for k in RUN_VALUES if k in extra}})
@@ -119,7 +132,7 @@ def merge(store: dict, new: list, drop=()) -> dict:
     figures = {r["key"]: r for r in store.get("figures", []) if r["key"] not in drop}
     for r in new:
         figures[r["key"]] = r
-    order = ["demo", "fine_2p5mm", "step_5mm", "step_2p5mm", "flow_mode_map"]
+    order = ["demo", "fine_2p5mm", RUN_3D[0], "step_5mm", "step_2p5mm", "flow_mode_map"]
     keys = [k for k in order if k in figures] + [k for k in figures if k not in order]
     return {"figures": [figures[k] for k in keys]}
 
@@ -168,8 +181,8 @@ def page(store: dict) -> str:
                    "compare speeds only in runs side by side, and measure alone on the "
                    "machine.") + [""]
     lines += _wrap(f"Regenerate with `{COMMAND}` (it runs the benchmarks; `--only emptying`, "
-                   "`step` or `flow_mode_map` for some of them), or from saved benchmark "
-                   f"output with `{COMMAND} --from-json BENCH.json`.") + [""]
+                   "`emptying_3d`, `step` or `flow_mode_map` for some of them), or from saved "
+                   f"benchmark output with `{COMMAND} --from-json BENCH.json`.") + [""]
     runs = [figures[k] for k in ("demo", "fine_2p5mm") if k in figures]
     if runs:
         lines += ["## The demo and the 2.5 mm run", "",
@@ -190,6 +203,8 @@ def page(store: dict) -> str:
         notes = [x for r in runs if r.get("note")
                  for x in _wrap(f"- {r['title']}: {r['note']}")]
         lines += [""] + (notes + [""] if notes else [])
+    if RUN_3D[0] in figures:
+        lines += three_d_section(figures)
     steps = [figures[k] for k in ("step_5mm", "step_2p5mm") if k in figures]
     if steps:
         lines += ["## Where a discharge step goes", "",
@@ -216,7 +231,7 @@ def page(store: dict) -> str:
                   + f" | {v.get('cores', '—')} | {_when(r)} | {_source(r)} |", ""]
         if r.get("note"):
             lines += _wrap(r["note"][:1].upper() + r["note"][1:]) + [""]
-    known = {"demo", "fine_2p5mm", "step_5mm", "step_2p5mm", "flow_mode_map"}
+    known = {"demo", "fine_2p5mm", RUN_3D[0], "step_5mm", "step_2p5mm", "flow_mode_map"}
     others = [r for r in store["figures"] if r["key"] not in known]
     if others:
         lines += ["## Other measurements", ""]
@@ -224,6 +239,61 @@ def page(store: dict) -> str:
             lines += [f"### {r['title']}", ""] + _wrap(r["text"]) + [""]
             lines += _wrap(f"*Measured {_when(r)}; {r['source']}.*") + [""]
     return "\n".join(lines).rstrip() + "\n"
+
+
+def _run_row(r) -> str:
+    """A row of a run table: cells, steps, threads, times, memory, when, by."""
+    v = r["values"]
+    cell = lambda k, unit="": (_number(v[k]) + unit) if k in v else "—"  # noqa: E731
+    return (f"| {r['title']} | {cell('cells')} | {cell('steps')} | {cell('threads')} | "
+            f"{cell('total_s', ' s')} | {cell('simulation_s', ' s')} | "
+            f"{cell('pictures_and_writing_s', ' s')} | "
+            f"{_memory(v['peak_rss_mb']) if 'peak_rss_mb' in v else '—'} | {_when(r)} | "
+            f"{_source(r)} |")
+
+
+def _ratio(a, b):
+    """``a / b`` of two figures (a range where either is a range of measurements)."""
+    lows = [x / y for x in (a if isinstance(a, (list, tuple)) else [a])
+            for y in (b if isinstance(b, (list, tuple)) else [b])]
+    return [min(lows), max(lows)] if min(lows) != max(lows) else lows[0]
+
+
+def three_d_section(figures: dict) -> list:
+    """The 3D reference beside the demo: both runs' rows and the ratio of their times."""
+    r3 = figures[RUN_3D[0]]
+    v3 = r3["values"]
+    lines = ["## The reference in 3D beside the demo", "",
+             "The same hopper, material and run settings computed whole in 3D (1 cm cubes; a "
+             "quarter by the default mirror planes) and as the demo's axisymmetric section "
+             "(5 mm squares), each from filling to empty by `fipy-hopper run`.", "",
+             "| run | cells | steps | threads | total | simulation | pictures and writing | "
+             "peak memory | measured | by |",
+             "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
+    demo = figures.get("demo")
+    lines += ([_run_row(demo)] if demo else []) + [_run_row(r3)]
+    extra = [text.format(_number(v3[k])) for k, text in (
+        ("loaded_cells", "{} loaded cells"),
+        ("mirror_factor", "the whole silo {} times the part computed"),
+        ("snapshots", "{} snapshots")) if k in v3]
+    lines.append("")
+    if extra:
+        lines += _wrap("The 3D run: " + ", ".join(extra) + ".") + [""]
+    if demo:
+        vd = demo["values"]
+        parts = [f"{label} {_number(_ratio(v3[k], vd[k]))} times the demo's"
+                 for k, label in (("total_s", "total"), ("simulation_s", "simulation"),
+                                  ("peak_rss_mb", "peak memory"))
+                 if k in v3 and k in vd]
+        if parts:
+            side = (r3["measured"][:10] == demo["measured"][:10]
+                    and r3["machine"] == demo["machine"])
+            lines += _wrap("The 3D reference: " + ", ".join(parts) + (
+                "." if side else f" (not side by side: the demo measured {_when(demo)}, the 3D "
+                "run " + _when(r3) + "; see above on comparing times).")) + [""]
+    if r3.get("note"):
+        lines += _wrap(r3["note"][:1].upper() + r3["note"][1:]) + [""]
+    return lines
 
 
 def timing_sentence(store: dict) -> str:

@@ -560,7 +560,8 @@ def reference_profiles(row3, row2, options) -> tuple:
         pb = b[1][np.isin(np.round(b[0] / h, 3), common)]
         rms = float(np.sqrt(np.mean((pa - pb) ** 2)))
         per_height.append({"z_m": _r(z, 4), "fraction_of_transition": frac,
-                           "rms_difference": _r(rms, 3), "wall_over_axis_3d": _r(pa[-1] / pa[0], 3),
+                           "rms_difference": _r(rms, 3),
+                           "wall_over_axis_3d": _r(pa[-1] / pa[0], 3),
                            "wall_over_axis_section": _r(pb[-1] / pb[0], 3), "cells": len(common)})
         for x, u, v in zip(common * h, pa, pb):
             rows.append({"z_m": z, "x_m": x, "three_d": u, "section": v})
@@ -654,7 +655,8 @@ def channel_rows(row, options) -> tuple:
             rows.append({"case": row["case"], "family": row["family"],
                          "e_over_R": row["e_over_R"], "t_s": t, "z_m": prof.z[k],
                          "in_band": bool(band[k]), "area_m2": prof.area[k],
-                         "theta_c_deg": prof.theta_c[k], "contact_angle_deg": prof.contact_angle[k],
+                         "theta_c_deg": prof.theta_c[k],
+                         "contact_angle_deg": prof.contact_angle[k],
                          "r_c_m": prof.r_c[k], "e_c_m": prof.e_c[k], "r_eq_m": prof.r_eq[k],
                          "centroid_x_m": prof.centroid_x[k], "fit_rms_m": prof.fit_rms[k]})
         if t > 0:
@@ -871,7 +873,8 @@ def _errorbar(ax, x, y, quartiles, colour, label):
     y = np.array([math.nan if v is None else v for v in y], float)
     lo = np.array([math.nan if q[0] is None else q[0] for q in quartiles], float)
     hi = np.array([math.nan if q[1] is None else q[1] for q in quartiles], float)
-    err = np.vstack([np.where(np.isfinite(lo), y - lo, 0.0), np.where(np.isfinite(hi), hi - y, 0.0)])
+    err = np.vstack([np.where(np.isfinite(lo), y - lo, 0.0),
+                     np.where(np.isfinite(hi), hi - y, 0.0)])
     ax.errorbar(x, y, yerr=np.clip(np.nan_to_num(err), 0.0, None), fmt="o-", color=colour,
                 capsize=3, label=label)
 
@@ -960,8 +963,8 @@ def reference_findings(ref) -> list:
         f"{num(a.get('mass_flow_index'), '.2f')} against {num(b.get('mass_flow_index'), '.2f')}, "
         f"stagnant fraction {num(a.get('stagnant_fraction'), '.3f')} against "
         f"{num(b.get('stagnant_fraction'), '.3f')}; stopped by {a.get('stop_reason')} after "
-        f"{num(a.get('discharge_time_s'), '.2f')} s against {num(b.get('discharge_time_s'), '.2f')}"
-        " s.")
+        f"{num(a.get('discharge_time_s'), '.2f')} s against "
+        f"{num(b.get('discharge_time_s'), '.2f')} s.")
     parts = []
     for stage, n in ref["loads"].items():
         parts.append(f"{STAGE_WORDS[stage]} {num(n['rms_above_lip_pct'], '.1f')} % RMS above "
@@ -1006,6 +1009,8 @@ def family_findings(numbers, options) -> list:
         es = _nums([e for e, _, _ in cases], "g")
         first = cases[0][2]
         rates = _nums([n["steady_rate"] for _, _, n in cases], ".2f")
+        out_pct = [100 * n["discharged_fraction"] if _sweep.finite(n["discharged_fraction"])
+                   else None for _, _, n in cases]
         diffs = _nums([n["rate_vs_centred_pct"] for _, _, n in cases], "+.1f")
         modes = "; ".join(_mode_text(n) for _, _, n in cases)
         out.append(
@@ -1013,7 +1018,7 @@ def family_findings(numbers, options) -> list:
             f"{options['outlet_diameter']:g} m outlet, filled to {options['fill_level']:g} m, "
             f"{1000 * options['cell_size']:g} mm cubes) with its outlet at e/R = {es}: steady "
             f"rate {rates} kg/s ({diffs} % from the centred; Beverloo "
-            f"{num(first['beverloo_rate'], '.2f')} kg/s), {_nums([n['discharged_fraction'] * 100 if _sweep.finite(n['discharged_fraction']) else None for _, _, n in cases], '.0f')} "
+            f"{num(first['beverloo_rate'], '.2f')} kg/s), {_nums(out_pct, '.0f')} "
             f"% discharged in {_nums([n['end_time_s'] for _, _, n in cases], 'g')} s; flow "
             f"mode {modes}.")
         parts = []
@@ -1029,8 +1034,9 @@ def family_findings(numbers, options) -> list:
         hop_d = [n["circumference"].get("early_discharge", {}).get("hopper") for _, _, n in cases]
         hopper_text = ""
         if any(hop):
-            hopper_text = (f"; on the cone the largest ratio at rest {_nums([v and v['largest'] for v in hop])}"
-                           f", at 90 % left {_nums([v and v['largest'] for v in hop_d])}")
+            hopper_text = (f"; on the cone the largest ratio at rest "
+                           f"{_nums([v and v['largest'] for v in hop])}, at 90 % left "
+                           f"{_nums([v and v['largest'] for v in hop_d])}")
         if parts:
             out.append(f"The {FAMILY_TITLES[family]}, the bin wall's largest / smallest "
                        f"pressure around the circumference (its largest over the heights) at "
@@ -1040,7 +1046,8 @@ def family_findings(numbers, options) -> list:
             parts = [f"e/R {e:g}: theta_c {num(c.get('theta_c_deg'), '.1f')} deg, r_c/R "
                      f"{num(c.get('r_c_over_R'), '.2f')}, e_c/R {num(c.get('e_c_over_R'), '.2f')}"
                      f" ({c.get('touching', 0)} of {c.get('heights', 0)} planes touching the "
-                     f"wall in part, {c.get('whole_wall', 0)} all round; {num(c.get('snapshot_s'), 'g')} s)"
+                     f"wall in part, {c.get('whole_wall', 0)} all round; "
+                     f"{num(c.get('snapshot_s'), 'g')} s)"
                      for (e, _, _), c in zip(cases, ch) if c]
             out.append(f"The {FAMILY_TITLES[family]}, the flow channel in the bin's middle half "
                        "at the last snapshot (medians over the heights): " + "; ".join(parts)
@@ -1095,7 +1102,8 @@ def write_outputs(out, rows, numbers, tables, options, setting, argv=None):
         for family in FAMILIES:
             if not _family_cases(numbers, family):
                 continue
-            _sweep.save(plot_family(family, numbers, tables, options), out / f"{family}_summary.png")
+            _sweep.save(plot_family(family, numbers, tables, options),
+                        out / f"{family}_summary.png")
             figures.append({"file": f"{family}_summary.png", "caption": (
                 f"The {FAMILY_TITLES[family]} with its outlet at each e/R: the largest over "
                 "the smallest wall pressure around the circumference against height at rest "
@@ -1103,7 +1111,8 @@ def write_outputs(out, rows, numbers, tables, options, setting, argv=None):
                 "contact half-angle theta_c, radius r_c and centre e_c (medians over the "
                 "middle half of the bin's fill at the last snapshot, bars the quartiles) "
                 "against e/R beside EN 1991-4's channels.")})
-            _sweep.save(plot_channels(family, numbers, rows, options), out / f"{family}_channels.png")
+            _sweep.save(plot_channels(family, numbers, rows, options),
+                        out / f"{family}_channels.png")
             figures.append({"file": f"{family}_channels.png", "caption": (
                 f"The {FAMILY_TITLES[family]} at its last snapshot of the discharge: the "
                 "downward speed in the plane through the axis and the outlet, and the flow "

@@ -138,3 +138,43 @@ def test_committed_page_and_readme_sentence_are_the_stores():
     store = performance.load()
     for record in store["figures"]:
         assert record["measured"] and record["machine"] and record["commit"], record["key"]
+
+
+def test_the_3d_reference_is_written_beside_the_demo_with_their_ratio():
+    """A 3D reference run (``test_bench_emptying_3d.py``) becomes the record
+    ``reference_3d_1cm`` with the 2D run's values and its loaded cells, mirror factor and
+    snapshots; the page sets it beside the demo, with the ratio of their times and memory
+    (a range when the demo's figure is a range), and says when the two were not measured side
+    by side.  Without it the page has no such section (the committed page)."""
+    bench = fake_benchmark_json(total=100.0, rss=400.0)
+    bench["benchmarks"].append({
+        "fullname": "tests/benchmarks/test_bench_emptying_3d.py::test_bench_reference_3d_run",
+        "params": None, "stats": {"median": 950.0, "max": 950.0},
+        "extra_info": {"total_s": 950.0, "simulation_s": 900.0,
+                       "pictures_and_writing_s": 50.0, "threads": 1, "peak_rss_mb": 800.0,
+                       "steps": 270_000, "cells": 21675, "loaded_cells": 8198,
+                       "mirror_factor": 4.0, "snapshots": 60, "dimensions": 3}})
+    records = {r["key"]: r for r in performance.records(bench)}
+    three = records["reference_3d_1cm"]
+    assert three["values"]["total_s"] == 950.0 and three["values"]["loaded_cells"] == 8198
+    assert "dimensions" not in three["values"]
+    store = performance.merge({"figures": []}, list(records.values()))
+    assert [r["key"] for r in store["figures"]][:3] == ["demo", "fine_2p5mm",
+                                                        "reference_3d_1cm"]
+    page = performance.page(store)
+    section = page.split("## The reference in 3D beside the demo", 1)[1].split("\n## ", 1)[0]
+    words = " ".join(section.split())                 # the sentences, unwrapped
+    for text in ("| The demo: the reference hopper", "| The reference hopper in 3D, 1 cm cubes",
+                 "21 675", "950 s", "8 198 loaded cells", "total 9.5 times the demo's",
+                 "simulation 10 times the demo's", "peak memory 2 times the demo's"):
+        assert text in words, text
+    assert "not side by side" not in words
+    quoted = performance.load()                          # the demo of the store: a range
+    later = performance.merge(quoted, [dict(three, measured="2031-06-01 10:00")])
+    words = " ".join(performance.page(later).split("## The reference in 3D beside the demo")[1]
+                     .split())
+    demo = {r["key"]: r for r in quoted["figures"]}["demo"]["values"]["total_s"]
+    low, high = 950.0 / max(demo), 950.0 / min(demo)
+    assert f"total {low:.3g}–{high:.3g} times the demo's" in words
+    assert "not side by side" in words
+    assert "## The reference in 3D" not in performance.page(quoted)

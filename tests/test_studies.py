@@ -583,8 +583,8 @@ def test_three_d_study_sets_3d_against_the_section_and_off_centre_outlets(three_
     circumference below 1.05 on the flat silo's bin wall and the cone, measured at most 1.011;
     the cone's one bin-wall bin below 1.1), and so the flat silo's bin wall with its outlet
     off the axis (measured 1.011); off centre the discharge is unsymmetric: the flat silo's
-    bin wall at 90 % left above 1.2 (measured 1.47), the cone's wall slides on the outlet's side and not on
-    the far side; the mass balance to 1e-9 (the offsets whole cells)."""
+    bin wall at 90 % left above 1.2 (measured 1.47), the cone's wall slides on the outlet's
+    side and not on the far side; the mass balance to 1e-9 (the offsets whole cells)."""
     data = study_json(three_d)
     assert data["setting"] == "quick" and data["cases"] == 6 and data["cases_failed"] == 0
     numbers = data["numbers"]
