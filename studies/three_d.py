@@ -8,7 +8,8 @@ Two parts, each an ordinary run directory per case (``hopper.dimensions = 3``,
 fill) computed whole in 3D (``reference_3d``: cubes of ``reference_cell_size``, 1 cm, by the
 default mirror planes, a quarter) and as its axisymmetric section on square cells of the same
 size (``reference_section``), both filled to rest and emptied (``reference_end_time``,
-``"empty"``), without markers (passive in the section, none in 3D).  Set side by side:
+``"empty"``), without markers (passive in the section, none in 3D), field snapshots every
+``reference_field_interval`` (1 s; the 3D snapshots hold the whole silo).  Set side by side:
 
 * the fill's mass and the steady discharge rate (the loop's plateau rule);
 * the wall pressure (the traction recovered from the wall's reaction) per height bin of the
