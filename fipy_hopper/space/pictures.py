@@ -235,6 +235,8 @@ def faces_picture(csv_path, png_path, widths, stages=("filling", "early_discharg
                 z_edges = _edges(z)
                 if name == face and hopper_height > 0:
                     z_edges[0] = max(z_edges[0], hopper_height)
+                elif name != face:
+                    z_edges = np.clip(z_edges, 0.0, hopper_height)
                 mesh = ax.pcolormesh(x[order], z_edges, grid, vmin=0.0, vmax=top,
                                      cmap="magma", shading="flat")
             ax.axvline(start, color="0.6", lw=0.6)
@@ -243,7 +245,7 @@ def faces_picture(csv_path, png_path, widths, stages=("filling", "early_discharg
             start += width
         if hopper_height > 0:
             ax.axhline(hopper_height, color="0.6", lw=0.6, ls=":")
-        ax.set_xlabel("along the perimeter (m), counter-clockwise from the +x face")
+        ax.set_xlabel("perimeter (m) from the +x face, counter-clockwise")
         ax.set_title(stage.replace("_", " "), pad=14)
     axes[0, 0].set_ylabel("z (m)")
     if mesh is not None:
@@ -286,7 +288,7 @@ def perimeter_picture(csv_path, png_path, widths, stages=("filling", "early_disc
             ax.text(start + 0.5 * width, 1.0, face, transform=ax.get_xaxis_transform(),
                     ha="center", va="bottom", fontsize=7)
             start += width
-        ax.set_xlabel("along the perimeter (m), counter-clockwise from the +x face")
+        ax.set_xlabel("perimeter (m) from the +x face, counter-clockwise")
         ax.set_ylabel("p_n (Pa)")
         ax.set_title(stage.replace("_", " "), pad=14)
         ax.legend(fontsize=7)

@@ -370,6 +370,33 @@ class RectangularSilo:
                                        (False, True, False, True), axis=axis, side=side))
         return tuple(faces)
 
+    def describe(self, density: float) -> str:
+        """Lines describing the silo: the bin, the outlet, the fill, each face (its slope from
+        the vertical and friction), for ``validate``."""
+        ex, ey = self.outlet_offset
+        outlet = (f"a circle {self.outlet_x:g} m across" if self.round_outlet
+                  else f"{self.outlet_x:g} m x {self.outlet_y:g} m")
+        volume = self.fill_volume()
+        lines = [f"plan         rectangular: the bin {self.bin_width:g} m (x) x "
+                 f"{self.bin_length:g} m (y), z = {self.hopper_height:.4g} to {self.top:.4g} m",
+                 f"outlet       {outlet}, its centre at ({ex:g}, {ey:g}) m on z = 0",
+                 f"fill level   z = {self.fill_level:g} m: {volume:.4g} m^3, "
+                 f"{density * volume:.4g} kg at {density:g} kg/m3",
+                 "tube         free-fall tube below the outlet, frictionless"]
+        for face in self.faces:
+            if face.kind == "tube":
+                continue
+            if face.kind == "floor":
+                lines.append(f"face floor   z = 0 round the outlet, friction "
+                             f"{face.friction_deg:g} deg")
+                continue
+            slope = math.degrees(math.acos(min(1.0, abs(face.normal[face.axis]))))
+            lines.append(f"face {face.name:<14s} {slope:.1f} deg from the vertical, "
+                         f"z = {face.vertices[:, 2].min():.4g} to "
+                         f"{face.vertices[:, 2].max():.4g} m, friction "
+                         f"{face.friction_deg:g} deg")
+        return "\n".join(lines)
+
     def face_index(self, name: str) -> int:
         return [f.name for f in self.faces].index(name)
 
