@@ -4,8 +4,10 @@ Constraints (:func:`contact_table`): every node that touches an open cell and li
 cell in front of a wall segment's surface (or behind it) is held by it
 (:meth:`fipy_hopper.space.boundary.SiloBoundary.contacts`: the surface's normal, its segment's
 friction ``mu_w = tan(phi_w)``, tubes frictionless, nodes round the outlet lip by the direction
-to it); while the outlet plate is closed, the nodes of the outlet plane in the outlet's circle
-(the lip's included) are held by it (normal ``-e_z``, the wall's friction).  Mirror planes are
+to it; a rectangular plan's faces likewise, :meth:`fipy_hopper.space.rectangular.
+RectangularSilo.contacts`); while the outlet plate is closed, the nodes of the outlet plane in
+the outlet (its rim included, ``boundary.outlet_plate``) are held by it (normal ``-e_z``, the
+wall's friction).  Mirror planes are
 not constraints: the model sets ``v_x = 0`` on ``x = 0`` and ``v_y = 0`` on ``y = 0``.
 
 The contact of a node with all its constraints (:func:`contact_nodes`, the reference of the
