@@ -968,9 +968,12 @@ def flow_plane(run, path):
         return None
     later = [e for e in entries if e["discharge_time_s"] > 0] or entries
     entry = later[(len(later) - 1) // 2]
-    title = (f"the plane through the axis and the outlet,\n"
-             f"{entry['discharge_time_s']:.3g} s after the opening")
-    return plane_picture(Path(run) / RunDirectory.FIELDS / entry["file"], path, title)
+    geom = _config(run).hopper
+    y0 = geom.offset_xy[1] if geom.rectangular else 0.0
+    where = (f"the plane y = {y0:g} m through the outlet" if y0 else
+             "the plane through the axis and the outlet")
+    title = (f"{where},\n{entry['discharge_time_s']:.3g} s after the opening")
+    return plane_picture(Path(run) / RunDirectory.FIELDS / entry["file"], path, title, y0)
 
 
 def _wall_stages(run) -> tuple:

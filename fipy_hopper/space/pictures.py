@@ -41,16 +41,18 @@ def _save(fig, path) -> Path:
     return path
 
 
-def plane_cells(vtu_path) -> dict:
-    """The cells of a snapshot next to the plane ``y = 0`` (on its ``+y`` side) on their
-    ``(z, x)`` index grid: ``x``, ``z`` (cell centres, m), ``speed``, ``vx``, ``vz`` (m/s) and
-    ``alpha`` ``(nz, nx)``, NaN where no open cell is."""
+def plane_cells(vtu_path, y0: float = 0.0) -> dict:
+    """The cells of a snapshot next to the plane ``y = 0`` (on its ``+y`` side; ``y0``: the
+    node plane nearest ``y = y0``) on their ``(z, x)`` index grid: ``x``, ``z`` (cell centres,
+    m), ``speed``, ``vx``, ``vz`` (m/s) and ``alpha`` ``(nz, nx)``, NaN where no open cell
+    is."""
     from ..io import read_vtu
     mesh = read_vtu(vtu_path)
     hexes = mesh.cells_dict["hexahedron"]
     centres = mesh.points[hexes].mean(axis=1)
     h = float(np.ptp(mesh.points[hexes[0]][:, 0]))
-    near = (centres[:, 1] > 0.0) & (centres[:, 1] < h)
+    y0 = h * round(y0 / h)
+    near = (centres[:, 1] > y0) & (centres[:, 1] < y0 + h)
     c = centres[near]
     xs = np.unique(np.round(c[:, 0] / h - 0.5)).astype(int)
     zs = np.unique(np.round(c[:, 2] / h - 0.5)).astype(int)
@@ -67,10 +69,11 @@ def plane_cells(vtu_path) -> dict:
     return out
 
 
-def plane_picture(vtu_path, png_path, title: str = "") -> Path:
-    """The speed and the flow pattern in the plane through the axis and the outlet."""
+def plane_picture(vtu_path, png_path, title: str = "", y0: float = 0.0) -> Path:
+    """The speed and the flow pattern in the plane through the axis and the outlet (a
+    rectangular plan's: through the outlet's centre, ``y = y0``)."""
     plt = _figure()
-    f = plane_cells(vtu_path)
+    f = plane_cells(vtu_path, y0)
     empty = ~(f["alpha"] > 0.05)
     speed = np.ma.masked_where(empty, f["speed"])
     fig, ax = plt.subplots(figsize=(5.5, 6.5))

@@ -36,6 +36,16 @@ carries the computed part's share, its image the rest.  The maps are of the whol
 image is binned, with its normal and meridional components as they are and its hoop component
 reversed (a reflection reverses the direction of increasing ``theta``).
 
+**A rectangular plan's faces** (:class:`FaceStretch`, :func:`face_patches`,
+:func:`locate_faces`): the same patches, recovery, images and maps with each plane face
+(:mod:`fipy_hopper.space.rectangular`) a stretch: ``s`` up its slope (from the outlet's edge on
+its side, carried on from a hopper's face to the bin's above it; the floor's along x), and
+across its width, in place of ``theta``, the fraction ``u`` of its width (0 at the ``-y`` end of
+an x face or the floor, the ``-x`` end of a y face), ``wall_sectors`` equal parts of it; the
+recovery's splines across are clamped cubic B-splines on ``u``; a mirror image may move to the
+facing face (:func:`image_maps`); the frame is the face's: ``n`` its normal, ``t`` up its
+slope, ``h`` along its width (``tau_theta`` is then the shear along the width).
+
 **Directions on the wall.**  At a wall point: ``n`` the unit normal into the wall (the
 surface's, :meth:`Part.lift`), ``t`` the unit tangent up the meridian (``d X / ds``), ``h`` the
 unit tangent around the circumference (``d X / d theta`` with its ``t`` part taken out, for a
