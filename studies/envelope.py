@@ -340,11 +340,12 @@ def write_outputs(out, rows, table, numbers, study, argv=None):
     for key, value in numbers.items():
         if key.startswith("p_max_Pa["):
             wall = key[len("p_max_Pa["):-1]
+            ratio = numbers.get(f"max_over_filling_max[{wall}]")
             findings.append(f"{wall}: the largest pressure {value:g} Pa (case "
                             f"{numbers[f'p_max_case[{wall}]']}, "
                             f"{numbers[f'p_max_window[{wall}]']}), the smallest "
                             f"{numbers.get(f'p_min_Pa[{wall}]')} Pa; the envelope over the "
-                            f"largest at rest up to {numbers.get(f'max_over_filling_max[{wall}]')}.")
+                            f"largest at rest up to {ratio}.")
     settings = {k: v for k, v in opts.items()}
     settings["combinations"] = [list(c) for c in opts["combinations"]]
     settings["offset_fractions"] = list(opts["offset_fractions"])
