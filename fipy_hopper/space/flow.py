@@ -85,9 +85,14 @@ def contact_slip(model, state) -> tuple:
 
 
 def hopper_stretches(patches) -> np.ndarray:
-    """The indices of the stretches that are hopper wall (not vertical)."""
+    """The indices of the stretches that are hopper wall (not vertical); on a rectangular
+    plan with a hopper its faces, not the floor round a circular outlet in its foot (a dead
+    corner that never slides, as a flat floor under a bin does)."""
+    names = patches.names
+    hopper = any(name.startswith("hopper_") for name in names)
     return np.array([k for k, st3 in enumerate(patches.stretches)
-                     if abs(st3.stretch.tangent[0]) > 1e-9], dtype=np.int64)
+                     if abs(st3.stretch.tangent[0]) > 1e-9
+                     and not (hopper and names[k] == "floor")], dtype=np.int64)
 
 
 def wall_slip_by_sector(model, state, previous_impulse=None,

@@ -98,6 +98,7 @@ class SpaceGrid:
     node_normal: np.ndarray       # (3, nz + 1, ny + 1, nx + 1) unit normal into the wall
     outflow_z: np.ndarray         # (ny, nx) bool: bottom z-faces that material leaves by
     outlet_z: np.ndarray          # (ny, nx) bool: z-faces of the outlet plane in the outlet
+    #                               (every open face of the plane: open above and below it)
 
     @property
     def factor(self) -> float:
@@ -232,8 +233,9 @@ def build_grid(boundary, h: float, free_fall_depth: float = 1.0,
     a_y[:, [0, -1]] = 0.0
     a_x[:, :, [0, -1]] = 0.0
     outflow = a_z[0] > 0.0
-    xc, yc = 0.5 * (x_nodes[1:] + x_nodes[:-1]), 0.5 * (y_nodes[1:] + y_nodes[:-1])
-    outlet = (a_z[n_below] > 0.0) & boundary.outlet_hole(xc[None, :], yc[:, None])
+    # the outlet: the faces of the outlet plane open above and below it (all of them: a face
+    # the outlet's edge cuts, whose centre lies outside it, lets material through too)
+    outlet = a_z[n_below] > 0.0
     if not np.isclose(z_nodes[n_below], 0.0) or len(np.asarray(fipy_adapter.face_areas(mesh))) \
             != a_z.size + a_y.size + a_x.size:
         raise AssertionError("grid layout")

@@ -455,16 +455,16 @@ class RectangularSilo:
         q = np.zeros_like(p)
         plane_n = np.zeros_like(p)
         on_plane = np.zeros(x.shape, bool)
-        for face in self.faces:
+        for face in self.faces:            # ties (within 1e-12 m): the first face's
             d, qf, free = face.nearest(p)
-            closer = d < best
+            closer = d < best - 1e-12
             best = np.where(closer, d, best)
             q = np.where(closer[None], qf, q)
             plane_n = np.where(closer[None], face.normal.reshape(3, *([1] * x.ndim)), plane_n)
             on_plane = np.where(closer, free, on_plane)
         if self.round_outlet:
             d, qf, nf, free = self._round_tube(p)
-            closer = d < best
+            closer = d < best - 1e-12
             best = np.where(closer, d, best)
             q = np.where(closer[None], qf, q)
             plane_n = np.where(closer[None], nf, plane_n)

@@ -682,7 +682,9 @@ def locate_faces(boundary, stretches, x, y, z, face=None):
     normal (3, n), tangent, hoop)``, ``f`` the fraction of the face's width (0 at its ``-y``
     end on the x faces and the floor, its ``-x`` end on the y faces).  A point's face is its
     entry's ``face`` (when given and a loaded face), else its nearest loaded face (a convex
-    edge's entries, the cells next to the wall); ``stretch`` -1 for the tube's entries and a
+    edge's entries, the cells next to the wall; of faces as near within 1e-9 m the first in
+    :attr:`~fipy_hopper.space.rectangular.RectangularSilo.load_faces`' order, which a mirror
+    image keeps); ``stretch`` -1 for the tube's entries and a
     face with no stretch (above the fill level)."""
     x, y, z = (np.atleast_1d(np.asarray(a, float)) for a in (x, y, z))
     n = len(x)
@@ -696,9 +698,9 @@ def locate_faces(boundary, stretches, x, y, z, face=None):
     if need.any():
         best = np.full(int(need.sum()), np.inf)
         pick = np.full(int(need.sum()), -1, np.int64)
-        for k in loaded:
-            d = boundary.faces[k].nearest(p[:, need])[0]
-            closer = d < best
+        for k in loaded:             # ties (within 1e-9 m) go to the first face, so that a
+            d = boundary.faces[k].nearest(p[:, need])[0]     # mirror image goes to the image
+            closer = d < best - 1e-9
             best = np.where(closer, d, best)
             pick = np.where(closer, k, pick)
         face[need] = pick
