@@ -101,7 +101,11 @@ def expected_quantities(cfg: HopperConfig) -> dict:
            "transition_height_m": bnd.transition_height("wall")}
     grains = mat.grain_diameter
     out["outlet_grains"] = geom.outlet_diameter / grains if grains > 0 else math.inf
-    if geom.axisymmetric:
+    if geom.rectangular and not geom.outlet_size[2]:   # a rectangular outlet
+        flat = float(theory.beverloo_rectangular_rate(mat.density, *geom.outlet_size[:2],
+                                                      d=grains))
+        critical = theory.jenike_critical_half_angle
+    elif geom.axisymmetric:
         flat = float(theory.beverloo_rate(mat.density, geom.outlet_diameter, d=grains))
         critical = theory.jenike_critical_half_angle
     else:     # per metre of slot; no plane hopper factor from a readable source

@@ -227,10 +227,16 @@ def _validate(args) -> int:
                           EXIT_BAD_INPUT)
         lines.append(f"  boundary           drawn to {_short(picture)}")
     else:
-        lines.append("  boundary" + ("           the section below, revolved about the axis "
-                                     "(the outlet off it as above)" if geom.dimensions == 3
-                                     else ""))
-    lines += ["    " + line for line in cfg.boundary.describe(cfg.material.density).split("\n")]
+        lines.append("  boundary" + (
+            "           the rectangular silo's faces" if geom.rectangular else
+            "           the section below, revolved about the axis (the outlet off it as "
+            "above)" if geom.dimensions == 3 else ""))
+    if geom.rectangular:
+        from .space.boundary import silo_boundary
+        described = silo_boundary(cfg.space_config()).describe(cfg.material.density)
+    else:
+        described = cfg.boundary.describe(cfg.material.density)
+    lines += ["    " + line for line in described.split("\n")]
     print("\n".join(lines))
     return EXIT_OK
 
@@ -247,16 +253,29 @@ def _three_d_lines(cfg, e: dict, memory: str) -> tuple:
     nx, ny, nz = cfg.grid_shape()
     h, geom, run = cfg.numerics.cell_size, cfg.hopper, cfg.run
     part = {(True, True): "a quarter", (False, True): "the half y >= 0",
+            (True, False): "the half x >= 0",
             (False, False): "the whole silo"}[computed_part(space.mirror_planes,
                                                             space.outlet_offset)]
     radius = max(r for r, _ in geom.wall_points)
+    across = "half-size" if geom.rectangular and not geom.outlet_size[2] else "radius"
     grid = [f"  grid (3D)          {nx} x {ny} x {nz} = {nx * ny * nz:,} cubes of {h:g} m "
             f"({part}, numerics.mirror_planes = \"{cfg.numerics.mirror_planes}\"; "
             f"{loaded_cells(space):,} loaded; {geom.outlet_radius / h:.1f} across the outlet "
-            f"radius), {memory}",
-            f"  outlet offset      {geom.outlet_offset:g} m from the axis along +x "
-            f"(e/R = {geom.outlet_offset / radius:.3g}); wall loads in "
-            f"{run.wall_sectors} sectors around the circumference"]
+            f"{across}), {memory}"]
+    if geom.rectangular:
+        ex, ey = geom.offset_xy
+        ox, oy, round_outlet = geom.outlet_size
+        outlet = f"{ox:g} m round" if round_outlet else f"{ox:g} m x {oy:g} m"
+        grid += [f"  plan               rectangular, bin {geom.bin_width:g} m (x) x "
+                 f"{geom.bin_length:g} m (y), "
+                 + (f"a hopper of plane faces {geom.cone_height:.4g} m high"
+                    if geom.cone_height > 0 else "a flat floor")
+                 + f", outlet {outlet} at [{ex:g}, {ey:g}] m; wall loads per face in "
+                 f"{run.wall_sectors} sectors across its width"]
+    else:
+        grid += [f"  outlet offset      {geom.outlet_offset:g} m from the axis along +x "
+                 f"(e/R = {geom.outlet_offset / radius:.3g}); wall loads in "
+                 f"{run.wall_sectors} sectors around the circumference"]
     discharge = (float(run.end_time) if run.end_time != "empty"
                  else min(e["expected_discharge_time_s"], run.max_time))
     t = time_estimate(space, discharge, emptied=run.end_time == "empty")
@@ -528,10 +547,23 @@ def _print_circumference(s: dict) -> None:
 
     calls = [c for c in s.get("flow_mode_by_sector") or [] if c in ("mass", "funnel")]
     mass = sum(c == "mass" for c in calls)
-    print(f"  around the wall        largest / smallest pressure up to {ratio('filling')} at "
+    offset = s.get("outlet_offset_m", 0)
+    rectangular = s.get("plan") == "rectangular"
+    offset = (f"[{offset[0]:g}, {offset[1]:g}] m" if isinstance(offset, list)
+              else f"{offset:g} m")
+    print(f"  {'across each face ' if rectangular else 'around the wall   '}     largest / "
+          f"smallest pressure up to {ratio('filling')} at "
           f"rest, {ratio('early_discharge')} from 90 % left, {ratio('discharge_envelope')} "
-          f"in the envelope (wall_extremes.csv; outlet offset "
-          f"{s.get('outlet_offset_m', 0):g} m)")
+          f"in the envelope (wall_extremes.csv; outlet offset {offset})")
+    if rectangular:
+        for stage in ("filling", "discharge_envelope"):
+            corners = s.get(f"{stage}_corner_pressure_Pa") or {}
+            peaks = [max((v for v in values if v == v), default=math.nan)
+                     for values in corners.values()]
+            if peaks:
+                print(f"  bin's corners          {stage.replace('_', ' ')}: the largest "
+                      f"pressure {min(peaks):.4g} to {max(peaks):.4g} Pa over the four "
+                      f"corners (summary.json: {stage}_corner_pressure_Pa)")
     if calls:
         print(f"  flow mode by sector    mass in {mass} of {len(calls)} measured sectors")
 

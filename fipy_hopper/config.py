@@ -141,7 +141,13 @@ SYMMETRIES = ("axisymmetric", "plane")
 SECTIONS = ("half", "full")
 #: The keys of the shorthands (a profile derives them from hopper.wall), and of a profile.
 SHORTHAND_KEYS = ("bin_diameter", "half_angle_deg", "outlet_diameter", "bin_height",
-                  "fill_height", "bin_width", "outlet_width")
+                  "fill_height", "bin_width", "outlet_width", "bin_length", "outlet_length")
+#: hopper.plan of a 3D silo (hopper.dimensions = 3): "circular" (the default: the section
+#: revolved about its axis) or "rectangular" (a bin of bin_width x bin_length over a hopper of
+#: plane faces, or a flat floor: fipy_hopper.space.rectangular)
+PLANS = ("circular", "rectangular")
+#: the keys of a rectangular plan only
+RECTANGULAR_KEYS = ("bin_length", "outlet_length")
 PROFILE_KEYS = ("wall", "left_wall", "fill_level")
 #: the models a run can use (numerics.formulation)
 FORMULATIONS = ("eulerian", "lagrangian")
@@ -257,6 +263,9 @@ class HopperGeometry:
     inserts: tuple = ()
     dimensions: int = 2
     outlet_offset: float = 0.0
+    plan: str = "circular"
+    bin_length: Optional[float] = None
+    outlet_length: Optional[float] = None
 
     def __post_init__(self):
         lo, hi = LENGTH_RANGE
@@ -266,7 +275,15 @@ class HopperGeometry:
         if isinstance(self.dimensions, bool) or self.dimensions not in DIMENSIONS:
             raise ConfigError(f"hopper.dimensions = {_show(self.dimensions)}: expected 2 (a "
                               "section, axisymmetric or plane) or 3 (the whole circular silo)")
-        _check_range("hopper.outlet_offset", self.outlet_offset, 0, hi, unit=" m")
+        self._check_plan()
+        self._check_offset(hi)
+        if self.rectangular:
+            self._check_section()
+            self._check_rectangular(lo, hi)
+            object.__setattr__(self, "fill_level", self.cone_height + self.fill_height)
+            _check_inserts(self)
+            self._check_three_d()
+            return
         if self.dimensions == 2 and self.outlet_offset != 0.0:
             raise ConfigError(f"hopper.outlet_offset = {self.outlet_offset:g} m is for "
                               "hopper.dimensions = 3 (a section's outlet lies on its axis; a "
@@ -282,10 +299,148 @@ class HopperGeometry:
         if self.dimensions == 3:
             self._check_three_d()
 
+    def _check_plan(self) -> None:
+        """``plan``: ``"circular"`` or ``"rectangular"``; a rectangular plan only in 3D and by
+        the shorthand's keys; its own keys (``bin_length``, ``outlet_length``) refused with a
+        circular plan."""
+        if not isinstance(self.plan, str) or self.plan not in PLANS:
+            raise ConfigError(f"hopper.plan = {_show(self.plan)}: expected one of "
+                              f"{', '.join(repr(p) for p in PLANS)}")
+        if self.plan == "rectangular":
+            if self.dimensions != 3:
+                raise ConfigError('hopper.plan = "rectangular" is for hopper.dimensions = 3 (a '
+                                  'section is axisymmetric or plane; a long bin in plane flow is '
+                                  'shape = "wedge"); allowed with dimensions = 2 is "circular"')
+            if self.shape != "conical":
+                raise ConfigError(f'hopper.plan = "rectangular" is sized by the shorthand\'s keys '
+                                  f'(bin_width, bin_length, half_angle_deg, outlet_width or '
+                                  f'outlet_diameter, bin_height, fill_height), not by hopper.shape '
+                                  f'= "{self.shape}"; leave hopper.shape out')
+            return
+        for key in RECTANGULAR_KEYS:
+            if getattr(self, key) is not None:
+                raise ConfigError(f'hopper.{key} is for plan = "rectangular"; a circular silo '
+                                  f'takes hopper.{key.replace("length", "diameter")}')
+
+    def _check_offset(self, hi: float) -> None:
+        """``outlet_offset``: a circular silo's one distance along ``+x`` (m, >= 0); a
+        rectangular plan's ``[ex, ey]`` (m, either sign; one number is ``[ex, 0]``), kept as a
+        pair."""
+        e = self.outlet_offset
+        if self.plan != "rectangular":
+            if isinstance(e, (list, tuple)):
+                raise ConfigError(f"hopper.outlet_offset = {_show(list(e))}: a circular silo's "
+                                  "outlet is off its axis by one distance along +x (m, >= 0); "
+                                  '[ex, ey] is for plan = "rectangular"')
+            _check_range("hopper.outlet_offset", e, 0, hi, unit=" m")
+            return
+        if isinstance(e, (list, tuple)):
+            if len(e) != 2:
+                raise ConfigError(f"hopper.outlet_offset = {_show(list(e))}: expected [ex, ey] "
+                                  "in m (the outlet's centre from the bin's axis), or one "
+                                  "number, ex")
+            pair = tuple(_check_range(f"hopper.outlet_offset[{i}]", v, -hi, hi, unit=" m")
+                         for i, v in enumerate(e))
+        else:
+            pair = (_check_range("hopper.outlet_offset", e, -hi, hi, unit=" m"), 0.0)
+        object.__setattr__(self, "outlet_offset", tuple(float(v) + 0.0 for v in pair))
+
+    def _check_rectangular(self, lo: float, hi: float) -> None:
+        """The rectangular plan's sizes (:mod:`fipy_hopper.space.rectangular`): ``bin_width``
+        (x, required) and ``bin_length`` (y, default the width: a square bin); the outlet
+        rectangular (``outlet_width`` along x, ``outlet_length`` along y, default the width)
+        or circular (``outlet_diameter``); ``half_angle_deg`` the half-angle from the vertical
+        of the hopper's faces across x (the faces x = const) of the centred hopper, which
+        sets the hopper's height ``(bin_width - outlet's x size) / (2 tan)`` (90: a flat
+        floor); ``bin_height`` and ``fill_height`` above the transition.  The outlet inside
+        the floor or the hopper's foot (:func:`fipy_hopper.space.rectangular.
+        outlet_offset_error`).  Sets the shorthand's ``bin_diameter`` (the bin's width) and
+        ``outlet_diameter`` (the outlet's smaller size) for what reads them."""
+        if self.wall is not None:
+            raise ConfigError('hopper.wall is for shape = "profile"; a rectangular plan is sized '
+                              'by hopper.bin_width and hopper.bin_length')
+        if self.bin_width is None:
+            raise ConfigError('hopper.bin_width is required for plan = "rectangular" (the bin\'s '
+                              f'size along x, a length in [{lo:g}, {hi:g}] m)')
+        width = _check_range("hopper.bin_width", self.bin_width, lo, hi, unit=" m")
+        length = width if self.bin_length is None else _check_range(
+            "hopper.bin_length", self.bin_length, lo, hi, unit=" m")
+        object.__setattr__(self, "bin_length", length)
+        if self.outlet_width is None:
+            if self.outlet_length is not None:
+                raise ConfigError("hopper.outlet_length is for a rectangular outlet, sized by "
+                                  "hopper.outlet_width (along x) and hopper.outlet_length "
+                                  "(along y); a circular outlet takes hopper.outlet_diameter")
+            ox = oy = _check_range("hopper.outlet_diameter", self.outlet_diameter, lo, hi,
+                                   unit=" m")
+        else:
+            ox = _check_range("hopper.outlet_width", self.outlet_width, lo, hi, unit=" m")
+            oy = ox if self.outlet_length is None else _check_range(
+                "hopper.outlet_length", self.outlet_length, lo, hi, unit=" m")
+            object.__setattr__(self, "outlet_length", oy)
+            object.__setattr__(self, "outlet_diameter", min(ox, oy))
+        object.__setattr__(self, "bin_diameter", width)
+        _check_range("hopper.half_angle_deg", self.half_angle_deg, 0, 90, low_open=True,
+                     unit=" deg")
+        _check_range("hopper.bin_height", self.bin_height, lo, hi, unit=" m")
+        _check_range("hopper.fill_height", self.fill_height, lo, hi, unit=" m")
+        x_key, y_key = (("outlet_width", "outlet_length") if self.outlet_width is not None
+                        else ("outlet_diameter", "outlet_diameter"))
+        if ox >= width:
+            raise ConfigError(f"hopper.{x_key} = {ox:g} m is not narrower than the bin, "
+                              f"hopper.bin_width = {width:g} m")
+        if oy >= length:
+            raise ConfigError(f"hopper.{y_key} = {oy:g} m is not shorter than the bin, "
+                              f"hopper.bin_length = {length:g} m")
+        if self.fill_height > self.bin_height:
+            raise ConfigError(
+                f"hopper.fill_height = {self.fill_height:g} m is above the top of the bin, "
+                f"hopper.bin_height = {self.bin_height:g} m")
+        rise = 0.5 * (width - ox) / hi
+        if self.half_angle_deg < 90.0 and math.tan(math.radians(self.half_angle_deg)) < rise:
+            least = _ceil_digits(math.degrees(math.atan(rise)))
+            raise ConfigError(
+                f"hopper.half_angle_deg = {self.half_angle_deg:g} deg makes the hopper higher "
+                f"than {hi:g} m (the largest length allowed); allowed range is "
+                f"[{least:.3g}, 90] deg for this bin and outlet")
+
+    @property
+    def rectangular(self) -> bool:
+        """True for a rectangular plan (``plan = "rectangular"``, 3D only)."""
+        return self.plan == "rectangular"
+
+    @property
+    def offset_xy(self) -> tuple:
+        """The outlet's centre from the silo's axis ``(ex, ey)`` (m): a circular silo's
+        ``(outlet_offset, 0)``."""
+        e = self.outlet_offset
+        return tuple(e) if isinstance(e, tuple) else (float(e), 0.0)
+
+    @property
+    def outlet_size(self) -> tuple:
+        """A rectangular plan's outlet ``(size along x, size along y, circular?)`` (m)."""
+        if self.outlet_width is None:
+            return self.outlet_diameter, self.outlet_diameter, True
+        return self.outlet_width, self.outlet_length, False
+
     def _check_three_d(self) -> None:
         """A 3D silo is a circular one: the conical shorthand or an axisymmetric profile
         revolved about its axis, without inserts, its outlet inside the floor or the hopper
-        (:func:`fipy_hopper.space.boundary.outlet_offset_error`)."""
+        (:func:`fipy_hopper.space.boundary.outlet_offset_error`); or a rectangular plan, its
+        outlet inside the floor or the hopper's foot
+        (:func:`fipy_hopper.space.rectangular.outlet_offset_error`)."""
+        if self.rectangular:
+            if self.inserts:
+                raise ConfigError(f"hopper.inserts: {len(self.inserts)} insert"
+                                  f"{'s' * (len(self.inserts) > 1)} given; hopper.dimensions = "
+                                  "3 has no inserts yet")
+            from .space.rectangular import outlet_offset_error as rect_error
+            ox, oy, round_outlet = self.outlet_size
+            error = rect_error(self.bin_width, self.bin_length, ox, oy, round_outlet,
+                               self.outlet_offset)
+            if error:
+                raise ConfigError(f"hopper.{error}")
+            return
         if not self.axisymmetric:
             what = ('a wedge (hopper.shape = "wedge")' if self.shape == "wedge" else
                     'a plane profile (hopper.symmetry = "plane")')
@@ -390,6 +545,9 @@ class HopperGeometry:
         shorthand's ``(R0, 0), (R, cone_height), (R, top)``."""
         if self.shape == "profile":
             return self.wall
+        if self.rectangular:       # the section through the axis across x, centred
+            return ((0.5 * self.outlet_size[0], 0.0), (self.bin_radius, self.cone_height),
+                    (self.bin_radius, self.top))
         return ((self.outlet_radius, 0.0), (self.bin_radius, self.cone_height),
                 (self.bin_radius, self.top))
 
@@ -408,6 +566,8 @@ class HopperGeometry:
         Walker and EN 1991-4's hopper loads apply to it as a whole; other silos get them
         where a stretch allows (Jenike per stretch of hopper wall, Janssen on a top vertical
         stretch)."""
+        if self.rectangular:         # a pyramid or a wedge of plane faces: no closed form here
+            return False
         buried = [i for i in self.inserts
                   if min(z for _, z in i.outline) < (self.fill_level or self.top)]
         return not buried and self.boundary.hopper_shape is not None
@@ -425,6 +585,8 @@ class HopperGeometry:
     def width(self) -> float:
         """The silo's widest span (m): the bin's diameter (width) of a shorthand, twice a
         half-section's widest ``x``, or wall to wall of a full section."""
+        if self.rectangular:
+            return max(self.bin_width, self.bin_length)
         x_min, x_max = self.x_extent
         return 2.0 * x_max if not self.full_section else x_max - x_min
 
@@ -462,6 +624,8 @@ class HopperGeometry:
             return None if self.half_angle_deg is None else _bin_bottom(self.wall)
         if self.half_angle_deg >= 90.0:
             return 0.0
+        if self.rectangular:
+            return 0.5 * (self.bin_width - self.outlet_size[0]) / math.tan(self.half_angle)
         return (self.bin_radius - self.outlet_radius) / math.tan(self.half_angle)
 
     @property
@@ -475,6 +639,11 @@ class HopperGeometry:
         """Volume of the filled material: frustum plus cylinder (m^3); for a wedge, trapezoid
         plus rectangle per metre of length (m^3/m); a profile or inserts: the boundary's
         (:meth:`fipy_hopper.boundary.Boundary.fill_volume`)."""
+        if self.rectangular:       # a prismatoid (a sheared one as well) and the bin's box
+            a0, b0 = self.outlet_size[:2]     # the hopper's foot (a round outlet's square)
+            a1, b1, h = self.bin_width, self.bin_length, self.cone_height
+            middle = 0.25 * (a0 + a1) * (b0 + b1)
+            return h / 6.0 * (a0 * b0 + 4.0 * middle + a1 * b1) + a1 * b1 * self.fill_height
         if self.shape == "profile" or self.inserts:
             return self.boundary.fill_volume()
         r0, r1, h = self.outlet_radius, self.bin_radius, self.cone_height
@@ -1257,10 +1426,21 @@ class HopperConfig:
             raise ConfigError(f"run.markers_per_side = {run.markers_per_side}: the 3D model "
                               "(hopper.dimensions = 3) carries no layer markers yet; allowed "
                               "with dimensions = 3 is 0 (the default 2 is taken as 0)")
-        if num.mirror_planes == "quarter" and self.hopper.outlet_offset > 0.0:
+        ex, ey = self.hopper.offset_xy
+        if num.mirror_planes == "quarter" and (ex != 0.0 or ey != 0.0):
+            where = (f"{ex:g} m" if not self.hopper.rectangular
+                     else f"[{ex:g}, {ey:g}] m")
             raise ConfigError(f'numerics.mirror_planes = "quarter" needs a centred outlet; '
-                              f"hopper.outlet_offset = {self.hopper.outlet_offset:g} m is "
-                              'symmetric about y = 0 only: "auto", "half" or "none"')
+                              f"hopper.outlet_offset = {where} is "
+                              f"symmetric about {'y' if ey == 0.0 else 'x'} = 0 only: "
+                              '"auto", "half" or "none"' if ex == 0.0 or ey == 0.0 else
+                              f'numerics.mirror_planes = "quarter" needs a centred outlet; '
+                              f"hopper.outlet_offset = {where} has no mirror plane: "
+                              '"auto" or "none"')
+        if num.mirror_planes == "half" and ex != 0.0 and ey != 0.0:
+            raise ConfigError(f'numerics.mirror_planes = "half" needs the outlet on x = 0 or '
+                              f"y = 0; hopper.outlet_offset = [{ex:g}, {ey:g}] m is on neither: "
+                              '"auto" or "none"')
 
     def space_config(self):
         """The 3D model's settings (:meth:`fipy_hopper.space.config.SpaceConfig.from_config`)
@@ -1495,12 +1675,18 @@ class HopperConfig:
         out = _plain(dataclasses.asdict(self))
         hopper = out["hopper"]
         geom = self.hopper
-        if geom.shape == "profile":
+        if geom.rectangular:
+            unused = PROFILE_KEYS + ("symmetry", "section", "shape", "bin_diameter") + (
+                ("outlet_width", "outlet_length") if geom.outlet_width is None
+                else ("outlet_diameter",))
+        elif geom.shape == "profile":
             unused = SHORTHAND_KEYS + (("left_wall",) if geom.left_wall is None else ())
         else:
             unused = PROFILE_KEYS + ("symmetry", "section") + (
                 ("bin_width", "outlet_width") if geom.shape == "conical"
                 else ("bin_diameter", "outlet_diameter"))
+        if not geom.rectangular:        # a circular silo's file reads as before the plans
+            unused += ("plan",) + tuple(k for k in RECTANGULAR_KEYS if k not in unused)
         if geom.dimensions == 2:        # a section's file reads as before the 3D keys
             unused += ("dimensions", "outlet_offset")
             del out["numerics"]["mirror_planes"], out["run"]["wall_sectors"]
@@ -1536,7 +1722,7 @@ class HopperConfig:
                     raise ConfigError(_unknown_message(f"key in [{name}]", str(key), allowed,
                                                        prefix=f"{name}."))
             if name == "hopper" and change:
-                _check_shape_keys({"shape": current.shape, **change})
+                _check_shape_keys({"shape": current.shape, "plan": current.plan, **change})
                 if change.get("shape", current.shape) != current.shape:
                     new[name] = _reshaped(current, change)
                     continue
@@ -1568,8 +1754,17 @@ def _ceil_digits(x: float, digits: int = 3) -> float:
 
 
 def _check_shape_keys(values: dict) -> None:
-    """Refuse the keys of another shape in a ``[hopper]`` table (before any is used)."""
+    """Refuse the keys of another shape (or plan) in a ``[hopper]`` table (before any is
+    used)."""
     shape = values.get("shape", "conical")
+    if values.get("plan") == "rectangular":
+        if "bin_diameter" in values:
+            raise ConfigError('hopper.bin_diameter is for a circular plan; a rectangular bin '
+                              '(plan = "rectangular") takes hopper.bin_width (along x) and '
+                              'hopper.bin_length (along y)')
+        if values.get("outlet_diameter") is not None and values.get("outlet_width") is not None:
+            raise ConfigError("hopper.outlet_diameter (a circular outlet) and hopper.outlet_width "
+                              "(a rectangular one) are both given; give one")
     if shape == "wedge":
         for key in ("bin_diameter", "outlet_diameter"):
             if key in values:

@@ -1040,7 +1040,10 @@ def load_summary(sim) -> dict:
     K = out["wall_k_bin"] if math.isfinite(out["wall_k_bin"]) else float(
         theory.k_jaky(mat.friction_angle_deg))
     mu = m.mu_wall
-    if "filling" in rec.wall and "discharge_envelope" in rec.wall:
+    rectangular = getattr(geom, "rectangular", False)
+    if "filling" in rec.wall and "discharge_envelope" in rec.wall and rectangular:
+        out.update(_face_overpressure(rec, m))
+    elif "filling" in rec.wall and "discharge_envelope" in rec.wall:
         on_wall = np.asarray(rec.wall_names) == "wall" if rec.wall_names else slice(None)
         s, p_fill = rec.wall["filling"][1][on_wall], rec.wall["filling"][4][on_wall]
         envelope = rec.wall["discharge_envelope"][4][on_wall]
@@ -1077,6 +1080,32 @@ def load_summary(sim) -> dict:
     out.update(corners)
     if classic is None:           # no closed form for this silo: left out, not NaN
         del out["walker_switch_pressure_Pa"], out["janssen_wall_axial_compression_N_m"]
+    return out
+
+
+def _face_overpressure(rec, model) -> dict:
+    """``overpressure_factor_bin_max`` and ``..._cone_max`` of a rectangular plan (3D): the
+    largest ratio of the discharge envelope to the filled pressure over the patches of the
+    bin's faces above the transition zone (half the bin's shorter side above the transition,
+    a quarter below the fill level) and of the hopper's faces (a tenth below the transition,
+    a quarter above the outlet), by height (the faces' own arc lengths differ)."""
+    bnd = model.boundary
+    names = np.asarray(rec.wall_names)
+    z, p_fill = np.asarray(rec.wall["filling"][3]), np.asarray(rec.wall["filling"][4])
+    envelope = np.asarray(rec.wall["discharge_envelope"][4])
+    loaded = p_fill > 0.05 * np.nanmax(p_fill)
+    ratio = np.where(loaded, envelope / np.where(loaded, p_fill, 1.0), np.nan)
+    near = 2.0 * min(bnd.half_extent)
+    z_t = bnd.bin_foot
+    on_bin = np.isin(names, ("x_plus", "x_minus", "y_plus", "y_minus"))
+    on_hopper = np.char.startswith(names.astype(str), "hopper_")
+    in_bin = on_bin & (z > z_t + 0.5 * near) & (z < bnd.fill_level - 0.25 * near)
+    in_cone = on_hopper & (z < z_t - 0.1 * near) & (z > 0.25 * near)
+    out = {}
+    if np.isfinite(ratio[in_bin]).any():
+        out["overpressure_factor_bin_max"] = float(np.nanmax(ratio[in_bin]))
+    if np.isfinite(ratio[in_cone]).any():
+        out["overpressure_factor_cone_max"] = float(np.nanmax(ratio[in_cone]))
     return out
 
 

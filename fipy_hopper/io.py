@@ -82,10 +82,23 @@ WALL_PRESSURE_COLUMNS = ("stage", "wall", "t_s", "s_m", "r_m", "z_m", "p_n_Pa", 
 WALL_PRESSURE_COLUMNS_3D = ("stage", "wall", "t_s", "s_m", "r_m", "z_m", "theta_deg",
                             "segment", "p_n_Pa", "tau_Pa", "tau_theta_Pa", "p_n_stress_Pa",
                             "tau_stress_Pa", "p_n_raw_Pa", "tau_raw_Pa", "window_s")
+#: Columns of ``wall_pressure.csv`` of a rectangular plan (``plan = "rectangular"``): ``wall``
+#: the face (``x_plus``, ``x_minus``, ``y_plus``, ``y_minus``, ``hopper_x_plus``, ...,
+#: ``floor``), ``u`` the sector's centre across the face's width as a fraction of it (0 at
+#: its -y end on the x faces and the floor, its -x end on the y faces), ``tau_h_Pa`` the shear
+#: along the width (towards +u); one row per stage, height bin and sector of each face.
+WALL_PRESSURE_COLUMNS_FACES = ("stage", "wall", "t_s", "s_m", "r_m", "z_m", "u", "segment",
+                               "p_n_Pa", "tau_Pa", "tau_h_Pa", "p_n_stress_Pa",
+                               "tau_stress_Pa", "p_n_raw_Pa", "tau_raw_Pa", "window_s")
 #: Columns of ``wall_extremes.csv`` (3D): per stage and height bin the largest and the
 #: smallest pressure around the circumference, their sectors and their ratio.
 WALL_EXTREMES_COLUMNS = ("stage", "s_m", "z_m", "p_max_Pa", "theta_max_deg", "p_min_Pa",
                          "theta_min_deg", "max_over_min")
+#: ``wall_extremes.csv`` of a rectangular plan: per stage, face and height bin the largest and
+#: the smallest pressure across the face's width, where (``u``, a fraction of the width) and
+#: their ratio
+WALL_EXTREMES_COLUMNS_FACES = ("stage", "wall", "s_m", "z_m", "p_max_Pa", "u_max", "p_min_Pa",
+                               "u_min", "max_over_min")
 #: Columns of ``wall_slip.csv``: the loaded contacts of the hopper wall at the last sample of
 #: the flow-mode window (:class:`fipy_hopper.diagnostics.FlowModeRule`).
 WALL_SLIP_COLUMNS = ("s_m", "r_m", "z_m", "slip_ratio", "sliding")
@@ -331,6 +344,7 @@ def _write_wall_pressure_3d(path: PathLike, record) -> None:
     stress = getattr(record, "wall_stress", {})
     raw = getattr(record, "wall_raw", {})
     window = getattr(record, "wall_window", {})
+    names = _face_names(record)
     rows = []
     for stage, values in record.wall.items():
         t, s, r, z, p, tau = values[:6]
@@ -339,11 +353,19 @@ def _write_wall_pressure_3d(path: PathLike, record) -> None:
         p_s, tau_s = stress.get(stage, (empty, empty))
         p_r, tau_r = raw.get(stage, (empty, empty))
         for k in range(len(s)):
-            rows.append([stage, "wall", _num(t), _num(s[k]), _num(r[k]), _num(z[k]),
-                         _num(theta[k]), int(segment[k]), _num(p[k]), _num(tau[k]),
-                         _num(hoop[k]), _num(p_s[k]), _num(tau_s[k]), _num(p_r[k]),
-                         _num(tau_r[k]), _num(window.get(stage, math.nan))])
-    _write_csv(path, WALL_PRESSURE_COLUMNS_3D, rows)
+            rows.append([stage, "wall" if names is None else names[k], _num(t), _num(s[k]),
+                         _num(r[k]), _num(z[k]), _num(theta[k]), int(segment[k]), _num(p[k]),
+                         _num(tau[k]), _num(hoop[k]), _num(p_s[k]), _num(tau_s[k]),
+                         _num(p_r[k]), _num(tau_r[k]), _num(window.get(stage, math.nan))])
+    _write_csv(path, WALL_PRESSURE_COLUMNS_3D if names is None else WALL_PRESSURE_COLUMNS_FACES,
+               rows)
+
+
+def _face_names(record):
+    """The faces of a rectangular plan's patches (``record.wall_names``), or None (a circular
+    silo's wall is ``"wall"``)."""
+    names = list(getattr(record, "wall_names", []) or [])
+    return names if names and any(n != "wall" for n in names) else None
 
 
 def wall_extremes(record) -> dict:
@@ -358,6 +380,7 @@ def wall_extremes(record) -> dict:
         return {}
     n = len(np.unique(theta))
     sectors = theta[:n]
+    names = _face_names(record)
     out = {}
     for stage, values in record.wall.items():
         p = np.asarray(values[4], float).reshape(-1, n)
@@ -367,6 +390,8 @@ def wall_extremes(record) -> dict:
         k_min = np.argmin(np.where(finite, p, np.inf), axis=1)
         out[stage] = (np.asarray(values[1])[::n], np.asarray(values[3])[::n], big,
                       sectors[k_max], small, sectors[k_min], ratio)
+        if names is not None:
+            out[stage] += (names[::n],)
     return out
 
 
@@ -374,11 +399,15 @@ def write_wall_extremes(path: PathLike, record) -> None:
     """``wall_extremes.csv`` of a 3D run (:data:`WALL_EXTREMES_COLUMNS`,
     :func:`wall_extremes`)."""
     rows = []
-    for stage, (s, z, big, t_max, small, t_min, ratio) in wall_extremes(record).items():
+    faces = False
+    for stage, values in wall_extremes(record).items():
+        s, z, big, t_max, small, t_min, ratio = values[:7]
+        faces = len(values) > 7
         for b in range(len(s)):
-            rows.append([stage, _num(s[b]), _num(z[b]), _num(big[b]), _num(t_max[b]),
-                         _num(small[b]), _num(t_min[b]), _num(ratio[b])])
-    _write_csv(path, WALL_EXTREMES_COLUMNS, rows)
+            rows.append(([stage, values[7][b]] if faces else [stage])
+                        + [_num(s[b]), _num(z[b]), _num(big[b]), _num(t_max[b]),
+                           _num(small[b]), _num(t_min[b]), _num(ratio[b])])
+    _write_csv(path, WALL_EXTREMES_COLUMNS_FACES if faces else WALL_EXTREMES_COLUMNS, rows)
 
 
 def write_wall_slip(path: PathLike, record, slip_ratio: float) -> None:

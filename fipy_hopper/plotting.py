@@ -953,7 +953,7 @@ def _run_facts(run) -> dict:
             "wall": wall, "snapshots": bool(entries),
             "discharge": any(e["stage"] == "discharge" for e in entries),
             "lagrangian": bool(entries) and cfg.numerics.formulation == "lagrangian",
-            "three_d": three_d}
+            "three_d": three_d, "rectangular": cfg.hopper.rectangular}
 
 
 # ---------------------------------------------------------------- 3D
@@ -968,9 +968,12 @@ def flow_plane(run, path):
         return None
     later = [e for e in entries if e["discharge_time_s"] > 0] or entries
     entry = later[(len(later) - 1) // 2]
-    title = (f"the plane through the axis and the outlet,\n"
-             f"{entry['discharge_time_s']:.3g} s after the opening")
-    return plane_picture(Path(run) / RunDirectory.FIELDS / entry["file"], path, title)
+    geom = _config(run).hopper
+    y0 = geom.offset_xy[1] if geom.rectangular else 0.0
+    where = (f"the plane y = {y0:g} m through the outlet" if y0 else
+             "the plane through the axis and the outlet")
+    title = (f"{where},\n{entry['discharge_time_s']:.3g} s after the opening")
+    return plane_picture(Path(run) / RunDirectory.FIELDS / entry["file"], path, title, y0)
 
 
 def _wall_stages(run) -> tuple:
@@ -999,6 +1002,25 @@ def wall_unrolled(run, path):
                             stages=_wall_stages(run))
 
 
+def wall_faces(run, path):
+    """A rectangular plan's wall pressure over its developed wall, at rest and in discharge
+    (:func:`fipy_hopper.space.pictures.faces_picture`)."""
+    from .space.pictures import faces_picture
+    geom = _config(run).hopper
+    return faces_picture(Path(run) / RunDirectory.WALL_PRESSURE, path,
+                         (geom.bin_width, geom.bin_length), stages=_wall_stages(run),
+                         hopper_height=geom.cone_height)
+
+
+def wall_perimeter(run, path):
+    """A rectangular plan's wall pressure along the bin's perimeter at a few heights
+    (:func:`fipy_hopper.space.pictures.perimeter_picture`)."""
+    from .space.pictures import perimeter_picture
+    geom = _config(run).hopper
+    return perimeter_picture(Path(run) / RunDirectory.WALL_PRESSURE, path,
+                             (geom.bin_width, geom.bin_length), stages=_wall_stages(run))
+
+
 #: Every picture :func:`plot_run` can draw, in the order drawn: the one list (the help of
 #: ``fipy-hopper plot`` and the files ``--force`` removes are read from it).  A fill-only run
 #: (``end_time = 0``) has no time series, so no ``discharge.png``; a Lagrangian run gets
@@ -1024,9 +1046,15 @@ PICTURES = (
     Picture("flow_plane.png", "3D: the flow pattern and speed in the plane through the axis "
             "and the outlet", flow_plane, lambda f: f["discharge"] and f["three_d"]),
     Picture("wall_circumference.png", "3D: the wall pressure around the circumference at a "
-            "few heights", wall_circumference, lambda f: f["wall"] and f["three_d"]),
+            "few heights", wall_circumference,
+            lambda f: f["wall"] and f["three_d"] and not f["rectangular"]),
     Picture("wall_unrolled.png", "3D: the wall pressure over the unrolled wall (theta, s)",
-            wall_unrolled, lambda f: f["wall"] and f["three_d"]),
+            wall_unrolled, lambda f: f["wall"] and f["three_d"] and not f["rectangular"]),
+    Picture("wall_faces.png", "3D, a rectangular plan: the wall pressure over the developed "
+            "faces", wall_faces, lambda f: f["wall"] and f["three_d"] and f["rectangular"]),
+    Picture("wall_perimeter.png", "3D, a rectangular plan: the wall pressure along the bin's "
+            "perimeter at a few heights", wall_perimeter,
+            lambda f: f["wall"] and f["three_d"] and f["rectangular"]),
 )
 
 

@@ -290,6 +290,51 @@ def beverloo_rate(rho_b, D0, C=0.58, k=1.5, d=0.0, g=G):
     return _out(C * rho_b * np.sqrt(g) * D_eff**2.5)
 
 
+def beverloo_rectangular_rate(rho_b, b, l, C=0.58, k=1.5, d=0.0, g=G):
+    """Beverloo's rate (kg/s) through a rectangular orifice ``b`` by ``l`` in a flat bottom,
+    by the hydraulic-diameter generalisation of the circular form.
+
+    ``W = C (4/pi) rho_b sqrt(g) A_k sqrt(D_h,k)``, ``A_k = (b - k d)(l - k d)`` and ``D_h,k =
+    4 A_k / U_k = 2 (b - k d)(l - k d) / (b + l - 2 k d)``: for a circle of diameter ``D`` it
+    is Beverloo's ``C rho_b sqrt(g) (D - k d)^(5/2)``; a square of side ``b`` gives ``0.738
+    rho_b sqrt(g) b^(5/2)`` (``d = 0``).
+
+    Parameters as :func:`beverloo_rate`; ``b``, ``l``: the orifice's sides (m), > 0.
+
+    Source: the circular form of Beverloo, Leniger & van de Velde (1961) with the area and
+    hydraulic diameter of the orifice (a generalisation used for non-circular orifices;
+    recalled, not checked against a source).  Tag: [D: reduces to Beverloo for a circle;
+    the generalisation unverified].
+
+    Raises ValueError if ``min(b, l) <= k d``.
+    """
+    rho_b = _positive("rho_b", rho_b, " kg/m^3")
+    b = _positive("b", b, " m")
+    l = _positive("l", l, " m")
+    C = _positive("C", C)
+    k = _nonneg("k", k)
+    d = _nonneg("d", d, " m")
+    g = _positive("g", g, " m/s^2")
+    b_eff, l_eff = b - k * d, l - k * d
+    if np.any(b_eff <= 0) or np.any(l_eff <= 0):
+        raise ValueError("b and l must exceed k*d (the effective orifice is not positive)")
+    area = b_eff * l_eff
+    d_h = 2.0 * area / (b_eff + l_eff)
+    return _out(C * 4.0 / np.pi * rho_b * np.sqrt(g) * area * np.sqrt(d_h))
+
+
+def hydraulic_diameter(b, l):
+    """``4 A / U = 2 b l / (b + l)`` (m) of a rectangular section ``b`` by ``l``: the diameter
+    whose circle has the same hydraulic radius ``A / U``, so that Janssen's formulas of a
+    circular bin (:func:`janssen_vertical_stress` and the others, ``z0 = D / (4 K mu)``) give
+    a rectangular bin's with ``D`` this (EN 1991-4's ``z0 = A / (U K mu)``).
+
+    Tag: [D: A/U of a rectangle]."""
+    b = _positive("b", b, " m")
+    l = _positive("l", l, " m")
+    return _out(2.0 * b * l / (b + l))
+
+
 def rose_tanaka_factor(theta_deg, beta_deg=45.0):
     """Rose-Tanaka hopper factor F multiplying the flat-bottom (Beverloo) rate.
 

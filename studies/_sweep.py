@@ -6,7 +6,9 @@ A *case* is a plain dictionary::
      "params": {"half_angle_deg": 30.0, ...},  # the swept values (columns of the study's CSV)
      "config": {"hopper": {...}, ...},       # sections for HopperConfig.from_dict
      "plots": True,                          # draw the run's own pictures when it ends
-     "track_alpha": False}                   # record min/max of alpha after every transport
+     "track_alpha": False,                   # record min/max of alpha after every transport
+     "track_wall_windows": False}            # the smallest and largest wall pressure per
+                                             # patch over the discharge's load windows
 
 :func:`run_cases` runs a list of them into ``ROOT/cases/<name>/`` with
 :func:`fipy_hopper.api.run` and returns one row per case: the parameters, the run's
@@ -45,6 +47,7 @@ from pathlib import Path
 
 CASES = "cases"                   # sub-folder of a study's output holding the run directories
 ALPHA_BOUNDS = "alpha_bounds.json"
+WALL_WINDOWS = "wall_windows.json"
 STUDIES_DIR = Path(__file__).resolve().parent
 DEFAULT_ROOT = STUDIES_DIR / "output"   # git-ignored
 
@@ -66,11 +69,14 @@ def case_name(*pairs) -> str:
 
 
 def make_case(name: str, params: dict, config: dict, plots: bool = True,
-              track_alpha: bool = False) -> dict:
+              track_alpha: bool = False, track_wall_windows: bool = False) -> dict:
     """A case dictionary (see the module docstring); the configuration is validated now."""
     _config(config)
-    return {"name": name, "params": dict(params), "config": config, "plots": bool(plots),
-            "track_alpha": bool(track_alpha)}
+    out = {"name": name, "params": dict(params), "config": config, "plots": bool(plots),
+           "track_alpha": bool(track_alpha)}
+    if track_wall_windows:
+        out["track_wall_windows"] = True
+    return out
 
 
 def merge(base: dict, **sections) -> dict:
@@ -183,6 +189,48 @@ class _AlphaBounds:
         return {"alpha_min": self.low, "alpha_max": self.high}
 
 
+class _WallWindows:
+    """The smallest and the largest wall pressure of every wall bin (a 3D run's patch) over
+    consecutive windows of the run's ``load_window`` through the discharge (the loop's own
+    envelope keeps only the largest), from the loads recovered from the wall's reaction
+    (:meth:`fipy_hopper.simulation.Simulation` ``wall_loads.profile``), written to
+    ``wall_windows.json`` in the run directory (``p_min_Pa``, ``p_max_Pa`` per bin in the
+    order of ``wall_pressure.csv``'s rows of a stage, ``windows``); a resumed run carries
+    them on."""
+
+    def __init__(self, path: Path, resume: bool):
+        self.path = path
+        saved = _read_json(path) if resume else None
+        self.low = saved["p_min_Pa"] if saved else None
+        self.high = saved["p_max_Pa"] if saved else None
+        self.windows = saved["windows"] if saved else 0
+        self.previous = None
+
+    def attach(self, sim) -> None:
+        sim.add_callback(self.window, sim.load_window, stages=("discharge",))
+        sim.add_wall_time_callback(lambda sim_, state: self.write(), 30.0)
+
+    def window(self, sim, state) -> None:
+        import numpy as np
+
+        now = sim.wall_loads.reading(sim.model, state)
+        if self.previous is not None and now["t"] > self.previous["t"]:
+            p = np.asarray(sim.wall_loads.profile(self.previous, now)[3], float)
+            if self.low is None:
+                self.low, self.high = p.tolist(), p.tolist()
+            else:
+                self.low = np.fmin(self.low, p).tolist()
+                self.high = np.fmax(self.high, p).tolist()
+            self.windows += 1
+        self.previous = now
+
+    def write(self) -> None:
+        from fipy_hopper.io import write_json
+
+        write_json(self.path, {"p_min_Pa": self.low, "p_max_Pa": self.high,
+                               "windows": self.windows})
+
+
 def run_case(case: dict, root, force: bool = False, threads: int | None = 1) -> dict:
     """Run (or read) one case into ``root/cases/<name>``; returns its row.
 
@@ -203,18 +251,27 @@ def run_case(case: dict, root, force: bool = False, threads: int | None = 1) -> 
                 "error": f"{path} holds a different configuration"}
     resume = status == "resume"
     tracker = _AlphaBounds(path / ALPHA_BOUNDS, resume) if case.get("track_alpha") else None
+    windows = (_WallWindows(path / WALL_WINDOWS, resume) if case.get("track_wall_windows")
+               else None)
+    setups = [t.attach for t in (tracker, windows) if t is not None]
+
+    def setup(sim):
+        for attach in setups:
+            attach(sim)
     started, cpu = time.perf_counter(), time.process_time()
     error = ""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ResolutionWarning)
         try:
             run(case["config"], path, force=not resume, resume=resume, quiet=True,
-                plots=case.get("plots", True), setup=tracker.attach if tracker else None,
+                plots=case.get("plots", True), setup=setup if setups else None,
                 command="studies: " + " ".join(sys.argv), threads=threads)
         except Exception as exc:  # the run wrote what it measured; keep the sweep going
             error = f"{type(exc).__name__}: {exc}"
     if tracker is not None:
         tracker.write()
+    if windows is not None:
+        windows.write()
     out = {**row, **_finished_row(path), "reused": False, "error": error}
     out["case_wall_time_s"] = time.perf_counter() - started
     out["case_cpu_time_s"] = time.process_time() - cpu    # this process (one worker thread)

@@ -107,7 +107,12 @@ PLAUSIBLE = {
                            any_value | st.lists(any_value | insert, max_size=2)),
                "dimensions": (st.sampled_from([2, 3]), st.sampled_from([1, 4, 2.0, "3"])
                               | any_value),
-               "outlet_offset": near(0.0, 0.3)},
+               "outlet_offset": (near(0.0, 0.3)[0] | st.lists(near(-0.3, 0.3)[0], min_size=2,
+                                                               max_size=2),
+                                 near(0.0, 0.3)[1] | st.lists(near(-0.3, 0.3)[1], max_size=3)),
+               "plan": (st.sampled_from(["circular", "rectangular"]),
+                        st.sampled_from(["", "Rectangular", "square"]) | any_value),
+               "bin_length": near(0.2, 3.0), "outlet_length": near(0.02, 0.15)},
     "material": {"density": near(100.0, 5000.0), "youngs_modulus": near(1e4, 1e9),
                  "poisson_ratio": near(-0.5, 0.49), "friction_angle_deg": near(5.0, 60.0),
                  "dilation_angle_deg": near(0.0, 30.0), "cohesion": near(0.0, 1e4),

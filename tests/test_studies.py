@@ -713,6 +713,46 @@ def test_three_d_study_estimates_its_default_from_the_settings():
     assert 2.0 <= opts["fill_level"] / opts["bin_diameter"] <= 3.0
 
 
+def test_envelope_runs_offsets_and_material_extremes(root):
+    """``envelope.py --quick``: a flat-bottomed square bin (2 cm) with its outlet centred and
+    half-way to its wall, each with mu_w and phi both at their lower and both at their upper
+    characteristic values (four cases, a Dask sweep run serially): every case finished with
+    its discharge window recorded; a row of ``envelope.csv`` per patch of the floor and the
+    four faces (4 sectors), each largest at least the largest at rest and each smallest at
+    most the smallest at rest over the cases, named by a case and a window; EN 1991-4's K
+    range and the factors in ``study.json``; the picture."""
+    out = run_quick(root, "envelope")
+    data = study_json(out)
+    assert data["setting"] == "quick" and data["cases"] == 4
+    numbers = data["numbers"]
+    assert numbers["cases_failed"] == 0
+    assert numbers["K_lower_en1991"] < numbers["K_m_en1991"] < numbers["K_upper_en1991"]
+    assert numbers["phi_lower_deg"] == pytest.approx(30.0 / 1.3, abs=1e-3)
+    assert numbers["mu_w_upper"] == pytest.approx(1.4 * math.tan(math.radians(15.0)),
+                                                  abs=1e-4)
+    cases = rows_of(out / "results.csv")
+    assert len(cases) == 4 and all(r["error"] == "" for r in cases)
+    assert {r["offset_fraction"] for r in cases} == {"0.0", "0.5"}
+    for r in cases:
+        with open(pathlib.Path(r["run_dir"]) / "wall_windows.json") as fh:
+            assert json.load(fh)["windows"] >= 1
+    table = rows_of(out / "envelope.csv")
+    walls = [r["wall"] for r in table]
+    assert sorted(set(walls)) == ["floor", "x_minus", "x_plus", "y_minus", "y_plus"]
+    assert all(walls.count(w) % 4 == 0 for w in set(walls))
+    names = {r["case"] for r in cases}
+    for r in table:
+        if r["p_max_Pa"] == "":                 # a patch of the floor wholly over the outlet
+            assert r["wall"] == "floor"
+            continue
+        assert float(r["p_max_Pa"]) >= float(r["p_filling_max_Pa"]) - 1e-9
+        assert float(r["p_min_Pa"]) <= float(r["p_filling_min_Pa"]) + 1e-9
+        assert r["p_max_case"] in names and r["p_max_window"] in ("filling", "discharge")
+        assert r["cases"] == "4"
+    assert any(r["p_max_window"] == "discharge" for r in table)
+    assert_png(out / "envelope.png")
+
+
 # ---------------------------------------------------------------- the report
 def test_stiffness_spread_runs_both_hoppers_with_and_without_the_viscosities(root):
     out = run_quick(root, "stiffness_spread")
@@ -770,7 +810,7 @@ def test_report_is_generated_from_the_outputs(root, flow_map, discharge, wall, c
                                       "shear_band",
                                       "element_tests",
                                       "lagrangian_vs_eulerian", "arching", "geometries",
-                                      "three_d"}
+                                      "three_d", "envelope"}
     assert "python studies/robustness.py" in (tmp_path / "partial.md").read_text()
 
 

@@ -278,6 +278,22 @@ def test_rathole_G_against_schulze_digitisation():
     np.testing.assert_allclose(th.jenike_rathole_G(phi), f, rtol=0.015)
 
 
+def test_rectangular_orifice_and_bin_worked_values():
+    """§b Beverloo for rectangular orifices and §d a rectangular bin's hydraulic diameter: the
+    worked values; a square's rate is 0.738 rho_b sqrt(g) b^2.5; the form is Beverloo's for
+    a circle when written with a circle's area and hydraulic diameter."""
+    assert_printed(th.beverloo_rectangular_rate(RHO_B, 0.05, 0.05), 1.939, 3)
+    assert_printed(th.beverloo_rectangular_rate(RHO_B, 0.05, 0.2), 9.813, 3)
+    assert_printed(th.beverloo_rectangular_rate(RHO_B, 0.05, 0.2, d=1e-3), 9.326, 3)
+    b = 0.1
+    assert th.beverloo_rectangular_rate(RHO_B, b, b) == pytest.approx(
+        0.58 * 4 / np.pi * RHO_B * np.sqrt(9.81) * b ** 2.5)
+    assert_printed(th.hydraulic_diameter(0.3, 0.4), 0.3429, 4)
+    assert th.hydraulic_diameter(0.24, 0.24) == pytest.approx(0.24)
+    with pytest.raises(ValueError):
+        th.beverloo_rectangular_rate(RHO_B, 0.001, 0.2, d=1e-3)
+
+
 # --- §h plane flow ----------------------------------------------------------------------
 def test_plane_flow_worked_values():
     # slot B = 0.05 m, rho_b = 1500: W' = 54.10 kg/(s m) (d = 0), 51.69 (d = 1 mm, k = 1.5)

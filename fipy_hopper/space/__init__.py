@@ -1,5 +1,5 @@
-"""The 3D Eulerian model of a circular silo: the same physics as the sections
-(:mod:`fipy_hopper.model`) on a fixed Cartesian grid, run by the shared loop
+"""The 3D Eulerian model of a circular silo (or a rectangular bin): the same physics as the
+sections (:mod:`fipy_hopper.model`) on a fixed Cartesian grid, run by the shared loop
 (:class:`fipy_hopper.simulation.Simulation`) for a configuration with ``[hopper] dimensions = 3``
 (``fipy-hopper run``, ``fipy_hopper.run``).
 
@@ -13,7 +13,10 @@ Modules:
 * ``config``: :class:`SpaceConfig`, the 3D run's settings (the sections' dataclasses and the
   outlet offset and mirror planes);
 * ``boundary``: :class:`SiloBoundary`, the silo in 3D as data (signed distance, normals,
-  contact entries) from the sections' wall profile revolved about the axis;
+  contact entries) from the sections' wall profile revolved about the axis; ``silo_boundary``
+  the silo of a configuration, circular or rectangular;
+* ``rectangular``: :class:`RectangularSilo`, a rectangular plan (``plan = "rectangular"``) as
+  data: its plane faces, exact distance, contact entries per face;
 * ``grid``: :class:`SpaceGrid`, the FiPy ``Grid3D`` with cut-cell open fractions, face
   apertures and node distances/normals (:func:`build_grid`);
 * ``momentum``: trilinear hexahedra with one-point quadrature, hourglass control, strain
@@ -25,7 +28,8 @@ Modules:
   faces);
 * ``model``: :class:`SpaceModel`, the model (initial state, steps, transport, masses; the
   model protocol of :mod:`fipy_hopper.protocol`);
-* ``wall``: the wall's patches (height bins times sectors), the wall loads from the wall's
+* ``wall``: the wall's patches (height bins times sectors around the circumference, or
+  across a rectangular plan's faces), the wall loads from the wall's
   reaction and the stresses, the vertical balance (:class:`SpaceWallLoads`) and the loop's
   view of them (:class:`PatchLoads`);
 * ``flow``: the wall slip per sector, the flow-mode measures, the plane through the axis and

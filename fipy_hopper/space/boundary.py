@@ -140,6 +140,20 @@ class Part:
         return d2 / length, n
 
 
+def silo_boundary(cfg):
+    """The silo of a :class:`~fipy_hopper.space.config.SpaceConfig` as data: a
+    :class:`SiloBoundary` (a circular plan) or a
+    :class:`~fipy_hopper.space.rectangular.RectangularSilo` (``plan = "rectangular"``), with
+    the walls' friction."""
+    if getattr(cfg.hopper, "rectangular", False):
+        from .rectangular import RectangularSilo
+        return RectangularSilo.from_geometry(cfg.hopper, cfg.wall.friction_angle_deg,
+                                             cfg.wall.segment_friction_deg)
+    return SiloBoundary.from_geometry(cfg.hopper, cfg.outlet_offset,
+                                      cfg.wall.friction_angle_deg,
+                                      cfg.wall.segment_friction_deg)
+
+
 @dataclass(frozen=True)
 class SiloBoundary:
     """The silo in 3D (module docstring): its ``parts``, the profile ``wall`` (m), the
@@ -151,6 +165,8 @@ class SiloBoundary:
     outlet_radius: float
     fill_level: float
     segment_friction_deg: tuple = field(default=())
+
+    plan = "circular"
 
     @classmethod
     def from_profile(cls, wall, fill_level: float, outlet_offset: float = 0.0,
@@ -213,6 +229,16 @@ class SiloBoundary:
         return max(r for r, _ in self.wall)
 
     @property
+    def half_extent(self) -> tuple:
+        """``(R, R)`` (m): the grid's extent each way."""
+        return self.radius, self.radius
+
+    @property
+    def outlet_centre(self) -> tuple:
+        """The outlet's centre ``(e, 0)`` (m)."""
+        return self.outlet_offset, 0.0
+
+    @property
     def top(self) -> float:
         return self.wall[-1][1]
 
@@ -246,6 +272,10 @@ class SiloBoundary:
             d = np.where(closer, dp, d)
             n = np.where(closer[None], npart, n)
         return d, n
+
+    def outlet_plate(self, x, y):
+        """The nodes the closed outlet's plate holds: in the outlet's circle or on its rim."""
+        return np.hypot(x - self.outlet_offset, y) <= self.outlet_radius + 1e-12
 
     def outlet_hole(self, x, y):
         """True where ``(x, y)`` lies in the outlet (the lip's circle centred at

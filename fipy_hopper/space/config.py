@@ -9,6 +9,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 from typing import Optional
 
+import numpy as np
+
 from ..config import (HopperConfig, HopperGeometry, MaterialConfig, NumericsConfig,
                       RunConfig, WallConfig, damped_step_factor)
 
@@ -19,10 +21,12 @@ DEFAULT_BULK_VISCOSITY = 0.06
 @dataclass(frozen=True)
 class SpaceConfig:
     """A 3D run: the silo ``hopper`` (an axisymmetric :class:`HopperGeometry`, the conical
-    shorthand or a profile, without inserts), ``material``, ``wall``, ``numerics`` (its
+    shorthand or a profile, without inserts; or a rectangular plan,
+    :mod:`fipy_hopper.space.rectangular`), ``material``, ``wall``, ``numerics`` (its
     ``cell_size`` is the cube's side; the sections' ``3 cells across the outlet radius`` is
     not required here), the outlet's offset from the silo's axis along ``+x``
-    (``outlet_offset``, m) and the computed part (``mirror_planes``: ``"auto"``, ``"none"``,
+    (``outlet_offset``, m; a rectangular plan's ``(ex, ey)``, always its geometry's
+    ``hopper.outlet_offset``) and the computed part (``mirror_planes``: ``"auto"``, ``"none"``,
     ``"quarter"``, ``"half"``, :mod:`fipy_hopper.space.grid`); ``run`` the sections'
     :class:`~fipy_hopper.config.RunConfig` (the stop rules, the sampling, the load window, the
     wall bins' width) and ``wall_sectors``, the sectors of the wall-load maps around the
@@ -40,6 +44,13 @@ class SpaceConfig:
     source: Optional[HopperConfig] = field(default=None, compare=False, repr=False)
 
     def __post_init__(self):
+        if self.hopper.rectangular:     # the plan's offset is its geometry's, (ex, ey)
+            e, own = self.outlet_offset, self.hopper.offset_xy
+            if not (isinstance(e, (int, float)) and e == 0.0) and tuple(
+                    float(v) for v in np.atleast_1d(e)) != own:
+                raise ValueError(f"outlet_offset = {e!r}: a rectangular plan's outlet is at "
+                                 f"its hopper.outlet_offset, {list(own)}")
+            object.__setattr__(self, "outlet_offset", own)
         if not (isinstance(self.wall_sectors, int) and 1 <= self.wall_sectors <= 360):
             raise ValueError(f"wall_sectors = {self.wall_sectors!r}: expected a whole number "
                              "in [1, 360]")
@@ -51,8 +62,10 @@ class SpaceConfig:
         if cfg.hopper.dimensions != 3:
             raise ValueError("a SpaceConfig is made from a configuration with "
                              f"hopper.dimensions = 3, not {cfg.hopper.dimensions}")
+        offset = (cfg.hopper.outlet_offset if cfg.hopper.rectangular
+                  else float(cfg.hopper.outlet_offset))
         return cls(hopper=cfg.hopper, material=cfg.material, wall=cfg.wall,
-                   numerics=cfg.numerics, outlet_offset=float(cfg.hopper.outlet_offset),
+                   numerics=cfg.numerics, outlet_offset=offset,
                    mirror_planes=cfg.numerics.mirror_planes, run=cfg.run,
                    wall_sectors=cfg.run.wall_sectors, source=cfg)
 
@@ -63,7 +76,9 @@ class SpaceConfig:
         if self.source is not None:
             return self.source
         return HopperConfig(
-            hopper=replace(self.hopper, dimensions=3, outlet_offset=float(self.outlet_offset)),
+            hopper=replace(self.hopper, dimensions=3, outlet_offset=(
+                tuple(self.outlet_offset) if self.hopper.rectangular
+                else float(self.outlet_offset))),
             material=self.material, wall=self.wall,
             numerics=replace(self.numerics, mirror_planes=self.mirror_planes),
             run=replace(self.run, wall_sectors=self.wall_sectors))
@@ -97,6 +112,8 @@ class SpaceConfig:
         """The axisymmetric section of the same silo, material, wall and numerics (the 3D
         model's comparison; its outlet is centred whatever ``outlet_offset``); ``run``: keys
         of its ``[run]`` replacing this one's."""
+        if self.hopper.rectangular:
+            raise ValueError("a rectangular plan has no axisymmetric section")
         section = replace(self.run, wall_sectors=12, **run)
         return HopperConfig(hopper=replace(self.hopper, dimensions=2, outlet_offset=0.0),
                             material=self.material, wall=self.wall,
@@ -136,6 +153,8 @@ class SpaceConfig:
             if isinstance(value, dict):
                 value = replace(getattr(self, key), **value)
             out[key] = value
+        if "hopper" in out and out["hopper"].rectangular and "outlet_offset" not in out:
+            out["outlet_offset"] = out["hopper"].offset_xy
         return replace(self, **out)
 
 

@@ -4,8 +4,10 @@ Constraints (:func:`contact_table`): every node that touches an open cell and li
 cell in front of a wall segment's surface (or behind it) is held by it
 (:meth:`fipy_hopper.space.boundary.SiloBoundary.contacts`: the surface's normal, its segment's
 friction ``mu_w = tan(phi_w)``, tubes frictionless, nodes round the outlet lip by the direction
-to it); while the outlet plate is closed, the nodes of the outlet plane in the outlet's circle
-(the lip's included) are held by it (normal ``-e_z``, the wall's friction).  Mirror planes are
+to it; a rectangular plan's faces likewise, :meth:`fipy_hopper.space.rectangular.
+RectangularSilo.contacts`); while the outlet plate is closed, the nodes of the outlet plane in
+the outlet (its rim included, ``boundary.outlet_plate``) are held by it (normal ``-e_z``, the
+wall's friction).  Mirror planes are
 not constraints: the model sets ``v_x = 0`` on ``x = 0`` and ``v_y = 0`` on ``y = 0``.
 
 The contact of a node with all its constraints (:func:`contact_nodes`, the reference of the
@@ -28,19 +30,23 @@ import numpy as np
 def contact_table(boundary, grid, candidates, plate_friction: float):
     """The constraints grouped by node: ``(nodes (Q, 3) k, j, i; ptr (Q + 1,); normal (K, 3);
     mu (K,); kind (K,) 0 wall / 1 plate; entry (K,) index in its list; segment (n_wall,) the
-    profile's segment of each wall entry (-1 tube, -2 convex corner))``; nodes in C order,
-    a node's constraints in list order (walls, then the plate)."""
+    profile's segment of each wall entry (-1 tube, -2 convex corner); (n_wall, n_plate);
+    face (n_wall,) the face of each wall entry (a rectangular silo's,
+    :attr:`fipy_hopper.space.rectangular.RectangularSilo.faces`; a circular silo's: its
+    segment))``; nodes in C order, a node's constraints in list order (walls, then the
+    plate)."""
     Z, Y, X = np.meshgrid(grid.z_nodes, grid.y_nodes, grid.x_nodes, indexing="ij")
-    flat, normals, mus, segs = [], [], [], []
-    for mask, n, mu, seg in boundary.contacts(X, Y, Z, 0.5 * grid.h, candidates):
+    flat, normals, mus, segs, faces = [], [], [], [], []
+    for item in boundary.contacts(X, Y, Z, 0.5 * grid.h, candidates):
+        mask, n, mu, seg = item[:4]
         idx = np.flatnonzero(mask)
         flat.append(idx)
         normals.append(n.reshape(3, -1)[:, idx].T)
         mus.append(np.full(len(idx), mu))
         segs.append(np.full(len(idx), seg))
+        faces.append(np.full(len(idx), item[4] if len(item) > 4 else seg))
     wall_flat = np.concatenate(flat) if flat else np.zeros(0, np.int64)
-    plate = (np.abs(Z) < 1e-12) & (np.hypot(X - boundary.outlet_offset, Y)
-                                   <= boundary.outlet_radius + 1e-12) & candidates
+    plate = (np.abs(Z) < 1e-12) & boundary.outlet_plate(X, Y) & candidates
     plate_flat = np.flatnonzero(plate)
     node = np.concatenate([wall_flat, plate_flat]).astype(np.int64)
     normal = np.concatenate(normals + [np.tile([0.0, 0.0, -1.0], (len(plate_flat), 1))])
@@ -58,7 +64,8 @@ def contact_table(boundary, grid, candidates, plate_friction: float):
     nodes = np.stack([k, j, i], axis=1).astype(np.int64)
     return (nodes, ptr, np.ascontiguousarray(normal), mu, kind, entry,
             np.concatenate(segs) if segs else np.zeros(0, np.int64),
-            (len(wall_flat), len(plate_flat)))
+            (len(wall_flat), len(plate_flat)),
+            np.concatenate(faces) if faces else np.zeros(0, np.int64))
 
 
 def _dot(a, b):

@@ -45,8 +45,10 @@ def grid_shape(cfg, cell_size: float | None = None) -> tuple:
     geom = cfg.hopper
     mirror_x, mirror_y = computed_part(cfg.mirror_planes, cfg.outlet_offset)
     radius = max(r for r, _ in geom.wall_points)
-    nx = len(_axis_nodes(radius, h, mirror_x)) - 1
-    ny = len(_axis_nodes(radius, h, mirror_y)) - 1
+    half_x, half_y = ((0.5 * geom.bin_width, 0.5 * geom.bin_length) if geom.rectangular
+                      else (radius, radius))
+    nx = len(_axis_nodes(half_x, h, mirror_x)) - 1
+    ny = len(_axis_nodes(half_y, h, mirror_y)) - 1
     outlet_radius = geom.wall_points[0][0]
     n_below = max(int(math.ceil(cfg.numerics.free_fall_depth * 2.0 * outlet_radius / h
                                 - 1e-9)), 3)
@@ -87,15 +89,13 @@ def loaded_cells(cfg, cell_size: float | None = None) -> int:
     783, 1,580 of 1,580 and 8,198 of 8,200 cells, tests/test_space_estimate.py)."""
     import numpy as np
 
-    from .boundary import SiloBoundary
+    from .boundary import silo_boundary
     h = cfg.numerics.cell_size if cell_size is None else float(cell_size)
-    boundary = SiloBoundary.from_geometry(cfg.hopper, cfg.outlet_offset,
-                                          cfg.wall.friction_angle_deg,
-                                          cfg.wall.segment_friction_deg)
+    boundary = silo_boundary(cfg)
     mirror_x, mirror_y = computed_part(cfg.mirror_planes, cfg.outlet_offset)
-    radius = boundary.radius
-    x = _axis_nodes(radius, h, mirror_x)
-    y = _axis_nodes(radius, h, mirror_y)
+    half_x, half_y = boundary.half_extent
+    x = _axis_nodes(half_x, h, mirror_x)
+    y = _axis_nodes(half_y, h, mirror_y)
     xc, yc = 0.5 * (x[1:] + x[:-1]), 0.5 * (y[1:] + y[:-1])
     Y, X = np.meshgrid(yc, xc, indexing="ij")
     total = 0

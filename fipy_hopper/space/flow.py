@@ -42,17 +42,33 @@ from .. import diagnostics
 
 def _axis_column(model) -> np.ndarray:
     """Per node row, the node column (index into ``x_nodes``) nearest to the section's axis
-    ``c(z)`` in the plane ``y = 0``."""
+    ``c(z)`` in the plane ``y = 0`` (a rectangular plan: nearest the centre of its section at
+    that height)."""
     g = model.grid
+    if model.boundary.plan == "rectangular":
+        c = model.boundary.section_centre(g.z_nodes)[0]
+        return np.argmin(np.abs(g.x_nodes[None, :] - c[:, None]), axis=1)
     part = model.boundary.parts[0] if len(model.boundary.parts) == 1 else \
         model.boundary.parts[1]
     c = part.centre(g.z_nodes)
     return np.argmin(np.abs(g.x_nodes[None, :] - c[:, None]), axis=1)
 
 
+def _axis_row(model) -> np.ndarray:
+    """Per node row, the node row ``j`` of the section's axis: the plane ``y = 0`` (a
+    rectangular plan: nearest the centre of its section at that height)."""
+    g = model.grid
+    if model.boundary.plan == "rectangular":
+        c = model.boundary.section_centre(g.z_nodes)[1]
+        return np.argmin(np.abs(g.y_nodes[None, :] - c[:, None]), axis=1)
+    return np.full(len(g.z_nodes), _plane_row(model))
+
+
 def _plane_row(model) -> int:
-    """The node row ``j`` of the plane ``y = 0``."""
-    return int(np.argmin(np.abs(model.grid.y_nodes)))
+    """The node row ``j`` of the plane ``y = 0`` (a rectangular plan: through the outlet's
+    centre, ``y = ey``)."""
+    y0 = model.boundary.outlet_centre[1] if model.boundary.plan == "rectangular" else 0.0
+    return int(np.argmin(np.abs(model.grid.y_nodes - y0)))
 
 
 def contact_slip(model, state) -> tuple:
@@ -64,14 +80,19 @@ def contact_slip(model, state) -> tuple:
     v = state.v[:, k, j, i]
     slip = -(v * W.entry_tangent).sum(axis=0)
     slip = np.where(W.entry_stretch >= 0, slip, np.nan)
-    axis = -state.v[2, k, _plane_row(model), _axis_column(model)[k]]
+    axis = -state.v[2, k, _axis_row(model)[k], _axis_column(model)[k]]
     return slip, axis
 
 
 def hopper_stretches(patches) -> np.ndarray:
-    """The indices of the stretches that are hopper wall (not vertical)."""
+    """The indices of the stretches that are hopper wall (not vertical); on a rectangular
+    plan with a hopper its faces, not the floor round a circular outlet in its foot (a dead
+    corner that never slides, as a flat floor under a bin does)."""
+    names = patches.names
+    hopper = any(name.startswith("hopper_") for name in names)
     return np.array([k for k, st3 in enumerate(patches.stretches)
-                     if abs(st3.stretch.tangent[0]) > 1e-9], dtype=np.int64)
+                     if abs(st3.stretch.tangent[0]) > 1e-9
+                     and not (hopper and names[k] == "floor")], dtype=np.int64)
 
 
 def wall_slip_by_sector(model, state, previous_impulse=None,
@@ -94,8 +115,8 @@ def wall_slip_by_sector(model, state, previous_impulse=None,
     label_of[hop] = np.arange(len(hop))
     on = W._on
     labels, loads, slips, axes, ss = [], [], [], [], []
-    for bins, sectors, _ in W._bin_sector:
-        lab = label_of[W.entry_stretch[on]]
+    for bins, sectors, _, _, image_stretch in W._bin_sector:
+        lab = label_of[image_stretch]
         labels.append(np.where(lab >= 0, lab * P.n_sectors + sectors, -1))
         loads.append(load[on])
         slips.append(slip[on])
@@ -127,10 +148,12 @@ def wall_slip_measures(model, state, previous_impulse=None,
     bnd = model.cfg.boundary
     rows = diagnostics.hopper_rows(bnd)
     ratios, fractions = np.full(len(rows), np.nan), np.full(len(rows), np.nan)
-    by_segment = {P.stretches[k].stretch.segment: n for n, k in enumerate(hop)}
+    by_segment = {}
+    for n, k in enumerate(hop):          # a rectangular plan: several faces of a segment
+        by_segment.setdefault(P.stretches[k].stretch.segment, []).append(n)
     for i, row in enumerate(rows):
         n = by_segment.get(int(bnd.table.segment[row]))
-        values = sectors[n] if n is not None else np.zeros(0)
+        values = sectors[n].ravel() if n is not None else np.zeros(0)
         values = values[np.isfinite(values)]
         if values.size:
             ratios[i] = float(values.min())
@@ -190,15 +213,19 @@ def flow_mode_measures(model, state, rule=diagnostics.FlowModeRule()) -> tuple:
     d, _ = model.boundary.distance_normal(X, Y, Z)
     down = cell_down(state)
     full = (state.alpha > 0.5) & (g.kappa > 0)
-    part = model.boundary.parts[0]
+    rectangular = model.boundary.plan == "rectangular"
+    part = None if rectangular else model.boundary.parts[0]
     ratios = []
     for frac in rule.heights:
         if z_b <= 0:
             break
         row = int(np.argmin(np.abs(g.centres(2) - frac * z_b)))
-        c = float(part.centre(g.centres(2)[row]))
+        if rectangular:
+            c, cy = (float(v) for v in model.boundary.section_centre(g.centres(2)[row]))
+        else:
+            c, cy = float(part.centre(g.centres(2)[row])), 0.0
         near = (d[row] >= g.h) & (d[row] <= 2.5 * g.h) & full[row]
-        axis = (np.hypot(X[row] - c, Y[row]) < 2.0 * g.h) & full[row]
+        axis = (np.hypot(X[row] - c, Y[row] - cy) < 2.0 * g.h) & full[row]
         if near.any() and axis.any():
             v_axis = float(np.mean(down[row][axis]))
             if v_axis > 1e-9:
@@ -276,7 +303,7 @@ def empty_channel(model, state, rule=diagnostics.OutcomeRule()) -> tuple:
     in the plane through the axis and the outlet (module docstring); NaN when the material
     closes the outlet's centre line (or there is none)."""
     f = plane_field(model, state)
-    e = model.boundary.outlet_offset
+    e = model.boundary.outlet_centre[0]
     above = f["z"] >= 0.0
     full = f["alpha"] > rule.full
     rows = np.flatnonzero(above & full.any(axis=1))
@@ -312,9 +339,14 @@ def bin_lateral_stress_ratio(model, state) -> float:
     (``alpha >= 0.99``) of the bin from a quarter of its diameter above the bin wall's foot to a
     quarter below the material's surface: the sections' measure
     (:func:`fipy_hopper.diagnostics.bin_lateral_stress_ratio`); NaN when the band is empty or
-    not in compression."""
+    not in compression.  A rectangular plan: ``sigma_rr`` is the mean horizontal normal stress
+    ``(sigma_xx + sigma_yy) / 2`` and the band from a quarter of the bin's shorter side
+    above its foot to as far below the surface."""
     g = model.grid
-    z_b, quarter = model.boundary.bin_foot, 0.5 * model.boundary.radius
+    rectangular = model.boundary.plan == "rectangular"
+    z_b = model.boundary.bin_foot
+    quarter = (0.5 * min(model.boundary.half_extent) if rectangular
+               else 0.5 * model.boundary.radius)
     Z, Y, X = np.meshgrid(g.centres(2), g.centres(1), g.centres(0), indexing="ij")
     in_bin = (Z > z_b) & (g.kappa > 0)
     filled = in_bin & (state.alpha >= 0.5)
@@ -324,11 +356,14 @@ def bin_lateral_stress_ratio(model, state) -> float:
     band = in_bin & (state.alpha >= 0.99) & (Z >= z_b + quarter) & (Z <= surface - quarter)
     if not band.any():
         return math.nan
-    rho = np.hypot(X[band], Y[band])
-    safe = np.where(rho > 0, rho, 1.0)
-    nx, ny = np.where(rho > 0, X[band] / safe, 1.0), np.where(rho > 0, Y[band] / safe, 0.0)
     s = state.sigma[band]
-    s_rr = nx * nx * s[:, 0] + ny * ny * s[:, 1] + 2.0 * nx * ny * s[:, 5]
+    if rectangular:             # the mean horizontal normal stress: (s_xx + s_yy) / 2
+        s_rr = 0.5 * (s[:, 0] + s[:, 1])
+    else:
+        rho = np.hypot(X[band], Y[band])
+        safe = np.where(rho > 0, rho, 1.0)
+        nx, ny = np.where(rho > 0, X[band] / safe, 1.0), np.where(rho > 0, Y[band] / safe, 0.0)
+        s_rr = nx * nx * s[:, 0] + ny * ny * s[:, 1] + 2.0 * nx * ny * s[:, 5]
     w = (state.alpha * model.open_volume)[band]
     vertical = float(np.sum(w * s[:, 2]))
     if not vertical < 0.0:

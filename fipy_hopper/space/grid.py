@@ -2,15 +2,17 @@
 part, with its cut cells.
 
 Mirror planes (``mirror_planes``): ``"auto"`` computes a centred silo as the quarter ``x >= 0,
-y >= 0`` and an off-centre one (outlet on ``+x``) as the half ``y >= 0``; ``"none"`` computes
+y >= 0`` and an off-centre one (outlet on ``+x``) as the half ``y >= 0`` (a rectangular plan
+with its outlet at ``(0, ey)``: the half ``x >= 0``; off both planes: the whole); ``"none"`` computes
 all of it; ``"quarter"`` / ``"half"`` name the part.  A mirror plane is a plane of nodes
 (``x = 0``, ``y = 0``) on which the normal velocity vanishes, and its faces are closed
 (exterior) faces of the grid: nothing crosses it.  ``factor`` (4, 2 or 1) converts the
 computed part's masses and forces to the whole silo's.
 
 Extent: node planes ``x = h i`` and ``y = h j`` (exactly these products, so the cells of two
-parts that overlap have the same sub-samples), two cells beyond the bin's radius on every side
-that is not a mirror plane; rows as the sections' grid (:func:`fipy_hopper.config.grid_rows`):
+parts that overlap have the same sub-samples), two cells beyond the bin's radius (a
+rectangular bin's half-width along x, half-length along y) on every side that is not a mirror
+plane; rows as the sections' grid (:func:`fipy_hopper.config.grid_rows`):
 at least ``free_fall_depth`` outlet diameters (and 3 cells) below the outlet plane, which is a
 node plane, to a cell above the top.
 
@@ -40,11 +42,30 @@ from ..config import MIRROR_PLANES
 from .boundary import SiloBoundary
 
 
-def computed_part(mirror_planes: str, outlet_offset: float) -> tuple:
-    """``(mirror_x, mirror_y)``: whether ``x = 0`` and ``y = 0`` are mirror planes."""
+def computed_part(mirror_planes: str, outlet_offset) -> tuple:
+    """``(mirror_x, mirror_y)``: whether ``x = 0`` and ``y = 0`` are mirror planes, for an
+    outlet ``outlet_offset`` off the axis along ``+x`` (a circular silo's distance) or at
+    ``(ex, ey)`` (a rectangular plan's; ``"half"`` and ``"auto"`` take the mirror plane
+    through the outlet's centre: ``y = 0`` when ``ey = 0``, else ``x = 0``; none when the
+    outlet is on neither)."""
     if mirror_planes not in MIRROR_PLANES:
         raise ValueError(f"mirror_planes = {mirror_planes!r}: expected one of "
                          f"{', '.join(repr(m) for m in MIRROR_PLANES)}")
+    if isinstance(outlet_offset, (tuple, list)):
+        ex, ey = (float(e) for e in outlet_offset)
+        if mirror_planes == "auto":
+            mirror_planes = ("quarter" if ex == 0.0 and ey == 0.0 else
+                             "half" if ex == 0.0 or ey == 0.0 else "none")
+        if mirror_planes == "quarter" and (ex != 0.0 or ey != 0.0):
+            raise ValueError("mirror_planes = 'quarter' needs a centred outlet "
+                             "(outlet_offset = [0, 0])")
+        if mirror_planes == "half":
+            if ey == 0.0:
+                return False, True
+            if ex == 0.0:
+                return True, False
+            raise ValueError("mirror_planes = 'half' needs the outlet on x = 0 or y = 0")
+        return {"quarter": (True, True), "none": (False, False)}[mirror_planes]
     if mirror_planes == "auto":
         mirror_planes = "quarter" if outlet_offset == 0.0 else "half"
     if mirror_planes == "quarter" and outlet_offset != 0.0:
@@ -77,6 +98,7 @@ class SpaceGrid:
     node_normal: np.ndarray       # (3, nz + 1, ny + 1, nx + 1) unit normal into the wall
     outflow_z: np.ndarray         # (ny, nx) bool: bottom z-faces that material leaves by
     outlet_z: np.ndarray          # (ny, nx) bool: z-faces of the outlet plane in the outlet
+    #                               (every open face of the plane: open above and below it)
 
     @property
     def factor(self) -> float:
@@ -151,16 +173,18 @@ def _fractions(boundary, corner_lists, h, n_sub, dims, near, both_sides=False, c
     return out
 
 
-def build_grid(boundary: SiloBoundary, h: float, free_fall_depth: float = 1.0,
+def build_grid(boundary, h: float, free_fall_depth: float = 1.0,
                min_open_fraction: float = 0.05, mirror_planes: str = "auto",
                n_sub: int = 8) -> SpaceGrid:
-    """The grid of ``boundary`` for cubes of side ``h`` (m) (module docstring)."""
+    """The grid of ``boundary`` (a :class:`SiloBoundary` or a
+    :class:`~fipy_hopper.space.rectangular.RectangularSilo`) for cubes of side ``h`` (m)
+    (module docstring)."""
     from ..fipy_adapter import UniformGrid3D
 
     mirror_x, mirror_y = computed_part(mirror_planes, boundary.outlet_offset)
-    radius = boundary.radius
-    x_nodes = _axis_nodes(radius, h, mirror_x)
-    y_nodes = _axis_nodes(radius, h, mirror_y)
+    half_x, half_y = boundary.half_extent
+    x_nodes = _axis_nodes(half_x, h, mirror_x)
+    y_nodes = _axis_nodes(half_y, h, mirror_y)
     n_below = max(int(math.ceil(free_fall_depth * 2.0 * boundary.outlet_radius / h - 1e-9)), 3)
     n_above = int(math.ceil(boundary.top / h - 1e-9)) + 1
     z_nodes = h * np.arange(-n_below, n_above + 1)
@@ -209,8 +233,9 @@ def build_grid(boundary: SiloBoundary, h: float, free_fall_depth: float = 1.0,
     a_y[:, [0, -1]] = 0.0
     a_x[:, :, [0, -1]] = 0.0
     outflow = a_z[0] > 0.0
-    xc, yc = 0.5 * (x_nodes[1:] + x_nodes[:-1]), 0.5 * (y_nodes[1:] + y_nodes[:-1])
-    outlet = (a_z[n_below] > 0.0) & boundary.outlet_hole(xc[None, :], yc[:, None])
+    # the outlet: the faces of the outlet plane open above and below it (all of them: a face
+    # the outlet's edge cuts, whose centre lies outside it, lets material through too)
+    outlet = a_z[n_below] > 0.0
     if not np.isclose(z_nodes[n_below], 0.0) or len(np.asarray(fipy_adapter.face_areas(mesh))) \
             != a_z.size + a_y.size + a_x.size:
         raise AssertionError("grid layout")

@@ -42,7 +42,7 @@ from ..transport import material_rows
 from . import contact as sc
 from . import momentum as sm
 from . import stepping
-from .boundary import SiloBoundary
+from .boundary import silo_boundary
 from .config import SpaceConfig
 from .grid import build_grid
 from .rate3d import overstress6
@@ -114,9 +114,7 @@ class SpaceModel:
         #: :func:`fipy_hopper.resources.thread_limit`); the results do not depend on them
         self.threads = int(threads) if threads else resources.thread_limit()
         num = cfg.numerics
-        self.boundary = SiloBoundary.from_geometry(
-            cfg.hopper, cfg.outlet_offset, cfg.wall.friction_angle_deg,
-            cfg.wall.segment_friction_deg)
+        self.boundary = silo_boundary(cfg)
         g = self.grid = build_grid(self.boundary, num.cell_size, num.free_fall_depth,
                                    num.min_open_fraction, cfg.mirror_planes)
         self.law = cfg.material.law()
@@ -262,10 +260,14 @@ class SpaceModel:
         return self._wall_loads
 
     def summary_extras(self, state) -> dict:
-        """The 3D keys of a run's summary: ``dimensions``, ``outlet_offset_m``,
-        ``mirror_factor`` (the computed part to the whole silo), ``wall_sectors``."""
-        return {"dimensions": 3, "outlet_offset_m": self.boundary.outlet_offset,
-                "mirror_factor": self.section_factor, "wall_sectors": self.cfg.wall_sectors}
+        """The 3D keys of a run's summary: ``dimensions``, ``outlet_offset_m`` (a rectangular
+        plan's ``[ex, ey]``, with ``plan``), ``mirror_factor`` (the computed part to the whole
+        silo), ``wall_sectors``."""
+        out = {"dimensions": 3, "outlet_offset_m": self.boundary.outlet_offset,
+               "mirror_factor": self.section_factor, "wall_sectors": self.cfg.wall_sectors}
+        if self.boundary.plan == "rectangular":
+            out.update(plan="rectangular", outlet_offset_m=list(self.boundary.outlet_offset))
+        return out
 
     def wall_entries(self) -> tuple:
         """``(s, normal, segment)`` of the rows of ``state.wall_impulse``: the arc length
@@ -375,7 +377,8 @@ class SpaceModel:
         a0, a1 = alpha[k, jj, ii], alpha[k + 1, jj, ii]
         frac = np.minimum((a0 - full) / np.maximum(a0 - a1, 1e-12), 1.0)
         height = zc[k] + frac * g.h
-        radius = np.hypot(g.centres(0)[ii] - self.boundary.outlet_offset, g.centres(1)[jj])
+        ex, ey = self.boundary.outlet_centre
+        radius = np.hypot(g.centres(0)[ii] - ex, g.centres(1)[jj] - ey)
         if np.ptp(radius) <= 0.0:
             return math.nan
         slope = np.polyfit(radius, height, 1)[0]

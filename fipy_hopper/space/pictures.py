@@ -41,16 +41,18 @@ def _save(fig, path) -> Path:
     return path
 
 
-def plane_cells(vtu_path) -> dict:
-    """The cells of a snapshot next to the plane ``y = 0`` (on its ``+y`` side) on their
-    ``(z, x)`` index grid: ``x``, ``z`` (cell centres, m), ``speed``, ``vx``, ``vz`` (m/s) and
-    ``alpha`` ``(nz, nx)``, NaN where no open cell is."""
+def plane_cells(vtu_path, y0: float = 0.0) -> dict:
+    """The cells of a snapshot next to the plane ``y = 0`` (on its ``+y`` side; ``y0``: the
+    node plane nearest ``y = y0``) on their ``(z, x)`` index grid: ``x``, ``z`` (cell centres,
+    m), ``speed``, ``vx``, ``vz`` (m/s) and ``alpha`` ``(nz, nx)``, NaN where no open cell
+    is."""
     from ..io import read_vtu
     mesh = read_vtu(vtu_path)
     hexes = mesh.cells_dict["hexahedron"]
     centres = mesh.points[hexes].mean(axis=1)
     h = float(np.ptp(mesh.points[hexes[0]][:, 0]))
-    near = (centres[:, 1] > 0.0) & (centres[:, 1] < h)
+    y0 = h * round(y0 / h)
+    near = (centres[:, 1] > y0) & (centres[:, 1] < y0 + h)
     c = centres[near]
     xs = np.unique(np.round(c[:, 0] / h - 0.5)).astype(int)
     zs = np.unique(np.round(c[:, 2] / h - 0.5)).astype(int)
@@ -67,10 +69,11 @@ def plane_cells(vtu_path) -> dict:
     return out
 
 
-def plane_picture(vtu_path, png_path, title: str = "") -> Path:
-    """The speed and the flow pattern in the plane through the axis and the outlet."""
+def plane_picture(vtu_path, png_path, title: str = "", y0: float = 0.0) -> Path:
+    """The speed and the flow pattern in the plane through the axis and the outlet (a
+    rectangular plan's: through the outlet's centre, ``y = y0``)."""
     plt = _figure()
-    f = plane_cells(vtu_path)
+    f = plane_cells(vtu_path, y0)
     empty = ~(f["alpha"] > 0.05)
     speed = np.ma.masked_where(empty, f["speed"])
     fig, ax = plt.subplots(figsize=(5.5, 6.5))
@@ -166,4 +169,131 @@ def unrolled_picture(csv_path, png_path, stages=("filling", "early_discharge")) 
     axes[0, 0].set_ylabel("bin centre: s along the meridian (z) (m)")
     if mesh is not None:
         fig.colorbar(mesh, ax=list(axes[0]), label="p_n (Pa)")
+    return _save(fig, png_path)
+
+
+# ---------------------------------------------------------------- a rectangular plan
+#: the bin's faces round the perimeter, counter-clockwise seen from above from +x, and
+#: whether a face's width (its ``u``, along +y or +x) runs that way
+PERIMETER = (("x_plus", True), ("y_plus", False), ("x_minus", False), ("y_minus", True))
+
+
+def face_tables(csv_path, stage) -> dict:
+    """``{face: (z (n_bins,), u (n_sectors,), p (n_bins, n_sectors))}`` of a stage's rows of a
+    rectangular plan's ``wall_pressure.csv`` (the floor left out), bins up each face."""
+    t = read_csv(csv_path)
+    on = np.asarray(t["stage"]) == stage
+    wall = np.asarray(t["wall"])[on]
+    z = np.asarray(t["z_m"], float)[on]
+    u = np.asarray(t["u"], float)[on]
+    p = np.asarray(t["p_n_Pa"], float)[on]
+    out = {}
+    for face in dict.fromkeys(wall):
+        if face == "floor":
+            continue
+        sel = wall == face
+        sectors = np.unique(u[sel])
+        n = len(sectors)
+        out[face] = (z[sel][::n], sectors, p[sel].reshape(-1, n))
+    return out
+
+
+def _edges(centres) -> np.ndarray:
+    """Cell edges round sorted centres (halfway between, the ends mirrored)."""
+    c = np.asarray(centres, float)
+    if len(c) == 1:
+        return np.array([c[0] - 0.5, c[0] + 0.5])
+    mid = 0.5 * (c[1:] + c[:-1])
+    return np.concatenate([[2 * c[0] - mid[0]], mid, [2 * c[-1] - mid[-1]]])
+
+
+def faces_picture(csv_path, png_path, widths, stages=("filling", "early_discharge"),
+                  hopper_height: float = 0.0) -> Path:
+    """The wall pressure of a rectangular plan over its developed wall, one panel per
+    recorded stage on a common colour scale: the bin's faces side by side round the
+    perimeter (:data:`PERIMETER`, each as wide as it is, ``widths = (bin_width,
+    bin_length)``), the height up; the hopper's faces below them, each sector at its fraction
+    of the face's width (the floor is in the file)."""
+    plt = _figure()
+    stages = [s for s in stages if np.any(np.asarray(read_csv(csv_path)["stage"]) == s)]
+    tables = [face_tables(csv_path, s) for s in stages]
+    top = max((np.nanmax(p) for t in tables for _, _, p in t.values()
+               if np.isfinite(p).any()), default=1.0)
+    fig, axes = plt.subplots(1, max(len(stages), 1), figsize=(6.0 * max(len(stages), 1), 5.0),
+                             squeeze=False)
+    mesh = None
+    for ax, stage, table in zip(axes[0], stages, tables):
+        start = 0.0
+        for face, forward in PERIMETER:
+            width = widths[1] if face.startswith("x") else widths[0]
+            for name in (face, "hopper_" + face):
+                if name not in table:
+                    continue
+                z, u, p = table[name]
+                u_edges = _edges(u)
+                u_edges = np.clip(u_edges, 0.0, 1.0)
+                x = start + width * (u_edges if forward else 1.0 - u_edges)
+                order = np.argsort(x)
+                grid = p if forward else p[:, ::-1]
+                z_edges = _edges(z)
+                if name == face and hopper_height > 0:
+                    z_edges[0] = max(z_edges[0], hopper_height)
+                elif name != face:
+                    z_edges = np.clip(z_edges, 0.0, hopper_height)
+                mesh = ax.pcolormesh(x[order], z_edges, grid, vmin=0.0, vmax=top,
+                                     cmap="magma", shading="flat")
+            ax.axvline(start, color="0.6", lw=0.6)
+            ax.text(start + 0.5 * width, 1.0, face, transform=ax.get_xaxis_transform(),
+                    ha="center", va="bottom", fontsize=7)
+            start += width
+        if hopper_height > 0:
+            ax.axhline(hopper_height, color="0.6", lw=0.6, ls=":")
+        ax.set_xlabel("perimeter (m) from the +x face, counter-clockwise")
+        ax.set_title(stage.replace("_", " "), pad=14)
+    axes[0, 0].set_ylabel("z (m)")
+    if mesh is not None:
+        fig.colorbar(mesh, ax=list(axes[0]), label="p_n (Pa)")
+    return _save(fig, png_path)
+
+
+def perimeter_picture(csv_path, png_path, widths, stages=("filling", "early_discharge"),
+                      n_heights: int = 3) -> Path:
+    """The wall pressure of a rectangular plan's bin along its perimeter at ``n_heights``
+    height bins, one panel per recorded stage (the faces' corners marked)."""
+    plt = _figure()
+    stages = [s for s in stages if np.any(np.asarray(read_csv(csv_path)["stage"]) == s)]
+    fig, axes = plt.subplots(1, max(len(stages), 1), figsize=(5.6 * max(len(stages), 1), 4.4),
+                             squeeze=False)
+    for ax, stage in zip(axes[0], stages):
+        table = face_tables(csv_path, stage)
+        if "x_plus" not in table:
+            continue
+        z_bins = table["x_plus"][0]
+        pick = np.unique(np.linspace(0, len(z_bins) - 1, n_heights).round().astype(int))
+        for c, b in enumerate(pick):
+            xs, ps = [], []
+            start = 0.0
+            for face, forward in PERIMETER:
+                width = widths[1] if face.startswith("x") else widths[0]
+                if face in table and b < len(table[face][0]):
+                    _, u, p = table[face]
+                    pos = start + width * (u if forward else 1.0 - u)
+                    order = np.argsort(pos)
+                    xs.append(pos[order])
+                    ps.append(p[b][order])
+                start += width
+            ax.plot(np.concatenate(xs), np.concatenate(ps), marker="o", ms=2.5, color=f"C{c}",
+                    label=f"z = {z_bins[b]:.3f} m")
+        start = 0.0
+        for face, _ in PERIMETER:
+            width = widths[1] if face.startswith("x") else widths[0]
+            ax.axvline(start, color="0.6", lw=0.6)
+            ax.text(start + 0.5 * width, 1.0, face, transform=ax.get_xaxis_transform(),
+                    ha="center", va="bottom", fontsize=7)
+            start += width
+        ax.set_xlabel("perimeter (m) from the +x face, counter-clockwise")
+        ax.set_ylabel("p_n (Pa)")
+        ax.set_title(stage.replace("_", " "), pad=14)
+        ax.legend(fontsize=7)
+    fig.tight_layout()
     return _save(fig, png_path)

@@ -36,6 +36,16 @@ carries the computed part's share, its image the rest.  The maps are of the whol
 image is binned, with its normal and meridional components as they are and its hoop component
 reversed (a reflection reverses the direction of increasing ``theta``).
 
+**A rectangular plan's faces** (:class:`FaceStretch`, :func:`face_patches`,
+:func:`locate_faces`): the same patches, recovery, images and maps with each plane face
+(:mod:`fipy_hopper.space.rectangular`) a stretch: ``s`` up its slope (from the outlet's edge on
+its side, carried on from a hopper's face to the bin's above it; the floor's along x), and
+across its width, in place of ``theta``, the fraction ``u`` of its width (0 at the ``-y`` end of
+an x face or the floor, the ``-x`` end of a y face), ``wall_sectors`` equal parts of it; the
+recovery's splines across are clamped cubic B-splines on ``u``; a mirror image may move to the
+facing face (:func:`image_maps`); the frame is the face's: ``n`` its normal, ``t`` up its
+slope, ``h`` along its width (``tau_theta`` is then the shear along the width).
+
 **Directions on the wall.**  At a wall point: ``n`` the unit normal into the wall (the
 surface's, :meth:`Part.lift`), ``t`` the unit tangent up the meridian (``d X / ds``), ``h`` the
 unit tangent around the circumference (``d X / d theta`` with its ``t`` part taken out, for a
@@ -157,10 +167,28 @@ class WallPatches:
     normal: np.ndarray
     tangent: np.ndarray
     hoop: np.ndarray
+    #: "revolved" (a circular silo: sectors around the circumference) or "faces" (a
+    #: rectangular plan: each stretch a plane face, its sectors equal parts of its width;
+    #: ``theta_deg`` then holds each sector's centre as a fraction of the width)
+    kind: str = "revolved"
 
     @property
     def n_bins(self) -> int:
         return len(self.s)
+
+    @property
+    def names(self) -> tuple:
+        """The wall of each stretch: ``"wall"`` on a circular silo, the face's name on a
+        rectangular plan (``x_plus``, ``hopper_x_plus``, ``floor``, ...)."""
+        return tuple(getattr(st3, "name", "wall") for st3 in self.stretches)
+
+    def sector_of_across(self, across) -> np.ndarray:
+        """The sector of wall points at ``across``: their angle (rad) around a circular
+        silo's part, or their fraction of a face's width (0 to 1)."""
+        if self.kind == "revolved":
+            return self.sector_of(np.degrees(across))
+        n = self.n_sectors
+        return np.clip(np.floor(np.asarray(across, float) * n).astype(np.int64), 0, n - 1)
 
     @property
     def n_sectors(self) -> int:
@@ -264,6 +292,18 @@ class StretchMap:
     basis_s: np.ndarray
     basis_t: np.ndarray
     basis_area: np.ndarray
+    #: a face's clamped knots across its width (fractions 0 to 1; None: the periodic
+    #: splines around a circumference)
+    across_knots: np.ndarray = None
+
+    def across(self, theta) -> np.ndarray:
+        """The basis across the stretch at ``theta`` (``(n, n_theta)``): the periodic cubic
+        splines around (rad), or a face's clamped cubic B-splines across its width
+        (fractions)."""
+        if self.across_knots is None:
+            return periodic_cubic(theta, self.n_theta)
+        from ..wall_traction import design
+        return design(self.across_knots, theta).toarray()
 
     def coefficients(self, s, theta, force) -> np.ndarray:
         """Spline coefficients ``(n_s_basis, n_theta, 3)`` (Pa) of forces ``force`` (n, 3)
@@ -271,7 +311,7 @@ class StretchMap:
         part of a carried-on floor beyond the bin)."""
         from ..wall_traction import design
         bs = design(self.knot_vector, s).toarray()                    # (n, ks)
-        bt = periodic_cubic(theta, self.n_theta)                       # (n, kt)
+        bt = self.across(theta)                                        # (n, kt)
         shares = np.einsum("ek,el,ec->klc", bs, bt, np.asarray(force, float))
         area = self.basis_area[..., None]
         return np.where(area > 0, shares / np.where(area > 0, area, 1.0), 0.0)
@@ -422,6 +462,269 @@ def images(mirror_x: bool, mirror_y: bool) -> list:
     return out
 
 
+def image_maps(patches, mirror_x: bool, mirror_y: bool) -> list:
+    """The mirror images of the computed part as maps of wall points, in the order of
+    :func:`images`: ``[f(stretch, s, across) -> (stretch, s, across, t_sign, h_sign), ...]``
+    (the image's stretch, arc length and across-coordinate, and the signs of its meridional
+    and hoop components).  Around a circular silo an image keeps its stretch and ``s``, maps
+    its angle and reverses the hoop (:func:`images`); on a rectangular plan it may move to the
+    facing face (``x_plus`` and ``x_minus`` across ``x = 0``, ``y_plus`` and ``y_minus``
+    across ``y = 0``), its fraction of the width reversed where the reflection reverses the
+    face's width (the hoop reversed with it), and the floor's ``s`` (along x) reversed across
+    ``x = 0`` (its meridional component with it)."""
+    if patches.kind == "revolved":
+        return [(lambda tmap, hsign: (lambda st, s, a: (st, s, tmap(a), 1.0, hsign)))(tmap, hsign)
+                for tmap, hsign, _ in images(mirror_x, mirror_y)]
+    specs = [(1.0, 1.0)]
+    if mirror_y:
+        specs.append((1.0, -1.0))
+    if mirror_x:
+        specs.append((-1.0, 1.0))
+    if mirror_x and mirror_y:
+        specs.append((-1.0, -1.0))
+    names = list(patches.names)
+    out = []
+    for rx, ry in specs:
+        perm, flip, sflip, total = [], [], [], []
+        for st3 in patches.stretches:
+            name = st3.name
+            if rx < 0:
+                name = name.replace("x_plus", "@").replace("x_minus", "x_plus").replace(
+                    "@", "x_minus")
+            if ry < 0:
+                name = name.replace("y_plus", "@").replace("y_minus", "y_plus").replace(
+                    "@", "y_minus")
+            perm.append(names.index(name))
+            across_y = st3.axis in (0, 2)          # x faces and the floor: across y
+            flip.append((ry < 0) if across_y else (rx < 0))
+            sflip.append(st3.axis == 2 and rx < 0)
+            total.append(st3.stretch.s_start + st3.stretch.s_end)
+        perm, flip, sflip, total = (np.append(np.asarray(a), d) for a, d in
+                                    ((perm, -1), (flip, False), (sflip, False), (total, 0.0)))
+
+        def image(st, s, a, perm=perm, flip=flip, sflip=sflip, total=total):
+            st = np.asarray(st, np.int64)
+            f, sf = flip[st], sflip[st]
+            return (perm[st], np.where(sf, total[st] - s, s), np.where(f, 1.0 - a, a),
+                    np.where(sf, -1.0, 1.0), np.where(f, -1.0, 1.0))
+        out.append(image)
+    return out
+
+
+# ---------------------------------------------------------------- a rectangular plan's faces
+@dataclass(frozen=True)
+class FaceStretch:
+    """A plane face of a rectangular plan as a stretch of the wall loads: its meridian
+    ``stretch`` (:class:`Meridian`: up the face's slope in ``(r, z)``, ``r`` the coordinate
+    along the face's outward axis; the floor's along ``x`` at ``z = 0``), the ``face``'s
+    index in :attr:`fipy_hopper.space.rectangular.RectangularSilo.faces`, its ``name``, its
+    outward ``axis`` (0 x, 1 y; 2 the floor) and ``side`` (+1, -1)."""
+
+    stretch: Meridian
+    face: int
+    name: str
+    axis: int
+    side: float
+    part: int = -1
+    clip_radius: float = math.inf
+
+
+def face_stretches(boundary, fill_level: float) -> list:
+    """The :class:`FaceStretch` es of a rectangular plan (the faces the material loads, up to
+    the fill level): the floor (along x from its ``-x`` edge), the hopper's faces (from the
+    foot's edge up their slope), the bin's faces (up from their foot; ``s`` carried on from
+    the hopper's face below, or on a flat floor from the outlet's edge on that side, as the
+    circular silo's meridian from the lip)."""
+    H = boundary.hopper_height
+    x0, x1, y0, y1 = boundary.foot
+    ex, ey = boundary.outlet_offset
+    half = boundary.half_extent
+    edge = {(0, 1.0): x1, (0, -1.0): -x0, (1, 1.0): y1, (1, -1.0): -y0}
+    if H <= 0.0:              # the outlet's edge on each side
+        ox, oy = 0.5 * boundary.outlet_x, 0.5 * boundary.outlet_y
+        edge = {(0, 1.0): ex + ox, (0, -1.0): -ex + ox, (1, 1.0): ey + oy,
+                (1, -1.0): -ey + oy}
+    out = []
+    slant = {}
+    for k in boundary.load_faces:
+        face = boundary.faces[k]
+        if face.kind == "floor":
+            out.append(FaceStretch(Meridian((x0, 0.0), (x1, 0.0), 0.0, face.segment), k,
+                                   face.name, 2, 1.0))
+            continue
+        key = (face.axis, face.side)
+        r_top = half[face.axis]
+        if face.kind == "hopper":
+            a, b = np.array([edge[key], 0.0]), np.array([r_top, H])
+            if fill_level < H:
+                b = a + (b - a) * fill_level / H
+            st = Meridian(tuple(a), tuple(b), 0.0, face.segment)
+            slant[key] = st.s_end
+        else:
+            if fill_level <= H:
+                continue
+            start = slant.get(key, r_top - edge[key])
+            st = Meridian((r_top, H), (r_top, min(fill_level, boundary.top)), float(start),
+                          face.segment)
+        out.append(FaceStretch(st, k, face.name, face.axis, face.side))
+    return out
+
+
+def _face_width(boundary, fs: FaceStretch, z) -> tuple:
+    """``(lo, hi)`` of a face's across-coordinate (y for the x faces and the floor, x for the
+    y faces) at heights ``z`` (m)."""
+    if fs.axis == 2:
+        _, _, y0, y1 = boundary.foot
+        return np.full(np.shape(z), y0), np.full(np.shape(z), y1)
+    x0, x1, y0, y1 = boundary.section(z)
+    return (y0, y1) if fs.axis == 0 else (x0, x1)
+
+
+def _face_surface(boundary, fs: FaceStretch, s, f):
+    """Point ``(3, ...)``, normal, meridional tangent, hoop tangent (the horizontal along the
+    face's width: ``+y`` on the x faces and the floor, ``+x`` on the y faces) and the area
+    factor (the face's width there) at arc lengths ``s`` and width fractions ``f``."""
+    st = fs.stretch
+    r, z = st.point(s)
+    r, z, f = np.broadcast_arrays(np.asarray(r, float), np.asarray(z, float),
+                                  np.asarray(f, float))
+    lo, hi = _face_width(boundary, fs, z)
+    u = lo + f * (hi - lo)
+    face = boundary.faces[fs.face]
+    shape = (3,) + (1,) * r.ndim
+    if fs.axis == 2:
+        point = np.stack([r, u, z])
+        tangent = np.array([1.0, 0.0, 0.0])
+        hoop = np.array([0.0, 1.0, 0.0])
+    else:
+        a = fs.axis
+        out = fs.side * r
+        point = np.stack([out, u, z] if a == 0 else [u, out, z])
+        tr, tz = st.tangent
+        tangent = np.zeros(3)
+        tangent[a], tangent[2] = fs.side * tr, tz
+        hoop = np.eye(3)[1 - a]
+    n = np.broadcast_to(face.normal.reshape(shape), point.shape)
+    return (point, n, np.broadcast_to(tangent.reshape(shape), point.shape),
+            np.broadcast_to(hoop.reshape(shape), point.shape), hi - lo)
+
+
+def face_patches(boundary, fill_level: float, width: float, n_sectors: int,
+                 knot_spacing: float | None = None) -> tuple:
+    """The :class:`WallPatches` (``kind = "faces"``) of a rectangular plan and each face's
+    :class:`StretchMap`: per face its bins of about ``width`` m up its slope (the floor's
+    along x) times ``n_sectors`` equal parts of its width; areas by Gauss quadrature of the
+    width along ``s`` (the floor's outlet left out); the recovery's clamped cubic splines
+    along ``s`` and across the width, knots about ``knot_spacing`` (not closer than
+    ``width``) apart (across: at the face's mean width)."""
+    from ..wall_traction import DEGREE, design, knots
+
+    spacing = max(width, knot_spacing or 0.0)
+    stretches = tuple(face_stretches(boundary, fill_level))
+    cols = {k: [] for k in ("stretch", "segment", "s", "lo", "hi", "r", "z")}
+    maps = []
+    f_edges = np.linspace(0.0, 1.0, n_sectors + 1)
+    f_centre = 0.5 * (f_edges[1:] + f_edges[:-1])
+    first = 0
+    for k, fs in enumerate(stretches):
+        st = fs.stretch
+        edges = bin_edges(st, width)
+        centres = 0.5 * (edges[1:] + edges[:-1])
+        r, z = st.point(centres)
+        n = len(centres)
+        cols["stretch"].append(np.full(n, k))
+        cols["segment"].append(np.full(n, st.segment))
+        cols["s"].append(centres)
+        cols["lo"].append(edges[:-1])
+        cols["hi"].append(edges[1:])
+        cols["r"].append(np.asarray(r, float))
+        cols["z"].append(np.asarray(z, float))
+        kv = knots(st, spacing)
+        z_mid = float(st.point(0.5 * (st.s_start + st.s_end))[1])
+        lo_m, hi_m = _face_width(boundary, fs, np.array(z_mid))
+        n_f = max(1, int(round(float(hi_m - lo_m) / spacing)))
+        inner = np.linspace(0.0, 1.0, n_f + 1)
+        kf = np.concatenate([[0.0] * DEGREE, inner, [1.0] * DEGREE])
+        s_q, ws, _ = _gauss_pieces(np.unique(np.concatenate(
+            [kv[DEGREE:len(kv) - DEGREE], edges])))
+        f_q, wf, _ = _gauss_pieces(np.unique(np.concatenate([inner, f_edges])))
+        bin_q = np.clip(np.searchsorted(edges, s_q, side="right") - 1, 0, n - 1)
+        sector_q = np.clip(np.searchsorted(f_edges, f_q, side="right") - 1, 0, n_sectors - 1)
+        S, F = np.meshgrid(s_q, f_q, indexing="ij")
+        point, _, _, _, factor = _face_surface(boundary, fs, S, F)
+        open_ = boundary.faces[fs.face].outside_hole(point)
+        weight = np.where(open_, factor, 0.0) * ws[:, None] * wf[None, :]
+        basis_s = design(kv, s_q).toarray()
+        basis_t = design(kf, f_q).toarray()
+        area = np.einsum("ik,ij,jl->kl", basis_s, weight, basis_t)
+        maps.append(StretchMap(fs, first + np.arange(n), kv, basis_t.shape[1], s_q, f_q, weight,
+                               bin_q, sector_q, basis_s, basis_t, area, kf))
+        first += n
+    cols = {k: np.concatenate(v) for k, v in cols.items()}
+    nb = len(cols["s"])
+    area = np.zeros((nb, n_sectors))
+    for sm in maps:
+        area[sm.bins] = sm.patch_sums(sm.weight)
+    centre, normal, tangent, hoop = (np.zeros((3, nb, n_sectors)) for _ in range(4))
+    for b in range(nb):
+        fs = stretches[cols["stretch"][b]]
+        S = np.full(n_sectors, cols["s"][b])
+        centre[:, b], normal[:, b], tangent[:, b], hoop[:, b], _ = _face_surface(
+            boundary, fs, S, f_centre)
+    patches = WallPatches(stretches, cols["stretch"], cols["segment"], cols["s"], cols["lo"],
+                          cols["hi"], cols["r"], cols["z"], f_centre, area, centre, normal,
+                          tangent, hoop, kind="faces")
+    return patches, tuple(maps)
+
+
+def locate_faces(boundary, stretches, x, y, z, face=None):
+    """Where points ``(x, y, z)`` (m) lie on a rectangular plan's faces: ``(stretch, s, f,
+    normal (3, n), tangent, hoop)``, ``f`` the fraction of the face's width (0 at its ``-y``
+    end on the x faces and the floor, its ``-x`` end on the y faces).  A point's face is its
+    entry's ``face`` (when given and a loaded face), else its nearest loaded face (a convex
+    edge's entries, the cells next to the wall; of faces as near within 1e-9 m the first in
+    :attr:`~fipy_hopper.space.rectangular.RectangularSilo.load_faces`' order, which a mirror
+    image keeps); ``stretch`` -1 for the tube's entries and a
+    face with no stretch (above the fill level)."""
+    x, y, z = (np.atleast_1d(np.asarray(a, float)) for a in (x, y, z))
+    n = len(x)
+    p = np.stack([x, y, z])
+    by_face = {fs.face: k for k, fs in enumerate(stretches)}
+    loaded = boundary.load_faces
+    if face is None:
+        face = np.full(n, -2, np.int64)
+    face = np.asarray(face, np.int64).copy()
+    need = face == -2
+    if need.any():
+        best = np.full(int(need.sum()), np.inf)
+        pick = np.full(int(need.sum()), -1, np.int64)
+        for k in loaded:             # ties (within 1e-9 m) go to the first face, so that a
+            d = boundary.faces[k].nearest(p[:, need])[0]     # mirror image goes to the image
+            closer = d < best - 1e-9
+            best = np.where(closer, d, best)
+            pick = np.where(closer, k, pick)
+        face[need] = pick
+    stretch = np.array([by_face.get(int(k), -1) for k in face], np.int64)
+    s, f = np.zeros(n), np.zeros(n)
+    normal, tangent, hoop = np.zeros((3, n)), np.zeros((3, n)), np.zeros((3, n))
+    for k, fs in enumerate(stretches):
+        on = stretch == k
+        if not on.any():
+            continue
+        st = fs.stretch
+        a, tv = np.asarray(st.start), st.tangent
+        r = x[on] if fs.axis == 2 else fs.side * p[fs.axis, on]
+        u = np.clip((r - a[0]) * tv[0] + (z[on] - a[1]) * tv[1], 0.0, st.length)
+        s[on] = st.s_start + u
+        _, zq = st.point(s[on])
+        lo, hi = _face_width(boundary, fs, np.asarray(zq, float))
+        across = y[on] if fs.axis in (0, 2) else x[on]
+        f[on] = np.clip((across - lo) / (hi - lo), 0.0, 1.0)
+        _, normal[:, on], tangent[:, on], hoop[:, on], _ = _face_surface(boundary, fs, s[on],
+                                                                          f[on])
+    return stretch, s, f, normal, tangent, hoop
+
+
 class SpaceWallLoads:
     """The wall loads of a :class:`~fipy_hopper.space.model.SpaceModel`: its contact entries
     and the cells next to its wall located on the wall's :class:`WallPatches`, the maps of the
@@ -445,7 +748,8 @@ class SpaceWallLoads:
     def __init__(self, model):
         self.model = model
         cfg, g = model.cfg, model.grid
-        self.patches, self.stretch_maps = wall_patches(
+        self.faces = model.boundary.plan == "rectangular"
+        self.patches, self.stretch_maps = (face_patches if self.faces else wall_patches)(
             model.boundary, cfg.hopper.fill_level, cfg.wall_bin_width_at(g.h),
             cfg.wall_sectors, KNOT_CELLS * g.h)
         P = self.patches
@@ -458,19 +762,26 @@ class SpaceWallLoads:
         #: each wall entry's node ``(k, j, i)`` and its position ``(3, n)`` (m)
         self.entry_node = where
         self.entry_xyz = np.stack([x, y, z])
+        if self.faces:
+            #: the face of each wall entry (a rectangular plan's, -2 a convex edge's)
+            self.entry_face = np.asarray(model.contacts[8], np.int64)
+            where = locate_faces(model.boundary, P.stretches, x, y, z, self.entry_face)
+        else:
+            where = locate(model.boundary, P.stretches, x, y, z, segment)
         (self.entry_stretch, self.entry_s, self.entry_theta, self.entry_normal,
-         self.entry_tangent, self.entry_hoop) = locate(model.boundary, P.stretches, x, y, z,
-                                                       segment)
+         self.entry_tangent, self.entry_hoop) = where
         segment_of = np.array([st.stretch.segment for st in P.stretches] + [-1])
         #: the profile segment whose load each entry is (-1: the tube's, not a load)
         self.entry_segment = segment_of[self.entry_stretch]
         self.images = images(g.mirror_x, g.mirror_y)
+        self.image_maps = image_maps(P, g.mirror_x, g.mirror_y)
         on = np.flatnonzero(self.entry_stretch >= 0)
         self._on = on
-        bins = P.bin_of(self.entry_stretch[on], self.entry_s[on])
-        self._bin_sector = [(bins, P.sector_of(np.degrees(tmap(self.entry_theta[on]))), hsign)
-                            for tmap, hsign, _ in self.images]
-        self._image_theta = [tmap(self.entry_theta[on]) for tmap, _, _ in self.images]
+        #: per image, the entries' ``(stretch, s, across, t_sign, h_sign)`` on the wall
+        self._image = [m(self.entry_stretch[on], self.entry_s[on], self.entry_theta[on])
+                       for m in self.image_maps]
+        self._bin_sector = [(P.bin_of(st, s), P.sector_of_across(a), hsign, tsign, st)
+                            for st, s, a, tsign, hsign in self._image]
         self._band = None
 
     # ------------------------------------------------------------------ readings
@@ -499,9 +810,9 @@ class SpaceWallLoads:
         P = self.patches
         out = np.zeros((P.n_bins, P.n_sectors, 3))
         v = np.asarray(values, float)[self._on]
-        for bins, sectors, hsign in self._bin_sector:
+        for bins, sectors, hsign, tsign, _ in self._bin_sector:
             flat = bins * P.n_sectors + sectors
-            for c, sign in ((0, 1.0), (1, 1.0), (2, hsign)):
+            for c, sign in ((0, 1.0), (1, tsign), (2, hsign)):
                 out[..., c] += np.bincount(flat, sign * v[:, c],
                                            P.n_bins * P.n_sectors).reshape(P.n_bins, -1)
         return out
@@ -519,16 +830,14 @@ class SpaceWallLoads:
         the entries' ``forces`` ``(f_n, f_t, f_h)`` (n_entries, 3)."""
         P = self.patches
         f = np.asarray(forces, float)[self._on]
-        stretch = self.entry_stretch[self._on]
-        s = self.entry_s[self._on]
         out = np.zeros((P.n_bins, P.n_sectors, 3))
         for k, sm in enumerate(self.stretch_maps):
-            on = stretch == k
             ss, tt, ff = [], [], []
-            for (_, hsign, _), theta in zip(self.images, self._image_theta):
+            for st, s, theta, tsign, hsign in self._image:
+                on = st == k
                 ss.append(s[on])
                 tt.append(theta[on])
-                ff.append(f[on] * np.array([1.0, 1.0, hsign]))
+                ff.append(f[on] * _signs(tsign, hsign, on))
             coefficients = sm.coefficients(np.concatenate(ss), np.concatenate(tt),
                                            np.concatenate(ff))
             out[sm.bins] = sm.patch_integrals(coefficients)
@@ -564,8 +873,9 @@ class SpaceWallLoads:
             band = (d >= 0.5 * g.h) & (d <= 2.5 * g.h) & (g.kappa > 0) & (Z > 0.0) & (
                 Z < m.cfg.hopper.fill_level)
             cells = np.flatnonzero(band.ravel())
-            where = locate(m.boundary, self.patches.stretches, X.ravel()[cells],
-                           Y.ravel()[cells], Z.ravel()[cells])
+            where = (locate_faces if self.faces else locate)(
+                m.boundary, self.patches.stretches, X.ravel()[cells], Y.ravel()[cells],
+                Z.ravel()[cells])
             keep = where[0] >= 0
             self._band = (cells[keep],) + tuple(w[..., keep] for w in where)
         return self._band
@@ -582,7 +892,7 @@ class SpaceWallLoads:
         trac = np.einsum("mij,jm->im", sig, n)
         vals = np.stack([-(trac * n).sum(axis=0), (trac * t).sum(axis=0),
                          (trac * hv).sum(axis=0)], axis=1)
-        mean = self._patch_means(state, vals, (1.0, 1.0, -1.0))
+        mean = self._patch_means(state, vals, "nth")
         return mean[..., 0], mean[..., 1], mean[..., 2]
 
     def vertical_stress_map(self, state) -> np.ndarray:
@@ -590,25 +900,26 @@ class SpaceWallLoads:
         the wall of each patch (n_bins, n_sectors), weighted as :meth:`stress_maps`; NaN where
         a patch holds no material."""
         cells = self._wall_band()[0]
-        return self._patch_means(state, state.sigma.reshape(-1, 6)[cells, 2:3], (1.0,))[..., 0]
+        return self._patch_means(state, state.sigma.reshape(-1, 6)[cells, 2:3], "n")[..., 0]
 
-    def _patch_means(self, state, vals, reflected) -> np.ndarray:
+    def _patch_means(self, state, vals, kinds) -> np.ndarray:
         """The weighted means per patch (n_bins, n_sectors, k) of the band cells' values
-        ``vals`` (m, k), over every image (``reflected``: each column's sign in a reflected
-        image), weights ``alpha kappa V`` where ``alpha > 1/2``; NaN where there is none."""
+        ``vals`` (m, k), over every image (``kinds``: each column a normal or scalar ``"n"``,
+        meridional ``"t"`` or hoop ``"h"`` component, signed as the image's), weights ``alpha
+        kappa V`` where ``alpha > 1/2``; NaN where there is none."""
         cells, stretch, s, theta = self._wall_band()[:4]
         P = self.patches
         alpha = state.alpha.ravel()[cells]
         w = np.where(alpha > 0.5, (state.alpha * self.model.open_volume).ravel()[cells], 0.0)
-        bins = P.bin_of(stretch, s)
         k = vals.shape[1]
         total = np.zeros((P.n_bins, P.n_sectors, k))
         weight = np.zeros(P.n_bins * P.n_sectors)
-        for tmap, hsign, _ in self.images:
-            flat = bins * P.n_sectors + P.sector_of(np.degrees(tmap(theta)))
+        for image in self.image_maps:
+            st, si, across, tsign, hsign = image(stretch, s, theta)
+            flat = P.bin_of(st, si) * P.n_sectors + P.sector_of_across(across)
             weight += np.bincount(flat, w, len(weight))
             for c in range(k):
-                sign = reflected[c] if hsign < 0 else 1.0
+                sign = {"n": 1.0, "t": tsign, "h": hsign}[kinds[c]]
                 total[..., c] += np.bincount(flat, sign * w * vals[:, c],
                                              len(weight)).reshape(P.n_bins, -1)
         weight = weight.reshape(P.n_bins, -1)
@@ -653,6 +964,16 @@ class SpaceWallLoads:
         return out
 
 
+def _signs(tsign, hsign, on) -> np.ndarray:
+    """The component signs ``(1, t_sign, h_sign)`` of an image's entries ``on``: ``(3,)``
+    for scalar signs, else ``(m, 3)``."""
+    if np.ndim(tsign) == 0 and np.ndim(hsign) == 0:
+        return np.array([1.0, tsign, hsign])
+    t = np.broadcast_to(tsign, on.shape)[on]
+    h = np.broadcast_to(hsign, on.shape)[on]
+    return np.stack([np.ones(len(t)), t, h], axis=1)
+
+
 def circumference_extremes(p) -> tuple:
     """``(largest, smallest, ratio)`` (n_bins,) of a map ``p`` (n_bins, n_sectors) around the
     circumference at each height bin (NaN where a bin has no finite sector; the ratio NaN
@@ -693,7 +1014,9 @@ class PatchLoads:
         self.z = np.repeat(P.z, ns)
         self.theta = np.tile(P.theta_deg, P.n_bins)
         self.segment = np.repeat(P.segment, ns)
-        self.bins = _PatchNames(np.full(P.n_bins * ns, "wall"))
+        names = np.asarray(P.names, dtype=object)[P.stretch] if P.kind == "faces" else \
+            np.full(P.n_bins, "wall", dtype=object)
+        self.bins = _PatchNames(np.repeat(names, ns).astype(str))
         self.sampler = self
 
     # -------------------------------------------------------------- the loop's interface
@@ -738,10 +1061,12 @@ class PatchLoads:
         (its vertical stretch, two bins clear of the transition and of the fill level, as the
         sections' :func:`fipy_hopper.diagnostics.wall_k`) of ``p_n / (-sigma_zz)`` of the
         cells next to it; NaN without a bin wall."""
+        P = self.patches
+        if P.kind == "faces":
+            return self._face_wall_k(p_n, state)
         bnd = self.model.cfg.boundary
         if bnd.transition("wall") is None:
             return math.nan
-        P = self.patches
         s_t = bnd.transition_s("wall")
         s_top = bnd.arc_at_height("wall", bnd.fill_level)
         width = np.repeat(P.hi - P.lo, P.n_sectors)
@@ -750,6 +1075,23 @@ class PatchLoads:
         szz = self.space.vertical_stress_map(state).ravel()
         keep = (vertical & (self.centres > s_t + 2 * width) & (self.centres < s_top - 2 * width)
                 & np.isfinite(szz) & (szz < 0.0) & np.isfinite(p_n))
+        if not keep.any():
+            return math.nan
+        return float(np.median(np.asarray(p_n)[keep] / -szz[keep]))
+
+    def _face_wall_k(self, p_n, state) -> float:
+        """:meth:`wall_k` of a rectangular plan: the median over the bin's faces' patches two
+        bins clear of the transition and the fill level (by height) of ``p_n / (-sigma_zz)``
+        of the cells next to them."""
+        P = self.patches
+        bnd = self.model.boundary
+        width = np.repeat(P.hi - P.lo, P.n_sectors)
+        on_bin = np.repeat([bnd.faces[P.stretches[k].face].kind == "bin" for k in P.stretch],
+                           P.n_sectors)
+        szz = self.space.vertical_stress_map(state).ravel()
+        keep = (on_bin & (self.z > bnd.bin_foot + 2 * width)
+                & (self.z < bnd.fill_level - 2 * width) & np.isfinite(szz) & (szz < 0.0)
+                & np.isfinite(p_n))
         if not keep.any():
             return math.nan
         return float(np.median(np.asarray(p_n)[keep] / -szz[keep]))
@@ -797,4 +1139,45 @@ def summary_3d(sim, patches) -> dict:
                                        rule=sim.flow_rule)
     out["wall_slip_ratio_by_sector"] = [float(r) for r in ratio]
     out["flow_mode_by_sector"] = calls
+    if P.kind == "faces":
+        out.update(face_summary(rec, P))
+    return out
+
+
+def corner_pressures(p, patches) -> dict:
+    """The pressure at each of the bin's vertical corners of a rectangular plan, per height
+    bin of the bin's faces: ``{corner: (z (n,), p (n,))}`` (Pa), the mean of the two faces'
+    patches in the sectors at the corner (the first or the last of each face's width), from a
+    map ``p`` (n_bins, n_sectors); corners :data:`fipy_hopper.space.rectangular.CORNERS`.
+    The corner's own end of a face is its ``+`` end (the last sector) for the ``_plus`` face
+    across it, else its first."""
+    from .rectangular import CORNERS
+
+    p = np.asarray(p, float)
+    names = patches.names
+    rows = {name: np.flatnonzero(patches.stretch == names.index(name))
+            for name in ("x_plus", "x_minus", "y_plus", "y_minus") if name in names}
+    out = {}
+    for corner, fx, fy in CORNERS:
+        if fx not in rows or fy not in rows or len(rows[fx]) != len(rows[fy]):
+            continue
+        # the x face's sector at y = +-L/2, the y face's at x = +-B/2
+        kx = -1 if fy == "y_plus" else 0
+        ky = -1 if fx == "x_plus" else 0
+        out[corner] = (patches.z[rows[fx]], 0.5 * (p[rows[fx], kx] + p[rows[fy], ky]))
+    return out
+
+
+def face_summary(rec, patches) -> dict:
+    """The rectangular plan's keys of ``summary.json``: each height bin's face
+    (``wall_bins_face``), and per recorded stage the pressure at the bin's corners per height
+    bin of its faces, ``<stage>_corner_pressure_Pa`` ``{corner: [...]}``
+    (:func:`corner_pressures`; their heights ``corner_z_m``)."""
+    out = {"wall_bins_face": [patches.names[k] for k in patches.stretch]}
+    for stage, p in stage_maps(rec, patches.n_sectors).items():
+        corners = corner_pressures(p, patches)
+        out[f"{stage}_corner_pressure_Pa"] = {c: [float(v) for v in pc]
+                                              for c, (_, pc) in corners.items()}
+        if corners and "corner_z_m" not in out:
+            out["corner_z_m"] = [float(z) for z in next(iter(corners.values()))[0]]
     return out
