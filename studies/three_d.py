@@ -35,13 +35,9 @@ eccentric cone's sections are circles sliding from the outlet's centre to the ax
 bin wall's foot), cubes of ``cell_size`` (2 cm: 3 cells across the outlet's radius, the least
 the configuration accepts), by the default mirror planes (a quarter when centred, else the
 half ``y >= 0``), ``wall_sectors`` (12) sectors.  The bin's radius is 16 cells so that every
-offset (0.08, 0.16 and 0.24 m) is a whole number of cells, and 1 cell of floor is left beside
-the outlet at e/R = 0.75: the 3D grid flags its outlet faces by their centres, and with the
-outlet's centre between nodes the faces at the hole's edge that are partly open but centred
-outside it pass material down uncounted (the discharged mass, the rate and the mass balance
-come out low: 0.3-1.5 % of the fill in 0.3 s of discharge, measured at 2 cm with offsets of
-2.5 and 3.25 cells); :func:`setup` warns of such offsets.  Each runs ``end_time`` s of
-discharge: by default the time Beverloo's rate (:func:`fipy_hopper.api.expected_quantities`)
+offset (0.08, 0.16 and 0.24 m) is a whole number of cells (the near wall's cells the same
+for every offset), and 1 cell of floor is left beside the outlet at e/R = 0.75.  Each runs
+``end_time`` s of discharge: by default the time Beverloo's rate (:func:`fipy_hopper.api.expected_quantities`)
 takes to discharge ``drained_fraction`` (0.15) of the fill, rounded up to half a second: past
 the 90 % stage and its load window, with the loop's steady rate measured from 90 % left on.
 Measured per case:
@@ -236,7 +232,8 @@ def end_time(config: dict, opts) -> float:
 
 
 def offset_cells(e_over_r: float, opts) -> float:
-    """The outlet's offset in cells (:func:`setup` warns when it is not a whole number)."""
+    """The outlet's offset in cells (the default's are whole numbers: the near wall's cells
+    are then the same for every offset)."""
     return float(e_over_r) * 0.5 * opts["bin_diameter"] / opts["cell_size"]
 
 
@@ -256,18 +253,6 @@ def setup(quick: bool = False, **options) -> dict:
                                              "dimensions": config["hopper"].get("dimensions", 2),
                                              "e_over_R": 0.0}, config,
                                       plots=opts["case_plots"]))
-    uneven = [e for e in opts["eccentricities"]
-              if abs(offset_cells(e, opts) - round(offset_cells(e, opts))) > 1e-6]
-    if uneven and opts["families"]:
-        import warnings
-
-        warnings.warn(
-            f"outlet offsets e/R = {', '.join(f'{e:g}' for e in uneven)} are not whole cells "
-            f"({', '.join(f'{offset_cells(e, opts):.3g}' for e in uneven)} cells): the 3D grid "
-            "flags its outlet faces by their centres, and faces at the hole's edge that are "
-            "partly open but centred outside it pass material down uncounted, so the "
-            "discharged mass, the rate and the mass balance come out low (measured here: "
-            "0.3-1.5 % of the fill in 0.3 s at 2 cm)", stacklevel=2)
     for family in opts["families"]:
         for e in opts["eccentricities"]:
             config = family_config(family, e, opts)

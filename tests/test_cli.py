@@ -357,8 +357,8 @@ def test_help_everywhere(argv, capsys):
 
 def test_force_leaves_nothing_of_the_earlier_run(run_dir, tmp_path, capsys):
     """A directory with every picture the package draws (:data:`plotting.PICTURES`: the
-    discharge run's six, a Lagrangian mesh picture drawn into it and a 3D run's three and its
-    ``wall_extremes.csv`` put there), then ``--force`` with a fill-only configuration, which
+    discharge run's six, a Lagrangian mesh picture drawn into it, a 3D run's three (a
+    rectangular plan's two more) and its ``wall_extremes.csv`` put there), then ``--force`` with a fill-only configuration, which
     draws fewer: the directory holds exactly what the same run writes into an empty one (no
     picture, table or snapshot of the earlier run)."""
     from fipy_hopper import plotting
@@ -366,7 +366,8 @@ def test_force_leaves_nothing_of_the_earlier_run(run_dir, tmp_path, capsys):
     old = tmp_path / "old"
     shutil.copytree(run_dir, old)
     plotting._save(plotting.lagrangian_mesh(old), old / "lagrangian_mesh.png")
-    for name in ("flow_plane.png", "wall_circumference.png", "wall_unrolled.png"):
+    for name in ("flow_plane.png", "wall_circumference.png", "wall_unrolled.png",
+                 "wall_faces.png", "wall_perimeter.png"):
         shutil.copy(old / "discharge.png", old / name)          # as a 3D run's
     (old / "wall_extremes.csv").write_text("stage,s_m\n")
     every = {p.name for p in plotting.PICTURES}

@@ -141,12 +141,15 @@ def test_janssen_bin_at_rest_wall_and_floor_carry_the_weight():
     assert abs(wall / (weight - janssen_floor) - 1.0) < 0.15
 
 
-def test_discharge_mass_balance():
-    """The small conical silo (a quarter, 2 cm) filled for a gravity ramp, then discharged for
-    0.15 s through its outlet: the mass above the outlet plane plus the mass discharged
-    through it is the initial mass to 1e-9, the mass in the grid plus the mass that left it
-    too, and material has left."""
-    model = SpaceModel(small_silo())
+@pytest.mark.parametrize("offset", [0.0, 0.05], ids=["centred", "offset 2.5 cells"])
+def test_discharge_mass_balance(offset):
+    """The small conical silo (2 cm; a quarter, or a half with the outlet 2.5 cells off the
+    axis, its centre between nodes) filled for a gravity ramp, then discharged for 0.15 s
+    through its outlet: the mass above the outlet plane plus the mass discharged through it
+    is the initial mass to 1e-9, the mass in the grid plus the mass that left it too, and
+    material has left.  (Broken once: with only the faces whose centre lies in the hole
+    counted as the outlet's, the offset case lost 0.3-0.55 % of its fill uncounted.)"""
+    model = SpaceModel(small_silo(outlet_offset=offset))
     s = model.initial_state()
     m0 = model.mass_in_hopper(s)
     while s.t < model.ramp_time:
