@@ -354,6 +354,36 @@ def _element(s):
             f"{m[1]} paths", {"max_rel_error": float(m[3]), "tests": int(m[1])})
 
 
+def _funnel_convergence(s):
+    m = s.finding(r"^funnel, default \(([\d., ]+) mm\): .*?; out in ([\d.]+) s ([\d., ]+) kg, "
+                  r"changes ([-\d., n/a]+) %")
+    changes = [None if c.strip() == "n/a" else float(c) for c in m[4].split(",")]
+    sizes = [float(h) for h in m[1].split(",")]
+    finite = [abs(c) for c in changes if c is not None]
+    return (f"mass out in {m[2]} s changes {m[4].strip()} % from {sizes[0]:g} to "
+            f"{sizes[-1]:g} mm cells (μ(I), d = 1 mm)",
+            {"cell_sizes_mm": sizes, "mass_out_kg": [float(v) for v in m[3].split(",")],
+             "changes_pct": changes, "last_change_pct": changes[-1],
+             "largest_change_pct": max(finite) if finite else None})
+
+
+def _beverloo_k(s):
+    m = s.finding(r"W = A \(D0 - k d\)\^n over (\d+) cases \(k and n free\): k = ([\d.]+), "
+                  r"n = ([\d.]+)")
+    return (f"k = {m[2]}, n = {m[3]} fitted over {m[1]} outlets and grain sizes (Beverloo: "
+            f"k 1.3–1.6 for spheres, n = 2.5)",
+            {"k": float(m[2]), "n": float(m[3]), "cases": int(m[1])})
+
+
+def _shear_band(s):
+    m = s.finding(r"Wall at ([\d.]+) m/s, d = 1 mm: the band is ([\d.]+), ([\d.]+) mm wide at "
+                  r"([\d.]+), ([\d.]+) mm cells = ([\d.]+), ([\d.]+) grains \(change ([\d.]+) %\)")
+    return (f"{m[6]} and {m[7]} grains wide at {m[4]} and {m[5]} mm cells (change {m[8]} %; "
+            f"the plain law: one cell)",
+            {"wall_speed_m_s": float(m[1]), "width_mm": [float(m[2]), float(m[3])],
+             "width_grains": [float(m[6]), float(m[7])], "change_pct": float(m[8])})
+
+
 V, W, D, L = ("tests/test_validation.py", "tests/test_wall_loads.py", "tests/test_discharge.py",
               "tests/test_wedge.py")
 T = "tests/test_wall_traction.py"
@@ -385,7 +415,7 @@ CLAIMS = (
           (f"{W}::test_at_rest_the_wall_and_the_plate_carry_the_weight",), readme=True),
     Claim("cone_walker", "The cone's wall pressure at rest against Walker's slice method",
           "wall_pressure", _cone_walker,
-          (f"{V}::test_filled_cone_pressure_against_walker",), readme=True),
+          (f"{T}::test_filled_cone_pressure_against_walker",), readme=True),
     Claim("bin_janssen", "The bin's wall pressure at rest against Janssen", "wall_pressure",
           _bin_janssen, (f"{W}::test_tall_flat_bin_reaches_janssens_asymptote",)),
     Claim("wall_smoothness", "The wall pressure along a wall that cuts the cells, at rest",
@@ -394,7 +424,7 @@ CLAIMS = (
     Claim("wall_convergence", "The wall-pressure profile under grid refinement",
           "wall_pressure", _wall_convergence,
           (f"{T}::test_the_profile_at_rest_converges_bin_by_bin",
-           f"{V}::test_filled_wall_pressure_converges_with_the_cell_size"), readme=True),
+           f"{T}::test_filled_wall_pressure_converges_with_the_cell_size"), readme=True),
     Claim("discharge_loads_stiffness", "Discharge wall loads against the softened stiffness "
           "E (indicative in the bin)", "wall_pressure", _discharge_loads_e,
           (f"{W}::test_filled_loads_do_not_depend_on_the_stiffness",

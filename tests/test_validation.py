@@ -10,12 +10,14 @@ stated beside it (``docs/validation.md`` quotes these docstrings).  A claim held
 - the outlet exponent at 4 mm cells (n = 2.5 +- 0.25): ``test_discharge.py::
   test_outlet_scaling_exponent`` (slow);
 - the filled loads do not depend on E, and the wall and plate carry the weight:
-  ``test_wall_loads.py``.
+  ``test_wall_loads.py``;
+- the cone's pressure at rest against Walker and the profile at rest under refinement:
+  ``test_wall_traction.py`` (one fixture of the reference at rest at 7.5 to 2.5 mm for every
+  test of the profile at rest).
 
 Cases: the discharge study's hopper (0.24 m bin, 0.12 m fill, 30 deg cone, phi = 30 deg,
 phi_w = 15 deg, 5 mm cells, 0.8 s of discharge), the convergence study's hopper (0.2 m bin,
-0.15 m fill, 30 deg cone, 0.06 m outlet), and the reference hopper (0.3 m bin, 20 deg cone)
-filled to rest.  About 90 s on one core.
+0.15 m fill, 30 deg cone, 0.06 m outlet).
 """
 
 import math
@@ -26,7 +28,7 @@ import pytest
 
 from fipy_hopper import theory
 from fipy_hopper.config import HopperConfig
-from fipy_hopper.diagnostics import fit_power_law, relative_l2
+from fipy_hopper.diagnostics import fit_power_law
 from fipy_hopper.model import HopperModel
 from fipy_hopper.simulation import Simulation
 
@@ -148,63 +150,3 @@ def test_rate_does_not_depend_on_the_stiffness(convergence_rates):
     rates = [convergence_rates[(0.0075, e)] for e in (2e6, 5e6, 20e6)]
     spread = (max(rates) - min(rates)) / np.mean(rates)
     assert spread < 0.02, rates
-
-
-# ---------------------------------------------------------------- wall loads at rest
-REFERENCE = {"bin_diameter": 0.3, "fill_height": 0.3, "half_angle_deg": 20.0,
-             "outlet_diameter": 0.06}
-WALL_CELLS = (0.0075, 0.005, 0.00375, 0.0025)
-WALL_BIN = 0.015            # m: every grid's wall bins ("auto" at 5 mm and finer)
-
-
-@pytest.fixture(scope="module")
-def filled_reference():
-    """``{cell: (cfg, s, r, z, p_n)}``: the reference hopper filled to rest (fill-only runs),
-    on the same wall bins at every cell size."""
-    out = {}
-    for cell in WALL_CELLS:
-        cfg = config(REFERENCE, cell, end_time=0.0, wall_bin_width=WALL_BIN)
-        sim = Simulation(HopperModel(cfg), progress=False)
-        assert sim.fill(), "the fill did not come to rest"
-        _, s, r, z, p, _ = sim.record.wall["filling"]
-        out[cell] = (cfg, s, r, z, p)
-    return out
-
-
-def test_filled_cone_pressure_against_walker(filled_reference):
-    """The cone's filled pressure against Walker's slice method (headline ``cone_walker``).
-
-    Held on every grid from 7.5 to 2.5 mm: the mean wall pressure over the cone within 5 % of
-    Walker's filling solution started from Janssen's vertical stress at the transition
-    (K = 1 - sin phi).  Why 5 %: the slice method takes the vertical stress uniform across each
-    slice; taking the oedometric K = nu / (1 - nu) = 0.43 of the elastic fill (the measured wall
-    K is 0.41) in place of 0.5 moves Walker's mean by 2 %.  Measured -2.2, -0.7, +0.1, -0.2 %."""
-    for cell, (cfg, s, r, z, p) in filled_reference.items():
-        geom = cfg.hopper
-        cone = z < geom.cone_height
-        mu = math.tan(math.radians(PHI_W))
-        sigma_vt = float(theory.janssen_vertical_stress(geom.fill_height, RHO, geom.bin_diameter,
-                                                        float(theory.k_jaky(PHI)), mu))
-        h = geom.bin_radius / math.tan(geom.half_angle)
-        x = np.clip(z[cone] + geom.outlet_radius / math.tan(geom.half_angle), 0.0, h)
-        walker = theory.walker_hopper_wall_pressure(x, h, geom.half_angle_deg, RHO, PHI, PHI_W,
-                                                    sigma_vt, mode="filling")
-        assert np.mean(p[cone]) == pytest.approx(np.mean(walker), rel=0.05), cell
-
-
-def test_filled_wall_pressure_converges_with_the_cell_size(filled_reference):
-    """The filled wall profile converges with the cell size (headline ``wall_convergence``;
-    over the whole wall, the outlet lip included, bin by bin on the 15 mm bins that every
-    grid shares).
-
-    Held: the successive relative L2 changes decrease and the last is below 5 % (the
-    wall-load convergence criterion of the wall-pressure study).  The bins are the same on
-    every grid, so the comparison has no merging or interpolation error of its own."""
-    s = filled_reference[WALL_CELLS[0]][1]
-    profiles = []
-    for cell in WALL_CELLS:
-        np.testing.assert_array_equal(filled_reference[cell][1], s)
-        profiles.append(filled_reference[cell][4])
-    changes = [relative_l2(a, b) for a, b in zip(profiles, profiles[1:])]
-    assert all(later < earlier for earlier, later in zip(changes, changes[1:])), changes
-    assert changes[-1] < 0.05, changes
