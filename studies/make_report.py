@@ -274,7 +274,7 @@ def build(root: Path, out: Path, copy: bool = True, only=None) -> dict:
                    f"python studies/element_tests.py --out {_display(root / name, out)}")
             lines.append(f"- `{name}`: `{cmd}`")
         lines.append("")
-    moved = moved_section("\n".join(lines + body)) if only is None else kept_moved(out)
+    moved = moved_section("\n".join(lines + body))
     lines += moved + body
     from fipy_hopper.io import atomic_write_text
 
@@ -293,7 +293,8 @@ def moved_section(report_text: str, previous=PREVIOUS, explanations=MOVED) -> li
     """The section that sets every published claim (``studies/headline.py``) of this report
     beside the previous report's (``previous_headline.json``), with the explanation of each
     one that moved (``moved.json``: ``{"change": what changed, "claims": {key: why}}``);
-    ``[]`` without a previous report.  A moved claim without an explanation says so."""
+    ``[]`` without a previous report.  A moved claim without an explanation says so; a claim
+    whose study has the previous report's commit is marked not rerun, not unchanged."""
     previous, explanations = Path(previous), Path(explanations)
     if not previous.is_file():
         return []
@@ -315,7 +316,9 @@ def moved_section(report_text: str, previous=PREVIOUS, explanations=MOVED) -> li
             why, was = "a new claim", ""
         else:
             was = old["result"]
-            why = ("unchanged" if old.get("values") == claim.get("values") else
+            rerun = old.get("study_commit") != claim.get("study_commit")
+            why = ("unchanged" if rerun and old.get("values") == claim.get("values") else
+                   "not rerun (the previous report's runs)" if not rerun else
                    notes.get("claims", {}).get(key, "**moved, not yet explained**"))
         rows.append([claim["claim"], was, claim["result"], why])
     made = before and next(iter(before.values())).get("study_commit", "")
@@ -325,17 +328,6 @@ def moved_section(report_text: str, previous=PREVIOUS, explanations=MOVED) -> li
              "and why it moved (`studies/moved.json`).", ""]
     lines += table(["claim", "previous", "now", "why"], rows)
     return lines + [""]
-
-
-def kept_moved(out: Path) -> list:
-    """The moved section of the report at ``out`` as it is (``--only`` keeps it)."""
-    if not Path(out).is_file():
-        return []
-    text = Path(out).read_text(encoding="utf-8")
-    if MOVED_TITLE not in text:
-        return []
-    chunk = text.split(MOVED_TITLE, 1)[1].split("\n## ", 1)[0]
-    return (MOVED_TITLE + chunk).rstrip("\n").split("\n") + [""]
 
 
 def _display(path: Path, out: Path) -> str:

@@ -297,7 +297,8 @@ def three_d_section(figures: dict) -> list:
 
 
 def timing_sentence(store: dict) -> str:
-    """The README's one sentence on the demo's and the 2.5 mm run's time and memory."""
+    """The README's one sentence on the demo's and the 2.5 mm run's time and memory, and the
+    test command's time from a fresh clone (figure ``test_suite`` with ``values.total_s``)."""
     figures = {r["key"]: r for r in store["figures"]}
     parts = []
     for key, name in (("demo", "The demo"), ("fine_2p5mm", "the 2.5 mm run")):
@@ -305,12 +306,18 @@ def timing_sentence(store: dict) -> str:
             v = figures[key]["values"]
             parts.append(f"{name} takes {_number(v['total_s'])} s and "
                          f"{_memory(v['peak_rss_mb'])} of memory")
+    suite = figures.get("test_suite", {}).get("values", {})
+    if "total_s" in suite:
+        parts.append(f"the test command from a fresh clone takes {_number(suite['total_s'])} s "
+                     f"({suite.get('what', 'the install and the cold kernel compile included')})")
     if not parts:
         return "Timings: [`docs/performance.md`](docs/performance.md)."
     when = sorted({(figures[k]["measured"][:10], figures[k]["machine"])
-                   for k in ("demo", "fine_2p5mm") if k in figures})
+                   for k in ("demo", "fine_2p5mm", "test_suite")
+                   if k in figures and "total_s" in figures[k].get("values", {})})
     where = "; ".join(f"{d} on {m}" for d, m in when)
-    return "\n".join(_wrap(" and ".join(parts) + f" (measured {where}; each figure with its "
+    return "\n".join(_wrap(", ".join(parts[:-1]) + (" and " if len(parts) > 1 else "")
+                           + parts[-1] + f" (measured {where}; each figure with its "
                            "commit in [`docs/performance.md`](docs/performance.md))."))
 
 

@@ -840,12 +840,15 @@ def test_report_rewrites_one_study_and_keeps_the_others(wall, tmp_path):
 
 def test_the_report_says_what_moved_and_why(tmp_path):
     """Against a previous headline in which one claim had another number and one was
-    explained: the moved claim with its explanation, an unexplained one flagged, the others
-    unchanged (the committed report's own claims)."""
+    explained: the moved claim with its explanation, an unexplained one flagged, one whose
+    study has the previous commit marked not rerun, the others unchanged (the committed
+    report's own claims)."""
     make_report = load("make_report")
     report = (STUDIES / "REPORT.md").read_text(encoding="utf-8")
     current = json.loads((STUDIES / "headline.json").read_text(encoding="utf-8"))
     previous = json.loads(json.dumps(current))
+    for claim in previous["claims"][:-1]:
+        claim["study_commit"] = "0000000"       # rerun since; the last one was not
     a, b = previous["claims"][0], previous["claims"][1]
     a["values"] = {"changed": True}
     a["result"] = "an older result"
@@ -860,5 +863,8 @@ def test_the_report_says_what_moved_and_why(tmp_path):
     assert "an older result" in row_a and "because of the law" in row_a
     row_b = next(line for line in lines if line.startswith(f"| {b['claim']} |"))
     assert "moved, not yet explained" in row_b
-    assert sum("| unchanged |" in line for line in lines) == len(current["claims"]) - 2
+    assert sum("| unchanged |" in line for line in lines) == len(current["claims"]) - 3
+    last = previous["claims"][-1]
+    row_last = next(line for line in lines if line.startswith(f"| {last['claim']} |"))
+    assert row_last.endswith("| not rerun (the previous report's runs) |")
     assert make_report.moved_section(report, tmp_path / "absent.json") == []
