@@ -355,16 +355,18 @@ def _element(s):
 
 
 def _funnel_convergence(s):
-    m = s.finding(r"^funnel, default \(([\d., ]+) mm\): .*?; out in ([\d.]+) s ([\d., ]+) kg, "
-                  r"changes ([-\d., n/a]+) %")
-    changes = [None if c.strip() == "n/a" else float(c) for c in m[4].split(",")]
-    sizes = [float(h) for h in m[1].split(",")]
-    finite = [abs(c) for c in changes if c is not None]
-    return (f"mass out in {m[2]} s changes {m[4].strip()} % from {sizes[0]:g} to "
-            f"{sizes[-1]:g} mm cells (μ(I), d = 1 mm)",
-            {"cell_sizes_mm": sizes, "mass_out_kg": [float(v) for v in m[3].split(",")],
-             "changes_pct": changes, "last_change_pct": changes[-1],
-             "largest_change_pct": max(finite) if finite else None})
+    m = s.finding(r"^funnel, default \(([\d., ]+) mm\): steady rate \(summary, median over the "
+                  r"plateau\) ([\d., ]+) kg/s, changes ([-\d., n/a]+) %; out in ([\d.]+) s "
+                  r"([\d., ]+) kg, changes ([-\d., n/a]+) %")
+
+    def numbers(text):
+        return [None if v.strip() == "n/a" else float(v) for v in text.split(",")]
+
+    sizes, rate_changes, out_changes = numbers(m[1]), numbers(m[3]), numbers(m[6])
+    return (f"from {sizes[0]:g} to {sizes[-1]:g} mm cells the mass out in {m[4]} s changes "
+            f"{m[6].strip()} % and the plateau rate {m[3].strip()} % (μ(I), d = 1 mm)",
+            {"cell_sizes_mm": sizes, "mass_out_kg": numbers(m[5]), "rate_kg_s": numbers(m[2]),
+             "mass_out_changes_pct": out_changes, "rate_changes_pct": rate_changes})
 
 
 def _beverloo_k(s):
@@ -376,7 +378,7 @@ def _beverloo_k(s):
 
 
 def _shear_band(s):
-    m = s.finding(r"Wall at ([\d.]+) m/s, d = 1 mm: the band is ([\d.]+), ([\d.]+) mm wide at "
+    m = s.finding(r"Wall at (0.5) m/s, d = 1 mm: the band is ([\d.]+), ([\d.]+) mm wide at "
                   r"([\d.]+), ([\d.]+) mm cells = ([\d.]+), ([\d.]+) grains \(change ([\d.]+) %\)")
     return (f"{m[6]} and {m[7]} grains wide at {m[4]} and {m[5]} mm cells (change {m[8]} %; "
             f"the plain law: one cell)",
@@ -436,6 +438,17 @@ CLAIMS = (
     Claim("transition_forces", "The forces in the wall at the transition", "wall_pressure",
           _transition_forces, (f"{W}::test_the_forces_in_the_wall_carry_its_vertical_"
                                "reaction",)),
+    Claim("funnel_convergence", "A funnel's discharge under grid refinement (the grain "
+          "size in the law)", "funnel_channel", _funnel_convergence,
+          ("tests/test_studies.py::test_funnel_channel_study_writes_its_outputs",),
+          readme=True),
+    Claim("beverloo_k", "Beverloo's empty annulus k d fitted from the law at the lip",
+          "grain_size", _beverloo_k,
+          ("tests/test_studies.py::test_grain_size_offset_fit_on_constructed_rates",
+           "tests/test_studies.py::test_grain_size_study_writes_its_outputs"), readme=True),
+    Claim("shear_band", "A shear band's width in grains, at two cell sizes", "shear_band",
+          _shear_band, ("tests/test_rate_dependence.py::test_the_shear_band_has_the_grain_sizes_"
+                        "width_at_any_cell_size",)),
     Claim("arching", "A cohesive powder's critical outlet against Jenike's", "arching",
           _arching, ("tests/test_cohesion.py::test_twice_the_critical_cohesion_arches",
                      "tests/test_cohesion.py::test_a_third_of_the_critical_cohesion_"
