@@ -58,8 +58,12 @@ def test_the_flow_mode_map_count_is_read_from_the_report():
     assert "in-sample" in before["result"] and "not placed on" in before["result"]
     values = before["values"]
     agree, cases = values["agree"], values["cases"]
-    own = "| 10 | 10 | 5 | 44.8 | mass | mass | 0.81 | 1 | 0 | 0.87 | yes |"
-    check = "| 40 | 10 | 2.5 | 44.8 | mass | mass | 0.24 | 0.95 | 0 | 0.23 | yes |"
+    def row(prefix):         # the map's row of a case (its numbers as the report has them)
+        return next(line for line in REPORT_TEXT.splitlines()
+                    if line.startswith(prefix) and line.endswith("| yes |"))
+
+    own = row("| 10 | 10 | 5 | 44.8 | mass | mass |")
+    check = row("| 40 | 10 | 2.5 | 44.8 | mass | mass |")
     assert own in REPORT_TEXT and check in REPORT_TEXT
     flipped = REPORT_TEXT.replace(own, own.replace("| mass | mass |", "| mass | funnel |")
                                   .replace("| yes |", "| no |"), 1)
