@@ -293,16 +293,18 @@ def write_outputs(out, rows, options, map_options, setting, argv=None) -> dict:
             f"error at most {slot_numbers[f'mass_balance_error_{key}_max']:.1e}.")
     if "flat_exponent_fine" in slot_numbers:
         widths = ", ".join(f"{1000 * w:g}" for w in options["fine_widths"])
+        trend = ("falls" if slot_numbers["flat_exponent_fine"]
+                 < slot_numbers["flat_exponent_coarse"] else "rises")
         findings.append(
-            f"The flat bottom's exponent falls as the cells shrink: over the {widths} mm "
+            f"The flat bottom's exponent {trend} as the cells shrink: over the {widths} mm "
             f"slots n = "
             f"{slot_numbers['flat_exponent_coarse']:.3f} at "
             f"{1000 * options['cell_size']:g} mm cells, "
             f"{slot_numbers['flat_exponent_fine']:.3f} at "
             f"{1000 * options['fine_cell_size']:g} mm, "
             f"{slot_numbers['flat_exponent_extrapolated']:.3f} extrapolated to "
-            f"zero cell size (first order, from two cell sizes): a resolution effect, the "
-            f"small slot gaining most from the finer cells.")
+            f"zero cell size (first order, from two cell sizes): a resolution effect of the "
+            f"slot's edges.")
     findings.append(
         f"Plane-flow map: {map_numbers['agreeing']} of {map_numbers['classified']} classified "
         f"wedges agree with Jenike's plane-flow boundary ({map_numbers['agreement_fraction']:.2f}"
