@@ -30,7 +30,8 @@ def flowing():
 
 #: the test files with the longest shared runs (module fixtures), longest first: collected
 #: first, so that the README's test command (a process per core, each file in one process:
-#: ``--dist loadfile``) starts them on different cores and fills in with the short files,
+#: ``-n auto --dist loadfile``; not in ``addopts``, where pytest-benchmark would take xdist
+#: for on and refuse ``--benchmark-only``) starts them on different cores and fills in with the short files,
 #: rather than leaving two of them for the end on one core.  The order within a file is kept.
 LONG_FILES = ("test_wall_traction.py", "test_studies.py", "test_validation.py", "test_wedge.py",
               "test_cli.py", "test_bench_emptying.py", "test_lagrangian.py",

@@ -47,7 +47,7 @@ def test_readme_opens_with_the_two_commands():
     demo, tests = first_block
     assert demo.startswith("python3 -m venv .venv && ")
     assert demo.endswith(".venv/bin/fipy-hopper demo --out hopper_run --force")
-    assert tests.endswith(".venv/bin/python -m pytest -n auto")
+    assert tests.endswith(".venv/bin/python -m pytest -n auto --dist loadfile")
     assert CI_COMMAND.search(text).group(0) == CI_COMMAND.match(tests).group(0)
     assert text.index(tests) == CI_COMMAND.search(text).start()
     assert text.index("```bash") < text.index("\n## ", text.index("## Quick start"))
