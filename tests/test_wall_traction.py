@@ -246,8 +246,7 @@ def test_filled_cone_pressure_against_walker(refined):
     Walker's filling solution started from Janssen's vertical stress at the transition
     (K = 1 - sin phi).  Why 5 %: the slice method takes the vertical stress uniform across each
     slice; taking the oedometric K = nu / (1 - nu) = 0.43 of the elastic fill (the measured wall
-    K is 0.41) in place of 0.5 moves Walker's mean by 2 %.  (Broken once: Walker's solution
-    for discharge in place of filling fails.)"""
+    K is 0.41) in place of 0.5 moves Walker's mean by 2 %."""
     for cell, sim in refined.items():
         cfg = sim.model.cfg
         _, s, r, z, p, _ = sim.record.wall["filling"]
