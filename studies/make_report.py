@@ -3,7 +3,7 @@
 Reads ``ROOT/<study>/study.json`` of each validation study (``flow_mode_map``, ``plane_flow``,
 ``discharge_rate``, ``wall_pressure``, ``discharge_dynamics``, ``stiffness_spread``,
 ``convergence``, ``robustness``, ``funnel_channel``, ``grain_size``, ``shear_band``,
-``lagrangian_vs_eulerian``, ``arching``, ``geometries``, ``three_d``, ``envelope``) and the
+``wall_zone``, ``lagrangian_vs_eulerian``, ``arching``, ``geometries``, ``three_d``, ``envelope``) and the
 outputs of
 ``element_tests`` (``failure_deviators.csv`` and its pictures), and writes one Markdown report:
 an overview, then per study its setting, findings (the comparisons as numbers), tables, figures
@@ -47,8 +47,8 @@ DEFAULT_ROOT = HERE / "output"
 DEFAULT_OUT = HERE / "REPORT.md"
 STUDIES = ("flow_mode_map", "plane_flow", "discharge_rate", "wall_pressure",
            "discharge_dynamics", "stiffness_spread", "convergence", "robustness",
-           "funnel_channel", "grain_size", "shear_band", "lagrangian_vs_eulerian", "arching",
-           "geometries", "three_d", "envelope")
+           "funnel_channel", "grain_size", "shear_band", "wall_zone", "lagrangian_vs_eulerian",
+           "arching", "geometries", "three_d", "envelope")
 ELEMENT_TESTS = "element_tests"
 ELEMENT_FIGURES = (("meridional.png", "Stress paths in the meridional (p, q) plane with the "
                     "yield surface's meridians and the flow potential."),

@@ -158,7 +158,7 @@ def test_case_pictures_are_the_study_setting_unless_asked_for():
 @pytest.mark.parametrize("name", ["flow_mode_map", "plane_flow", "discharge_rate",
                                   "wall_pressure", "stiffness_spread", "convergence",
                                   "robustness", "funnel_channel", "lagrangian_vs_eulerian",
-                                  "arching", "three_d"])
+                                  "arching", "three_d", "wall_zone"])
 def test_a_study_refuses_an_option_it_does_not_have(name):
     with pytest.raises(TypeError, match=r"unknown options \['bogus'\]; known: "):
         load(name).setup(bogus=1)
@@ -411,6 +411,37 @@ def test_shear_band_study_measures_the_band_in_grains(root):
     assert numbers["band_mm_v0.5_d3mm"][-1] > numbers["band_mm_v0.5_d1mm"][-1]
     assert all(c <= 1.01 for c in numbers["plain_band_cells_v0.5"])
     assert_png(out / "shear_band.png")
+
+
+# ---------------------------------------------------------------- shear zone at the bin wall
+def test_wall_zone_on_constructed_speed_rows():
+    """A plug at 1 m/s with a linear fall over the last 12 mm to 0.4 at the wall: the zone
+    (speed below 95 % of the plug) is 12 mm x 0.05 / 0.6 = 1 mm short of the fall's start,
+    found between cell centres; a plug that slides whole has no zone and slip 1; a row
+    at rest has no plug."""
+    study = load("wall_zone")
+    R, h = 0.15, 0.0025
+    r = (np.arange(60) + 0.5) * h
+    fall = 0.012
+    speed = np.where(r < R - fall, 1.0, 1.0 - 0.6 * (r - (R - fall)) / fall)
+    plug, width, slip = study.wall_zone(r, speed, R)
+    assert plug == pytest.approx(1.0)
+    assert width == pytest.approx(fall - 0.05 / 0.6 * fall, rel=1e-9)
+    assert slip == pytest.approx(speed[-1])
+    assert study.wall_zone(r, np.full_like(r, 0.3), R) == (pytest.approx(0.3), 0.0, 1.0)
+    assert all(math.isnan(x) for x in study.wall_zone(r, np.zeros_like(r), R))
+
+
+def test_wall_zone_study_writes_its_outputs(root):
+    out = run_quick(root, "wall_zone")
+    numbers = study_json(out)["numbers"]
+    assert set(numbers) == {"d1mm", "plain"}
+    assert numbers["d1mm"]["cell_sizes_mm"] == [10.0, 7.5]
+    # the rough wall holds the material back: a zone, and the wall's cell below the plug
+    assert all(w is not None and w > 0 for w in numbers["d1mm"]["zone_width_mm"])
+    assert all(s is not None and s < 0.9 for s in numbers["d1mm"]["wall_slip"])
+    assert len(rows_of(out / "profiles.csv")) > 10
+    assert_png(out / "wall_zone.png")
 
 
 # ---------------------------------------------------------------- robustness
@@ -805,7 +836,7 @@ def test_report_is_generated_from_the_outputs(root, flow_map, discharge, wall, c
                                       "convergence",
                                       "discharge_dynamics", "stiffness_spread",
                                       "robustness", "funnel_channel", "grain_size",
-                                      "shear_band",
+                                      "shear_band", "wall_zone",
                                       "element_tests",
                                       "lagrangian_vs_eulerian", "arching", "geometries",
                                       "three_d", "envelope"}
