@@ -986,12 +986,34 @@ def _wall_stages(run) -> tuple:
     return tuple(shown)
 
 
+def eccentric_codes(run):
+    """What :func:`fipy_hopper.space.pictures.code_curves` needs to draw the codes' eccentric
+    patterns for a 3D run: a circular silo's outlet offset, radius and fill level, the bin
+    wall's foot, ``mu = tan(phi_w)``, ``phi``, ``gamma = rho g``, EN 1991-4's middle
+    ``G = 0.4`` and ``K`` (measured at the bin wall at rest, ``wall_k_bin``, else EN's
+    ``1.1 (1 - sin phi)``); ``None`` for a centred outlet, a rectangular plan or a section."""
+    cfg = _config(run)
+    geom = cfg.hopper
+    if geom.dimensions != 3 or geom.rectangular or not geom.outlet_offset > 0.0:
+        return None
+    phi = cfg.material.friction_angle_deg
+    K = _summary(run).get("wall_k_bin")
+    if not (isinstance(K, (int, float)) and math.isfinite(K) and K > 0):
+        K = float(theory.k_en1991(phi))
+    return {"offset": float(geom.outlet_offset), "radius": 0.5 * geom.bin_diameter,
+            "surface": float(geom.fill_level),
+            "bin_foot": max(cfg.boundary.transition_height("wall"), 0.0),
+            "mu": math.tan(math.radians(cfg.wall.friction_angle_deg)), "phi_deg": phi,
+            "gamma": cfg.material.density * theory.G, "K": float(K), "G": 0.4}
+
+
 def wall_circumference(run, path):
     """The 3D run's wall pressure around the circumference at a few heights, at rest and in
-    discharge (:func:`fipy_hopper.space.pictures.circumference_picture`)."""
+    discharge (:func:`fipy_hopper.space.pictures.circumference_picture`), with the codes'
+    eccentric patterns in discharge for an off-centre outlet (:func:`eccentric_codes`)."""
     from .space.pictures import circumference_picture
     return circumference_picture(Path(run) / RunDirectory.WALL_PRESSURE, path,
-                                 stages=_wall_stages(run))
+                                 stages=_wall_stages(run), codes=eccentric_codes(run))
 
 
 def wall_unrolled(run, path):

@@ -48,7 +48,7 @@ DEFAULT_OUT = HERE / "REPORT.md"
 STUDIES = ("flow_mode_map", "plane_flow", "discharge_rate", "wall_pressure",
            "discharge_dynamics", "stiffness_spread", "convergence", "robustness",
            "funnel_channel", "grain_size", "shear_band", "wall_zone", "lagrangian_vs_eulerian",
-           "arching", "geometries", "three_d", "envelope")
+           "arching", "geometries", "three_d", "envelope", "eccentric")
 ELEMENT_TESTS = "element_tests"
 ELEMENT_FIGURES = (("meridional.png", "Stress paths in the meridional (p, q) plane with the "
                     "yield surface's meridians and the flow potential."),

@@ -158,7 +158,7 @@ def test_case_pictures_are_the_study_setting_unless_asked_for():
 @pytest.mark.parametrize("name", ["flow_mode_map", "plane_flow", "discharge_rate",
                                   "wall_pressure", "stiffness_spread", "convergence",
                                   "robustness", "funnel_channel", "lagrangian_vs_eulerian",
-                                  "arching", "three_d", "wall_zone"])
+                                  "arching", "three_d", "wall_zone", "eccentric"])
 def test_a_study_refuses_an_option_it_does_not_have(name):
     with pytest.raises(TypeError, match=r"unknown options \['bogus'\]; known: "):
         load(name).setup(bogus=1)
@@ -839,7 +839,7 @@ def test_report_is_generated_from_the_outputs(root, flow_map, discharge, wall, c
                                       "shear_band", "wall_zone",
                                       "element_tests",
                                       "lagrangian_vs_eulerian", "arching", "geometries",
-                                      "three_d", "envelope"}
+                                      "three_d", "envelope", "eccentric"}
     assert "python studies/robustness.py" in (tmp_path / "partial.md").read_text()
 
 

@@ -5,7 +5,8 @@
   axis and the outlet (``y = 0``), from a field snapshot (``fields_NNNN.vtu``): the speed of
   the cells next to the plane, arrows of their velocity in the plane, empty cells blank;
 * :func:`circumference_picture`: the wall pressure around the circumference at a few heights
-  (polar), at rest and in discharge, from ``wall_pressure.csv``;
+  (polar), at rest and in discharge, from ``wall_pressure.csv``; for a circular silo with an
+  off-centre outlet the codes' eccentric patterns beside it in discharge (:func:`code_curves`);
 * :func:`unrolled_picture`: the wall pressure over the unrolled wall (``theta`` across, the
   bins up the meridian, labelled with their ``s`` and ``z``), one panel per stage, from
   ``wall_pressure.csv``.
@@ -121,27 +122,104 @@ def _stage_table(csv_path, stage, floors: bool = False):
     return bins_s[keep], bins_z[keep], sectors, grid[keep]
 
 
-def circumference_picture(csv_path, png_path, stages=("filling", "early_discharge"),
-                          n_heights: int = 3) -> Path:
-    """The wall pressure around the circumference at ``n_heights`` height bins (spread over
-    the wall), one polar panel per stage (those recorded)."""
+#: the angles (deg) at which the codes' patterns are drawn: fine enough for EN 1991-4's zones
+CODE_THETA = np.linspace(-180.0, 180.0, 721)
+
+
+def code_curves(theta_deg, z, p_hf, p_nf, codes) -> dict:
+    """The codes' wall pressure around a circular silo with an off-centre outlet at the height
+    ``z`` (m above the outlet plane) of its bin wall, at ``theta_deg`` (0 towards the outlet):
+    ``{label: p (Pa)}``, empty without ``codes`` or for a centred outlet.
+
+    * EN 1991-4's large-eccentricity pattern
+      (:func:`fipy_hopper.theory.en1991_eccentric_wall_pressure`) for each ``G`` of
+      ``codes["G"]`` (one number or several) at the depth ``codes["surface"] - z`` below the
+      fill's level, as the code's own factors on its own filling pressure (``p_hce / p_hf``
+      and ``p_hae / p_hf``, both of EN's formulas with the same ``K`` and ``mu``) times the
+      given filling pressure ``p_hf`` (Pa);
+    * AS 3774's eccentric outlet (:func:`fipy_hopper.theory.as3774_eccentric_increment`):
+      ``p_nf`` (Pa, the symmetric flow pressure) plus its increment, ``h = z`` above the outlet.
+
+    ``codes``: ``offset`` (m), ``radius`` (m), ``K``, ``mu`` (= tan phi_w), ``phi_deg``,
+    ``gamma`` (N/m^3), ``surface`` (m above the outlet plane) and ``G``.  A ``G`` outside
+    (0, 1), or a wall rougher than the solid (``mu > tan phi``), draws no EN curve; a height
+    at or above the surface none either.
+    """
+    from .. import theory
+
+    if not codes or not codes.get("offset", 0.0) > 0.0:
+        return {}
+    c = codes
+    out = {}
+    depth = c["surface"] - z
+    Gs = np.atleast_1d(c.get("G", 0.4)).astype(float)
+    for G in Gs:
+        if depth > 0 and 0.0 < G < 1.0 and np.isfinite(p_hf):
+            try:
+                p = theory.en1991_eccentric_wall_pressure(
+                    theta_deg, depth, c["gamma"], c["radius"], G, c["K"], c["mu"],
+                    c["phi_deg"]).p_h
+            except ValueError:        # mu above tan(phi): EN has no sliding channel
+                continue
+            own = theory.en1991_filling_vertical_walls(depth, c["gamma"], 2.0 * c["radius"],
+                                                       c["K"], c["mu"]).p_h
+            out[f"EN 1991-4, G = {G:.3g}"] = np.asarray(p, float) * (p_hf / float(own))
+    if np.isfinite(p_nf):
+        inc = theory.as3774_eccentric_increment(theta_deg, z, p_nf, c["offset"],
+                                                2.0 * c["radius"], c["phi_deg"])
+        out["AS 3774"] = p_nf + np.asarray(inc, float)
+    return out
+
+
+def circumference_figure(csv_path, stages=("filling", "early_discharge"), n_heights: int = 3,
+                         codes=None):
+    """The figure of :func:`circumference_picture` (pyplot's; the caller closes it)."""
     plt = _figure()
-    stages = [s for s in stages if np.any(np.asarray(read_csv(csv_path)["stage"]) == s)]
+    recorded = np.asarray(read_csv(csv_path)["stage"])
+    stages = [s for s in stages if np.any(recorded == s)]
     fig, axes = plt.subplots(1, max(len(stages), 1), subplot_kw={"projection": "polar"},
                              figsize=(4.5 * max(len(stages), 1), 5.6), squeeze=False)
+    rest = _stage_table(csv_path, "filling") if codes and np.any(recorded == "filling") else None
     for ax, stage in zip(axes[0], stages):
         bins, z, sectors, grid = _stage_table(csv_path, stage)
         pick = np.unique(np.linspace(0, len(bins) - 1, n_heights).round().astype(int))
         closed = np.radians(np.append(sectors, sectors[0] + 360.0))
-        for b in pick:
-            ax.plot(closed, np.append(grid[b], grid[b, 0]), marker="o", ms=3,
+        named = {}
+        for c, b in enumerate(pick):
+            ax.plot(closed, np.append(grid[b], grid[b, 0]), marker="o", ms=3, color=f"C{c}",
                     label=f"s = {bins[b]:.3f} m (z = {z[b]:.3f} m)")
+            if rest is None or stage == "filling" or not z[b] > codes.get("bin_foot", 0.0):
+                continue
+            curves = code_curves(CODE_THETA, z[b], float(np.nanmean(rest[3][b])),
+                                 float(np.nanmean(grid[b])), codes)
+            for (label, p), style in zip(curves.items(), ("--", "-.", ":", (0, (1, 3)))):
+                style = ":" if label == "AS 3774" else style
+                ax.plot(np.radians(CODE_THETA), p, ls=style, lw=1.0, color=f"C{c}")
+                named.setdefault(label, style)
+        for label, style in named.items():       # the codes in the legend, in black
+            ax.plot([], [], ls=style, color="k", lw=1.0, label=(
+                f"{label} eccentric discharge (p_hf: the height's mean at rest)"
+                if label.startswith("EN") else
+                f"{label} eccentric outlet (p_nf: the height's mean in the panel)"))
         ax.set_title(stage.replace("_", " "))
         ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.08))
     fig.suptitle("wall pressure p_n (Pa) around the circumference; 0 deg: the outlet's side",
                  y=0.99)
     fig.tight_layout(rect=(0, 0.1, 1, 0.94))
-    return _save(fig, png_path)
+    return fig
+
+
+def circumference_picture(csv_path, png_path, stages=("filling", "early_discharge"),
+                          n_heights: int = 3, codes=None) -> Path:
+    """The wall pressure around the circumference at ``n_heights`` height bins (spread over
+    the wall), one polar panel per stage (those recorded).  With ``codes`` (the keys of
+    :func:`code_curves` and ``bin_foot``, the bin wall's foot, m) and an off-centre outlet,
+    each discharge panel draws beside the simulated pressure of each height on the bin wall
+    (``z > bin_foot``) EN 1991-4's eccentric pattern (its filling pressure ``p_hf`` the mean
+    around the circumference at rest at that height) and AS 3774's (``p_nf`` the panel's
+    mean around at that height), dashed and dotted in the height's colour; at rest, on the
+    hopper, for a centred outlet (and a rectangular plan: not drawn here) none."""
+    return _save(circumference_figure(csv_path, stages, n_heights, codes), png_path)
 
 
 def unrolled_picture(csv_path, png_path, stages=("filling", "early_discharge")) -> Path:
