@@ -18,9 +18,10 @@ the fill (7.5 s).  ``--runs-from DIR`` runs (or reads) these cases in ``DIR/case
 ``studies/output/three_d``) instead of ``--out``: by ``_sweep``'s restart rule a finished case
 there whose ``config.toml`` equals this study's is read, not recomputed; an unfinished one is
 resumed, a missing one run there (for ``three_d.py`` to read in turn), and a finished one of
-another configuration stops the study before anything runs.  Runs read from ``three_d.py``
-have no window records (it does not ask for them): their "in discharge windows" stage then
-takes the loop's discharge envelope for the largest pressure and has no smallest.
+another configuration stops the study before anything runs.  ``three_d.py`` records the
+windows of these cases too; a run without window records (made before it did) has its
+"in discharge windows" stage from the loop's discharge envelope for the largest pressure,
+and no smallest.
 
 Measured per case:
 

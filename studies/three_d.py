@@ -260,7 +260,8 @@ def setup(quick: bool = False, **options) -> dict:
                 "part": "eccentric", "family": family, "dimensions": 3,
                 "e_over_R": float(e), "outlet_offset_m": config["hopper"]["outlet_offset"],
                 "outlet_offset_cells": _r(offset_cells(e, opts), 6),
-                "end_time_s": config["run"]["end_time"]}, config, plots=opts["case_plots"]))
+                "end_time_s": config["run"]["end_time"]}, config, plots=opts["case_plots"],
+                track_wall_windows=True))     # the windows' extremes, read by eccentric.py
     return {"options": opts, "cases": cases, "setting": _sweep.setting_label(quick, options)}
 
 
