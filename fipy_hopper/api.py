@@ -31,6 +31,7 @@ import numpy as np
 from .config import ConfigError, HopperConfig
 from . import io as fio
 from . import resources
+from .summary_text import write_summary_text
 
 __all__ = ["load_config", "run", "read_results", "Results", "expected_quantities",
            "make_model", "UnfinishedRunWarning", "ResultsError"]
@@ -306,7 +307,7 @@ def run(config_or_path, out, force: bool = False, resume: bool = False, quiet: b
     try:
         with _interrupts_deferred() as finishing:
             status, reason, error, summary = _finish(rundir, sim, cfg, fields, manifest,
-                                                     status, reason, error, wall)
+                                                     status, reason, error, wall, out)
         pictures_interrupted = finishing.caught and status != "interrupted"
         if plots and status != "interrupted" and not pictures_interrupted:
             try:
@@ -330,8 +331,9 @@ def run(config_or_path, out, force: bool = False, resume: bool = False, quiet: b
     return fio._jsonable(summary)
 
 
-def _finish(rundir, sim, cfg, fields, manifest, status, reason, error, wall) -> tuple:
-    """Write what a run measured (the last snapshot, the tables, ``summary.json``) and end the
+def _finish(rundir, sim, cfg, fields, manifest, status, reason, error, wall, out) -> tuple:
+    """Write what a run measured (the last snapshot, the tables, ``summary.json`` and beside it
+    ``summary.txt``, the terminal's summary naming the run directory as ``out``) and end the
     manifest's session: ``(status, reason, error, summary)``.  An error in the tables or the
     summary of a run that had not failed fails it (``stop_reason`` ``"failed: ..."``, the
     traceback in ``error.log``, :class:`ResultsError` raised by :func:`run`): a summary is
@@ -359,6 +361,7 @@ def _finish(rundir, sim, cfg, fields, manifest, status, reason, error, wall) -> 
     manifest.end_session(status, reason, wall)
     summary["wall_time_s"] = manifest.total_wall_time()
     fio.write_json(rundir / rundir.SUMMARY, summary)
+    write_summary_text(rundir / rundir.SUMMARY_TEXT, summary, out)
     if status == "finished":
         rundir.checkpoint.unlink(missing_ok=True)
     return status, reason, error, summary

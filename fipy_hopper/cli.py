@@ -39,9 +39,9 @@ from pathlib import Path
 from . import __version__
 from .config import ConfigError, HopperConfig, ResolutionWarning, SamplingWarning
 from .config import short_text as _short
+from .summary_text import PROG
 
 EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
-PROG = "fipy-hopper"
 
 
 class _Parser(argparse.ArgumentParser):
@@ -482,90 +482,11 @@ def _cohesion_lines(cfg, e: dict) -> list:
 
 
 def _print_summary(s: dict, out) -> None:
-    from .api import result_key
+    """Print the summary of a run (:func:`fipy_hopper.summary_text.summary_lines`: what the
+    run wrote to ``summary.txt``)."""
+    from .summary_text import summary_lines
 
-    wedge = "steady_discharge_rate_kg_s_m" in s       # per metre of length
-
-    def num(key, fmt):
-        value = s.get(result_key(key, axisymmetric=not wedge))
-        return "n/a" if value is None else format(value, fmt)
-
-    per = "/m" if wedge else ""
-    theory = "Beverloo, slot" if wedge else "Beverloo x Rose-Tanaka"
-    if s.get("stop_reason") in ("filled", "fill_not_at_rest"):      # the loads at rest
-        print(f"{PROG}: {s.get('stop_reason')} after {num('fill_time_s', '.3g')} s of filling "
-              f"({num('steps', 'd')} steps, {num('wall_time_s', '.0f')} s wall time)\n"
-              f"  weight at rest         {num('fill_weight_N', '.4g')} N{per}: the walls carry "
-              f"{num('fill_wall_vertical_N', '.4g')} N{per}, the outlet plate "
-              f"{num('fill_outlet_N', '.4g')} N{per} (residual "
-              f"{num('fill_equilibrium_residual', '.1e')})\n"
-              f"  bin wall               K = p_n / sigma_v {num('wall_k_bin', '.3f')}, axial "
-              f"compression at the transition {num('bin_wall_axial_compression_N_m', '.4g')} "
-              f"N/m (Janssen {num('janssen_wall_axial_compression_N_m', '.4g')} N/m)\n"
-              f"  hopper                 tension at the transition "
-              f"{num('hopper_meridional_tension_N_m', '.4g')} N/m, ring compression "
-              f"{num('transition_ring_compression_N', '.4g')} N\n"
-              f"  mass                   {num('initial_mass_kg', '.4g')} kg{per} filled\n"
-              f"  results in             {out}/ (wall_pressure.csv: the loads along the wall)")
-        if s.get("dimensions") == 3:
-            _print_circumference(s)
-        return
-    print(f"{PROG}: {s.get('stop_reason')} after {num('discharge_time_s', '.3g')} s of discharge "
-          f"({num('steps', 'd')} steps, {num('wall_time_s', '.0f')} s wall time)\n"
-          f"  steady discharge rate  {num('steady_discharge_rate_kg_s', '.4g')} kg/s{per} "
-          f"({theory} {num('beverloo_rate_kg_s', '.4g')} kg/s{per})\n"
-          f"  flow mode              {s.get('flow_mode')} (wall slip ratio "
-          f"{num('wall_slip_ratio', '.2f')}, sliding over {num('wall_slip_fraction', '.0%')} of "
-          f"the hopper wall; Jenike expects {s.get('jenike_flow_mode')})\n"
-          f"  mass                   {num('initial_mass_kg', '.4g')} kg{per} filled, "
-          f"{num('remaining_mass_kg', '.4g')} kg{per} left "
-          f"(mass balance error {num('mass_balance_error', '.1e')})\n"
-          f"  results in             {out}/")
-    if s.get("distortion"):
-        print(f"  Lagrangian mesh        stopped by distortion: {s['distortion']}")
-    if s.get("dimensions") == 3:
-        _print_circumference(s)
-    stopped = s.get("flow_stopped_time_s")
-    if stopped is not None and stopped == stopped:
-        left = s.get("remaining_mass_fraction")
-        channel = s.get("rathole_diameter_m")
-        print(f"  outcome                {s.get('flow_mode')}: the flow stopped {stopped:.3g} s "
-              f"after the opening with {100 * left:.2f} % of the mass left"
-              + (f", a rathole {channel:.3g} m wide"
-                 if channel is not None and channel == channel else "")
-              + (f", its surface at {s['heap_angle_deg']:.1f} deg from the horizontal (against "
-                 f"the angle of repose)" if s.get("heap_angle_deg") is not None
-                 and s["heap_angle_deg"] == s["heap_angle_deg"] else ""))
-
-
-def _print_circumference(s: dict) -> None:
-    """The 3D lines of the summary: the wall pressure's largest over smallest around the
-    circumference at rest and in discharge, and the flow mode per sector."""
-    def ratio(stage):
-        value = s.get(f"{stage}_wall_pressure_max_over_min_largest")
-        return "n/a" if value is None or value != value else f"{value:.3g}"
-
-    calls = [c for c in s.get("flow_mode_by_sector") or [] if c in ("mass", "funnel")]
-    mass = sum(c == "mass" for c in calls)
-    offset = s.get("outlet_offset_m", 0)
-    rectangular = s.get("plan") == "rectangular"
-    offset = (f"[{offset[0]:g}, {offset[1]:g}] m" if isinstance(offset, list)
-              else f"{offset:g} m")
-    print(f"  {'across each face ' if rectangular else 'around the wall   '}     largest / "
-          f"smallest pressure up to {ratio('filling')} at "
-          f"rest, {ratio('early_discharge')} from 90 % left, {ratio('discharge_envelope')} "
-          f"in the envelope (wall_extremes.csv; outlet offset {offset})")
-    if rectangular:
-        for stage in ("filling", "discharge_envelope"):
-            corners = s.get(f"{stage}_corner_pressure_Pa") or {}
-            peaks = [max((v for v in values if v == v), default=math.nan)
-                     for values in corners.values()]
-            if peaks:
-                print(f"  bin's corners          {stage.replace('_', ' ')}: the largest "
-                      f"pressure {min(peaks):.4g} to {max(peaks):.4g} Pa over the four "
-                      f"corners (summary.json: {stage}_corner_pressure_Pa)")
-    if calls:
-        print(f"  flow mode by sector    mass in {mass} of {len(calls)} measured sectors")
+    print("\n".join(summary_lines(s, out)))
 
 
 def main(argv=None) -> int:

@@ -6,6 +6,7 @@ A run directory describes itself::
     manifest.json        package and dependency versions, code commit, start/end time, wall time,
                          stop reason
     summary.json         the run's headline numbers (see :meth:`Simulation.summary`)
+    summary.txt          the same summary as the terminal shows it (:mod:`.summary_text`)
     timeseries.csv       t_s, mass_in_hopper_kg, discharged_kg, discharge_rate_kg_s, ...
     wall_pressure.csv    stage, t_s, s_m, r_m, z_m, p_n_Pa, tau_Pa, ..., hoop and meridional forces
                          (3D: theta_deg, segment, tau_theta_Pa, no forces; one row per patch)
@@ -464,6 +465,7 @@ class RunDirectory:
     CONFIG = "config.toml"
     MANIFEST = "manifest.json"
     SUMMARY = "summary.json"
+    SUMMARY_TEXT = "summary.txt"
     PROFILE = "profile.json"
     TIMESERIES = "timeseries.csv"
     WALL_PRESSURE = "wall_pressure.csv"
@@ -710,8 +712,8 @@ class RunDirectory:
         return self.path / self.CHECKPOINT
 
     #: every file a run writes at the top of its directory, besides the pictures
-    OUTPUTS = (CONFIG, MANIFEST, SUMMARY, PROFILE, TIMESERIES, WALL_PRESSURE, LOADS, WALL_SLIP,
-               WALL_EXTREMES, CHECKPOINT, ERROR_LOG)
+    OUTPUTS = (CONFIG, MANIFEST, SUMMARY, SUMMARY_TEXT, PROFILE, TIMESERIES, WALL_PRESSURE,
+               LOADS, WALL_SLIP, WALL_EXTREMES, CHECKPOINT, ERROR_LOG)
 
     @classmethod
     def output_names(cls) -> tuple:

@@ -25,7 +25,7 @@ except ModuleNotFoundError:  # Python 3.10
     import tomli as tomllib
 
 import fipy_hopper as fh
-from fipy_hopper import io, theory
+from fipy_hopper import io, summary_text, theory
 from fipy_hopper.cli import main
 from fipy_hopper.config import HopperConfig
 from fipy_hopper.io import read_csv
@@ -74,7 +74,7 @@ def run_dir(tmp_path_factory):
 
 
 def test_run_directory_has_every_output(run_dir):
-    for name in ("config.toml", "manifest.json", "summary.json", "timeseries.csv",
+    for name in ("config.toml", "manifest.json", "summary.json", "summary.txt", "timeseries.csv",
                  "wall_pressure.csv", "fields/fields.pvd", "fields/snapshots.csv",
                  "flow_pattern.png", "discharge.png", "wall_pressure.png", "wall_forces.png",
                  "discharge.gif"):
@@ -132,6 +132,36 @@ def test_summary_json_contract(run_dir):
     assert summary["discharge_time_s"] == pytest.approx(0.2, abs=0.005)
     assert summary["initial_mass_kg"] == pytest.approx(
         summary["remaining_mass_kg"] + summary["discharged_kg"], rel=1e-9)
+
+
+def test_summary_txt_is_summary_json_as_text(run_dir):
+    """``summary.txt`` is the summary's lines (:func:`summary_text.summary_lines`) of ``summary.json``:
+    the same data, as the terminal shows it."""
+    summary = json.loads((run_dir / "summary.json").read_text())
+    text = (run_dir / "summary.txt").read_text(encoding="utf-8")
+    assert text == "\n".join(summary_text.summary_lines(summary, str(run_dir))) + "\n"
+    assert text.startswith("fipy-hopper: end_time after ")
+
+
+def test_summary_txt_holds_what_the_terminal_showed(tmp_path, capsys):
+    """A run prints its summary and writes the same text to ``summary.txt``: the discharge
+    rate, the flow mode and where the results are."""
+    cfg = coarse_config(tmp_path)
+    cfg.write_text(cfg.read_text().replace("end_time = 0.2", "end_time = 0.05"))
+    out = tmp_path / "run"
+    assert main(["run", str(cfg), "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    text = (out / "summary.txt").read_text(encoding="utf-8")
+    assert text == printed
+    summary = json.loads((out / "summary.json").read_text())
+    lines = text.splitlines()
+    assert lines[0].startswith("fipy-hopper: end_time after ")
+    assert any(line.startswith("  steady discharge rate  "
+                               f"{summary['steady_discharge_rate_kg_s']:.4g} kg/s")
+               for line in lines), lines
+    assert any(line.startswith(f"  flow mode              {summary['flow_mode']} (")
+               for line in lines), lines
+    assert lines[-1] == f"  results in             {out}/"
 
 
 def test_timeseries_and_wall_pressure_csv(run_dir):
@@ -308,6 +338,7 @@ def test_unstable_run_exits_1_and_keeps_its_outputs(tmp_path, monkeypatch, capsy
     summary = json.loads((out / "summary.json").read_text())
     manifest = json.loads((out / "manifest.json").read_text())
     assert summary["stop_reason"].startswith("unstable: ") and "at step" in summary["stop_reason"]
+    assert (out / "summary.txt").read_text().startswith(f"fipy-hopper: {summary['stop_reason']}")
     assert manifest["status"] == "failed" and manifest["stop_reason"] == summary["stop_reason"]
     ts = read_csv(out / "timeseries.csv")
     assert 2 <= len(ts["t_s"]) and ts["t_s"][-1] < 0.06

@@ -22,12 +22,14 @@ from fipy_hopper.io import RunDirectory, RunDirectoryError
 MANIFEST = json.dumps({"package": "fipy_hopper", "status": "finished", "sessions": []})
 
 #: the files an earlier run left, at the top and in fields/
-OWN_TOP = ("config.toml", "summary.json", "timeseries.csv", "discharge.png", "error.log",
-           ".summary.abcd_123.tmp.json", ".checkpoint-k2j4h5g6.npz")
+OWN_TOP = ("config.toml", "summary.json", "summary.txt", "timeseries.csv", "discharge.png",
+           "error.log", ".summary.abcd_123.tmp.json", ".summary.q1w2e3r4.tmp.txt",
+           ".checkpoint-k2j4h5g6.npz")
 OWN_FIELDS = ("fields_0000.vtu", "fields_0012.vtu", "markers_0012.vtu", "fields.pvd",
               "snapshots.csv", ".fields_0013.q1w2e3r4.tmp.vtu", ".snapshots.zzzzzzzz.tmp.csv")
 #: files that look like them and that no run writes
-FOREIGN_TOP = (".env.tmpl", "notes.txt", "summary.json.bak", ".my.tmp", "results.vtu")
+FOREIGN_TOP = (".env.tmpl", "notes.txt", "summary.json.bak", "summary.txt.bak", ".my.tmp",
+               "results.vtu")
 FOREIGN_FIELDS = ("my.tmp.txt", "paraview_state.pvsm", "fields_final.vtu", "notes.vtu.txt",
                   ".hidden.tmp")
 
@@ -66,7 +68,9 @@ def test_force_removes_only_the_files_a_run_writes(tmp_path):
 
 
 @pytest.mark.parametrize("name, own, in_fields", [
-    ("summary.json", True, False), ("wall_forces.png", True, False),
+    ("summary.json", True, False), ("summary.txt", True, False),
+    (".summary.a1b2c3d4.tmp.txt", True, False), ("summary.txt", False, True),
+    ("wall_forces.png", True, False),
     ("discharge.gif", True, False), (".discharge.a1b2c3d4.tmp.gif", True, False),
     (".checkpoint-abcdefgh.npz", True, False), (".probe.abcdefgh.tmp", True, False),
     (".env.tmpl", False, False), ("notes.txt", False, False), (".lock", False, False),

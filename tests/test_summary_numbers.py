@@ -70,7 +70,37 @@ def test_a_flat_floor_stops_when_its_flow_has_stopped_and_reports_its_heel(tmp_p
     assert 0.0 < summary["heap_angle_deg"] <= cfg.material.friction_angle_deg
     from fipy_hopper.cli import _print_summary
     _print_summary(summary, tmp_path / "run")
-    assert f"its surface at {summary['heap_angle_deg']:.1f} deg" in capsys.readouterr().out
+    text = capsys.readouterr().out
+    assert f"its surface at {summary['heap_angle_deg']:.1f} deg" in text
+    assert (tmp_path / "run" / "summary.txt").read_text(encoding="utf-8") == text   # the API's
+
+
+def test_the_summary_text_says_n_a_for_what_a_summary_lacks():
+    """The summary's lines (``summary.txt``, the terminal's) of a summary with keys missing,
+    NaN or null, and of a 3D rectangular plan's with a corner's pressure NaN: every line is
+    written, what is not known reads ``n/a``."""
+    from fipy_hopper.summary_text import summary_lines
+
+    lines = summary_lines({}, "run")
+    assert lines[0] == "fipy-hopper: n/a after n/a s of discharge (n/a steps, n/a s wall time)"
+    assert lines[2].startswith("  flow mode              n/a (wall slip ratio n/a")
+    assert lines[-1] == "  results in             run/"
+    three_d = {"stop_reason": "end_time", "steady_discharge_rate_kg_s": math.nan,
+               "dimensions": 3, "plan": "rectangular", "outlet_offset_m": [0.01, None],
+               "filling_wall_pressure_max_over_min_largest": 1.25,
+               "filling_corner_pressure_Pa": {"x_plus_y_plus": [2.0, math.nan, 5.0],
+                                              "x_minus_y_plus": [None, 3.0],
+                                              "x_minus_y_minus": [math.nan]},
+               "discharge_envelope_corner_pressure_Pa": {"x_plus_y_plus": [None]},
+               "flow_mode_by_sector": ["mass", "funnel", "none", "mass"],
+               "flow_stopped_time_s": 1.5, "remaining_mass_fraction": None}
+    text = "\n".join(summary_lines(three_d, "run"))
+    assert "steady discharge rate  n/a kg/s" in text
+    assert "up to 1.25 at rest, n/a from 90 % left" in text and "offset [0.01, n/a] m" in text
+    assert "filling: the largest pressure 3 to 5 Pa over the four corners" in text
+    assert "discharge envelope: the largest pressure n/a to n/a Pa" in text
+    assert "flow mode by sector    mass in 2 of 3 measured sectors" in text
+    assert "the flow stopped 1.5 s after the opening with n/a % of the mass left" in text
 
 
 def _labels(fig) -> list:
@@ -103,6 +133,7 @@ def test_a_fill_only_run_is_described_by_its_loads_at_rest(fill_only, capsys):
     assert "\n" in title and "mobilised friction" in title
     _print_summary(summary, out)
     text = capsys.readouterr().out
+    assert (out / "summary.txt").read_text(encoding="utf-8") == text    # written by fh.run
     weight = summary["fill_weight_N"]
     assert f"{weight:.4g} N: the walls carry" in text and "weight at rest" in text
     assert f"{summary['hopper_meridional_tension_N_m']:.4g} N/m" in text
