@@ -167,7 +167,8 @@ def _grain_diameter(run_dir) -> float:
 
 
 def analyse(rows, options):
-    """Adds the zone's width (m, grains, cells), the slip and the plug speed to each row;
+    """Adds the zone's width (m, grains, cells; the median over the rows and snapshots, its
+    quartiles, and the zone of the mean profile), the slip and the plug speed to each row;
     returns per law its widths by cell size and their changes under refinement, and the
     profiles (rows of ``profiles.csv``)."""
     profiles = []
@@ -181,6 +182,11 @@ def analyse(rows, options):
         r["zone_width_m"] = float(np.median(widths)) if widths else math.nan
         r["zone_width_grains"] = r["zone_width_m"] / d if d > 0 else math.nan
         r["zone_width_cells"] = r["zone_width_m"] / h
+        r["zone_width_q25_m"], r["zone_width_q75_m"] = (
+            [float(q) for q in np.percentile(widths, [25, 75])] if widths else [math.nan] * 2)
+        wall_r = 0.5 * options["bin_diameter"]
+        r["mean_profile_zone_m"] = wall_zone(wall_r - dist[::-1], mean[::-1], wall_r,
+                                             options["fraction"])[1]
         r["wall_slip"] = float(np.median(slips)) if slips else math.nan
         r["plug_speed_m_s"] = float(np.median(plugs)) if plugs else math.nan
         profiles += [{"case": r["case"], "law": r["law"], "cell_size_mm": r["cell_size_mm"],
@@ -196,11 +202,19 @@ def analyse(rows, options):
             "zone_width_mm": [_r(1000 * x, 2) for x in w],
             "zone_width_grains": [_r(r["zone_width_grains"], 2) for r in done],
             "zone_width_cells": [_r(r["zone_width_cells"], 2) for r in done],
+            "zone_width_quartiles_mm": [[_r(1000 * r["zone_width_q25_m"], 2),
+                                         _r(1000 * r["zone_width_q75_m"], 2)] for r in done],
+            "mean_profile_zone_mm": [_r(1000 * r["mean_profile_zone_m"], 2) for r in done],
             "zone_width_changes": [_r(abs(b - a) / b, 4) if b > 0 else None
                                    for a, b in zip(w, w[1:])],
             "wall_slip": [_r(r["wall_slip"], 3) for r in done],
             "plug_speed_m_s": [_r(r["plug_speed_m_s"], 4) for r in done]}
     return numbers, profiles
+
+
+def _mm(x):
+    """``x`` (m, or m/s) in mm rounded to 0.01, or None when it is missing."""
+    return _r(1000 * x, 2) if _sweep.finite(x) else None
 
 
 def plot(rows, profiles, options):
@@ -231,7 +245,8 @@ def write_outputs(out, rows, numbers, profiles, options, setting, argv=None):
     out = Path(out)
     _sweep.write_rows_csv(out / "results.csv", rows, first=(
         "case", "law", "grain_mm", "cell_size_mm", "zone_width_m", "zone_width_grains",
-        "zone_width_cells", "wall_slip", "plug_speed_m_s", "samples", "error"))
+        "zone_width_cells", "zone_width_q25_m", "zone_width_q75_m", "mean_profile_zone_m",
+        "wall_slip", "plug_speed_m_s", "samples", "error"))
     _sweep.write_rows_csv(out / "profiles.csv", profiles)
     _sweep.save(plot(rows, profiles, options), out / "wall_zone.png")
     figures = [{"file": "wall_zone.png",
@@ -243,7 +258,8 @@ def write_outputs(out, rows, numbers, profiles, options, setting, argv=None):
     findings = []
     for law, e in numbers.items():
         def listed(key, scale=1.0, spec=".1f", e=e):
-            return ", ".join("n/a" if v is None else format(scale * v, spec) for v in e[key])
+            return ", ".join("n/a" if v is None else format(scale * v, spec)
+                             for v in e[key]) or "n/a"
 
         sizes = ", ".join(f"{h:g}" for h in e["cell_sizes_mm"])
         text = (f"{law} ({sizes} mm cells): the shear zone along the rough bin wall (speed "
@@ -251,7 +267,11 @@ def write_outputs(out, rows, numbers, profiles, options, setting, argv=None):
                 f"{listed('zone_width_mm')} mm wide")
         if law != "plain":
             text += f" = {listed('zone_width_grains')} grains"
-        text += (f" = {listed('zone_width_cells')} cells; changes under refinement "
+        quartiles = ", ".join("n/a" if None in q else f"{q[0]:.1f}-{q[1]:.1f}"
+                              for q in e["zone_width_quartiles_mm"])
+        text += (f" = {listed('zone_width_cells')} cells (median over the rows and snapshots; "
+                 f"quartiles {quartiles} mm; the mean profile's zone "
+                 f"{listed('mean_profile_zone_mm')} mm); changes under refinement "
                  f"{listed('zone_width_changes', 100)} %; the wall's cell moves at "
                  f"{listed('wall_slip', 1, '.2f')} of the plug "
                  f"({listed('plug_speed_m_s', 1000, '.1f')} mm/s)")
@@ -260,15 +280,14 @@ def write_outputs(out, rows, numbers, profiles, options, setting, argv=None):
                     "(docs/references.md); a zone of a cell or two, or one that shrinks with "
                     "the cells, is decided by the grid, not by the grain.")
     table = {"title": "Runs", "columns": ["law", "cell (mm)", "zone (mm)", "zone (grains)",
-                                         "zone (cells)", "wall cell / plug",
+                                         "zone (cells)", "quartiles (mm)",
+                                         "mean profile's zone (mm)", "wall cell / plug",
                                          "plug speed (mm/s)", "samples"],
-             "rows": [[r["law"], r["cell_size_mm"],
-                       _r(1000 * r["zone_width_m"], 2) if _sweep.finite(r.get("zone_width_m"))
-                       else None, _r(r.get("zone_width_grains"), 2),
-                       _r(r.get("zone_width_cells"), 2), _r(r.get("wall_slip"), 3),
-                       _r(1000 * r["plug_speed_m_s"], 2)
-                       if _sweep.finite(r.get("plug_speed_m_s")) else None, r.get("samples")]
-                      for r in rows]}
+             "rows": [[r["law"], r["cell_size_mm"], _mm(r.get("zone_width_m")),
+                       _r(r.get("zone_width_grains"), 2), _r(r.get("zone_width_cells"), 2),
+                       f"{_mm(r.get('zone_width_q25_m'))}-{_mm(r.get('zone_width_q75_m'))}",
+                       _mm(r.get("mean_profile_zone_m")), _r(r.get("wall_slip"), 3),
+                       _mm(r.get("plug_speed_m_s")), r.get("samples")] for r in rows]}
     settings = {k: (list(v) if isinstance(v, tuple) else v) for k, v in options.items()}
     headline = "Shear zone along the rough bin wall: " + "; ".join(
         f"{law} " + ", ".join("n/a" if v is None else f"{v:.1f}"
