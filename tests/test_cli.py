@@ -143,6 +143,22 @@ def test_summary_txt_is_summary_json_as_text(run_dir):
     assert text.startswith("fipy-hopper: end_time after ")
 
 
+def test_every_key_of_the_summary_is_defined_in_the_usage_page(run_dir):
+    """Each key of a run's ``summary.json`` is named in ``docs/usage.md`` (in backticks), or
+    is the discharge form ``<name>_discharge_<unit>`` of a named key that the page gives
+    as ``*_discharge_*``: a number a user reads is defined where the user looks it up."""
+    page = (Path(__file__).resolve().parents[1] / "docs" / "usage.md").read_text()
+    assert "`*_discharge_*`" in page
+
+    def defined(key):
+        return f"`{key}`" in page or ("_discharge_" in key
+                                      and f"`{key.replace('_discharge_', '_')}`" in page)
+
+    summary = json.loads((run_dir / "summary.json").read_text())
+    assert len(summary) > 40
+    assert [k for k in summary if not defined(k)] == []
+
+
 def test_summary_txt_holds_what_the_terminal_showed(tmp_path, capsys):
     """A run prints its summary and writes the same text to ``summary.txt``: the discharge
     rate, the flow mode and where the results are."""
