@@ -101,10 +101,18 @@ DRIVER = textwrap.dedent("""\
 """)
 
 
+def _default_sigint():
+    """The child's Ctrl-C as a terminal gives it: an ignored SIGINT is inherited across
+    ``exec`` (a test process that started a Dask cluster or a multiprocessing pool may have
+    left it ignored), and a process started so never sees Ctrl-C at all."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def run_cli(moment, argv, signame="SIGINT"):
     env = dict(os.environ, PYTHONPATH=str(REPO), NUMBA_NUM_THREADS="1")
     return subprocess.run([sys.executable, "-c", DRIVER, moment, signame, *argv],
-                          capture_output=True, text=True, env=env, timeout=600)
+                          capture_output=True, text=True, env=env, timeout=600,
+                          preexec_fn=_default_sigint)
 
 
 @pytest.fixture(scope="module")
