@@ -161,6 +161,38 @@ def test_jacobi_eigen_solve_on_degenerate_and_diagonal_tensors():
         assert np.allclose(v.T @ v, np.eye(3), rtol=0, atol=1e-14)
 
 
+def test_block_eigen_solve_gives_each_matrix_its_own_result_to_the_bit():
+    """The lockstep eigen-solve of a block (``_eigh3_block``) against each matrix solved
+    alone (``_eigh3``, a block of one): the same eigenvalues and vectors to the bit, for a
+    block mixing matrices that converge at once (diagonal, +-0 entries), after a few sweeps
+    (random) and in the last sweeps (near-repeated eigenvalues, tiny off-diagonal parts), in
+    two orders; and each the decomposition of its matrix to round-off."""
+    rng = np.random.default_rng(11)
+    Q = random_rotations(40, rng)
+    mats = [np.diag([-2.0, -5.0, -1.0]), np.diag([-0.0, 0.0, -0.0]), np.zeros((3, 3))]
+    for q, gap in zip(Q, np.tile([0.0, 1e-15, 1e-10, 1e-6, 0.3], 8)):
+        mats.append(q @ np.diag([-1.0, -1.0 - gap, -7.0 * rng.random()]) @ q.T * 1e4)
+    mats += list(rng.normal(size=(60, 3, 3)))
+    m = np.array([np.triu(t) + np.triu(t, 1).T for t in mats])     # exactly symmetric
+    m[5, 0, 1] = m[5, 1, 0] = -0.0
+    for order in (np.arange(len(m)), rng.permutation(len(m))):
+        block = m[order]
+        A = np.array([block[:, 0, 0], block[:, 1, 1], block[:, 2, 2], block[:, 1, 2],
+                      block[:, 0, 2], block[:, 0, 1]])
+        V = np.empty((9, len(block)))
+        p3._eigh3_block(len(block), A, V)
+        a, v = np.empty((3, 3)), np.empty((3, 3))
+        for j, t in enumerate(block):
+            a[:] = t
+            p3._eigh3(a, v)
+            alone = np.concatenate([np.diag(a), v.ravel()])
+            together = np.concatenate([A[:3, j], V[:, j]])
+            assert np.array_equal(alone.view(np.int64), together.view(np.int64)), j
+            scale = max(np.abs(t).max(), 1e-300)
+            assert np.allclose(v @ np.diag(np.diag(a)) @ v.T, t, rtol=0, atol=1e-13 * scale)
+            assert np.allclose(v.T @ v, np.eye(3), rtol=0, atol=1e-13)
+
+
 def test_shapes_and_invalid_layout():
     mat = MATERIALS["cohesionless, psi = 0"]
     sig = np.zeros((2, 3, 6))

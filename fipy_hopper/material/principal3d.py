@@ -8,7 +8,8 @@ The update of one point is the axisymmetric one's with a general principal frame
 
 1. elastic predictor ``sigma_tr = sigma + lambda tr(d_eps) I + 2 mu d_eps``;
 2. the principal stresses ``s1 >= s2 >= s3`` and axes ``v_1, v_2, v_3`` of the symmetric 3 x 3
-   trial stress (compiled: cyclic Jacobi rotations, :func:`_eigh3`; numpy: ``np.linalg.eigh``);
+   trial stress (compiled: cyclic Jacobi rotations, the points of a block in lockstep,
+   :func:`_eigh3_block`; numpy: ``np.linalg.eigh``);
 3. ``F = [(s1 - s3) + (s1 + s3) sin(phi)] / (2 cos(phi)) - c``; ``F <= 0``: elastic, the
    trial stress exactly.  Else the principal-space return of the law, which is dimension-free
    and is **not** re-implemented here: compiled, the blocked fast solve
@@ -154,77 +155,124 @@ def update6_reference(sigma, d_eps, mat: MohrCoulomb, return_status: bool = Fals
 # ---------------------------------------------------------------------------------------------
 # Compiled kernels
 # ---------------------------------------------------------------------------------------------
+#: rows of the block eigen-solve's matrix work array (the six-component layout's order)
+_A00, _A11, _A22, _A12, _A02, _A01 = 0, 1, 2, 3, 4, 5
+
+
+@_jit
+def _jacobi_rotations(n, sweep, app, aqq, apq, arp, arq, p0, p1, p2, q0, q1, q2):
+    """One Jacobi rotation in the plane ``(p, q)`` of each of the ``n`` symmetric 3 x 3
+    matrices of a block, in lockstep (:func:`_eigh3_block`): ``app, aqq, apq`` the plane's
+    entries, ``arp, arq`` the third row's, ``p0 .. p2`` and ``q0 .. q2`` the eigenvector
+    matrix's columns ``p`` and ``q``, each a row of a work array (passed one by one: LLVM
+    vectorises the loop only when it can tell them apart).
+
+    The rotation annihilating ``a_pq`` is Numerical Recipes' stable ``jacobi``: ``t = sgn(theta)
+    / (|theta| + sqrt(theta^2 + 1))``, ``theta = (a_qq - a_pp) / (2 a_pq)`` (``t = a_pq /
+    (a_qq - a_pp)`` where ``theta^2`` would overflow), ``c = 1 / sqrt(t^2 + 1)``, ``s = t c``,
+    ``tau = s / (1 + c)``.  A matrix with ``a_pq = 0`` is left as it is; after the fourth sweep
+    an ``a_pq`` below round-off of both diagonal entries is set to 0 without rotating.  Every
+    update is a select, so the loop has no branch; a matrix left as it is keeps its entries to
+    the bit."""
+    for j in range(n):
+        a_pp, a_qq, a_pq = app[j], aqq[j], apq[j]
+        small = 100.0 * abs(a_pq)
+        skip = sweep > 3 and abs(a_pp) + small == abs(a_pp) and abs(a_qq) + small == abs(a_qq)
+        rotate = not skip and a_pq != 0.0
+        diff = a_qq - a_pp
+        theta = 0.5 * diff / a_pq
+        t_theta = 1.0 / (abs(theta) + math.sqrt(abs(theta * theta + 1.0)))
+        t_theta = -t_theta if theta < 0.0 else t_theta
+        t = a_pq / diff if abs(diff) + small == abs(diff) else t_theta
+        t = t if rotate else 0.0
+        c = 1.0 / math.sqrt(abs(t * t + 1.0))   # abs: provably >= 0, so LLVM emits (vector) sqrt
+        s = t * c
+        tau = s / (1.0 + c)
+        x, y = arp[j], arq[j]
+        app[j] = a_pp - t * a_pq if rotate else a_pp
+        aqq[j] = a_qq + t * a_pq if rotate else a_qq
+        apq[j] = 0.0 if (skip or rotate) else a_pq
+        arp[j] = x - s * (y + tau * x) if rotate else x
+        arq[j] = y + s * (x - tau * y) if rotate else y
+        x, y = p0[j], q0[j]
+        p0[j] = x - s * (y + tau * x) if rotate else x
+        q0[j] = y + s * (x - tau * y) if rotate else y
+        x, y = p1[j], q1[j]
+        p1[j] = x - s * (y + tau * x) if rotate else x
+        q1[j] = y + s * (x - tau * y) if rotate else y
+        x, y = p2[j], q2[j]
+        p2[j] = x - s * (y + tau * x) if rotate else x
+        q2[j] = y + s * (x - tau * y) if rotate else y
+
+
+@_jit
+def _eigh3_block(n, A, V):
+    """Eigen-decomposition of the ``n`` symmetric 3 x 3 matrices in the columns of ``A`` (rows
+    ``_A00 .. _A01``: xx, yy, zz, yz, xz, xy) in place by cyclic Jacobi rotations in lockstep:
+    on return ``A[0:3]`` holds each matrix's eigenvalues and ``V[3 r + c]`` the entry ``(r,
+    c)`` of its matrix of unit eigenvectors (columns; set to the identity first).  Each sweep
+    rotates in the planes (0, 1), (0, 2), (1, 2) (:func:`_jacobi_rotations`); the sweeps stop
+    when every matrix's off-diagonal part is 0 (quadratic convergence: 3 to 5 sweeps).  A
+    matrix that has converged is left as it is by the sweeps the others still need, so each
+    matrix's result is that of rotating it on its own, to the bit, whatever shares its block.
+    The iterations of different matrices are independent: in lockstep the loop is vectorised
+    and pipelined instead of waiting on one matrix's chain of square roots and divisions."""
+    for j in range(n):
+        for r in range(9):
+            V[r, j] = 1.0 if r == 0 or r == 4 or r == 8 else 0.0
+    for sweep in range(_JACOBI_SWEEPS):
+        converged = True
+        for j in range(n):
+            if abs(A[_A01, j]) + abs(A[_A02, j]) + abs(A[_A12, j]) != 0.0:
+                converged = False
+                break
+        if converged:
+            return
+        _jacobi_rotations(n, sweep, A[_A00], A[_A11], A[_A01], A[_A02], A[_A12],
+                          V[0], V[3], V[6], V[1], V[4], V[7])
+        _jacobi_rotations(n, sweep, A[_A00], A[_A22], A[_A02], A[_A01], A[_A12],
+                          V[0], V[3], V[6], V[2], V[5], V[8])
+        _jacobi_rotations(n, sweep, A[_A11], A[_A22], A[_A12], A[_A01], A[_A02],
+                          V[1], V[4], V[7], V[2], V[5], V[8])
+
+
 @_jit
 def _eigh3(a, v):
-    """Eigen-decomposition of the symmetric 3 x 3 ``a`` in place by cyclic Jacobi rotations:
-    on return the diagonal of ``a`` holds the eigenvalues and the columns of ``v`` the unit
-    eigenvectors (``v`` is set to the identity first).  Each rotation annihilates one
-    off-diagonal entry (the stable form of Numerical Recipes' ``jacobi``: ``t = sgn(theta) /
-    (|theta| + sqrt(theta^2 + 1))``, ``theta = (a_qq - a_pp) / (2 a_pq)``); the sweeps stop when
-    the off-diagonal part is below round-off of the diagonal (quadratic convergence: 3 to 5
-    sweeps)."""
-    for i in range(3):
-        for j in range(3):
-            v[i, j] = 1.0 if i == j else 0.0
-    for sweep in range(_JACOBI_SWEEPS):
-        off = abs(a[0, 1]) + abs(a[0, 2]) + abs(a[1, 2])
-        if off == 0.0:
-            return
-        for p in range(2):
-            for q in range(p + 1, 3):
-                apq = a[p, q]
-                small = 100.0 * abs(apq)
-                if (sweep > 3 and abs(a[p, p]) + small == abs(a[p, p])
-                        and abs(a[q, q]) + small == abs(a[q, q])):
-                    a[p, q] = 0.0
-                    a[q, p] = 0.0
-                    continue
-                if apq == 0.0:
-                    continue
-                diff = a[q, q] - a[p, p]
-                if abs(diff) + small == abs(diff):
-                    t = apq / diff
-                else:
-                    theta = 0.5 * diff / apq
-                    t = 1.0 / (abs(theta) + math.sqrt(theta * theta + 1.0))
-                    if theta < 0.0:
-                        t = -t
-                c = 1.0 / math.sqrt(t * t + 1.0)
-                s = t * c
-                tau = s / (1.0 + c)
-                a[p, p] -= t * apq
-                a[q, q] += t * apq
-                a[p, q] = 0.0
-                a[q, p] = 0.0
-                for r in range(3):
-                    if r != p and r != q:
-                        arp, arq = a[r, p], a[r, q]
-                        a[r, p] = arp - s * (arq + tau * arp)
-                        a[p, r] = a[r, p]
-                        a[r, q] = arq + s * (arp - tau * arq)
-                        a[q, r] = a[r, q]
-                for r in range(3):
-                    vrp, vrq = v[r, p], v[r, q]
-                    v[r, p] = vrp - s * (vrq + tau * vrp)
-                    v[r, q] = vrq + s * (vrp - tau * vrq)
+    """:func:`_eigh3_block` of the one symmetric 3 x 3 ``a``, in place: on return the diagonal
+    of ``a`` holds the eigenvalues (the off-diagonal part 0) and the columns of ``v`` the unit
+    eigenvectors."""
+    A = np.empty((6, 1))
+    V = np.empty((9, 1))
+    A[_A00, 0], A[_A11, 0], A[_A22, 0] = a[0, 0], a[1, 1], a[2, 2]
+    A[_A12, 0], A[_A02, 0], A[_A01, 0] = a[1, 2], a[0, 2], a[0, 1]
+    _eigh3_block(1, A, V)
+    a[0, 0], a[1, 1], a[2, 2] = A[_A00, 0], A[_A11, 0], A[_A22, 0]
+    a[1, 2] = a[2, 1] = A[_A12, 0]
+    a[0, 2] = a[2, 0] = A[_A02, 0]
+    a[0, 1] = a[1, 0] = A[_A01, 0]
+    for r in range(3):
+        for c in range(3):
+            v[r, c] = V[3 * r + c, 0]
 
 
 @_jit
-def _trial_principal(sig, dep, lam, mu, a, v, trial, axes, S, m, sp, cp, c):
-    """Elastic trial of one point (six components into ``trial[:, m]``), its sorted principal
-    stresses into ``S[0:3, m]``, ``F`` into ``S[3, m]`` and the axes (the columns of v, in
-    the order of s1, s2, s3) into ``axes[:, m]`` (9 rows, row-major).  Returns F."""
+def _elastic_trial(sig, dep, lam, mu, trial, A, m):
+    """The elastic trial of one point (six components) into ``trial[:, m]`` and ``A[:, m]``."""
     lt = lam * (dep[0] + dep[1] + dep[2])
     for k in range(3):
         trial[k, m] = sig[k] + (lt + 2.0 * mu * dep[k])
     for k in range(3, 6):
         trial[k, m] = sig[k] + 2.0 * mu * dep[k]
-    a[0, 0], a[1, 1], a[2, 2] = trial[0, m], trial[1, m], trial[2, m]
-    a[1, 2] = a[2, 1] = trial[3, m]
-    a[0, 2] = a[2, 0] = trial[4, m]
-    a[0, 1] = a[1, 0] = trial[5, m]
-    _eigh3(a, v)
-    d0, d1, d2 = a[0, 0], a[1, 1], a[2, 2]
+    for k in range(6):
+        A[k, m] = trial[k, m]
+
+
+@_jit
+def _principal_sorted(A, V, j, axes, S, m, sp, cp, c):
+    """The decomposed point ``j`` of a block (``A``, ``V`` of :func:`_eigh3_block`): its sorted
+    principal stresses into ``S[0:3, m]``, ``F`` into ``S[3, m]`` and the axes (the
+    eigenvectors of s1, s2, s3) into ``axes[:, m]`` (9 rows, row-major).  Returns F."""
+    d0, d1, d2 = A[_A00, j], A[_A11, j], A[_A22, j]
     # descending order (a stable sort of three)
     i1, i2, i3 = 0, 1, 2
     if d1 > d0:
@@ -236,9 +284,9 @@ def _trial_principal(sig, dep, lam, mu, a, v, trial, axes, S, m, sp, cp, c):
         i2, i3 = 2, i2
     S[0, m], S[1, m], S[2, m] = d[i1], d[i2], d[i3]
     for r in range(3):
-        axes[r, m] = v[r, i1]
-        axes[3 + r, m] = v[r, i2]
-        axes[6 + r, m] = v[r, i3]
+        axes[r, m] = V[3 * r + i1, j]
+        axes[3 + r, m] = V[3 * r + i2, j]
+        axes[6 + r, m] = V[3 * r + i3, j]
     f = ((S[0, m] - S[2, m]) + (S[0, m] + S[2, m]) * sp) / (2.0 * cp) - c
     S[3, m] = f
     return f
@@ -279,7 +327,8 @@ def _compliance6(d, E, nu, mu, out):
 def update6_points(sig, deps, prm, sig_out, dep_out, status):
     """The compiled update of the rows of ``sig``/``deps`` (n, 6) into the outputs: blocks of
     ``return_fast._BLOCK`` points, (1) elastic trial, eigen-solve and F (elastic points
-    written out, plastic ones gathered), (2) the law's fast return of the gathered sorted
+    written out, plastic ones gathered; the eigen-solve of the block's points in lockstep,
+    :func:`_eigh3_block`), (2) the law's fast return of the gathered sorted
     principal stresses in lockstep (``return_fast._fast_block``), (3) the robust return
     (``return_robust._return_sorted``) for each point the fast solve did not accept, the
     coaxial rebuild and ``d_eps_p = C^-1 (sigma_tr - sigma_new)``."""
@@ -289,25 +338,31 @@ def update6_points(sig, deps, prm, sig_out, dep_out, status):
     nb = min(n, _fast._BLOCK)
     idx = np.empty(nb, dtype=np.int64)
     trial = np.empty((6, nb))
+    A = np.empty((6, nb))
+    V = np.empty((9, nb))
     axes = np.empty((9, nb))
     S = np.empty((4, nb))
     W = np.empty((_fast._W_ROWS, nb))
     flags = np.empty((_fast._F_ROWS, nb), dtype=np.bool_)
-    a = np.empty((3, 3))
-    v = np.empty((3, 3))
     new = np.empty(6)
     diff = np.empty(6)
     for b0 in range(0, n, _fast._BLOCK):
         b1 = min(b0 + _fast._BLOCK, n)
-        m = 0
         for i in range(b0, b1):
-            f = _trial_principal(sig[i], deps[i], lam, mu, a, v, trial, axes, S, m, sp, cp, c)
+            _elastic_trial(sig[i], deps[i], lam, mu, trial, A, i - b0)
+        _eigh3_block(b1 - b0, A, V)
+        m = 0    # the plastic points gathered in place (m <= j: column j is read first)
+        for i in range(b0, b1):
+            j = i - b0
+            f = _principal_sorted(A, V, j, axes, S, m, sp, cp, c)
             if not f > 0.0:
                 for k in range(6):
-                    sig_out[i, k] = trial[k, m]
+                    sig_out[i, k] = trial[k, j]
                     dep_out[i, k] = 0.0
                 status[i] = ELASTIC
                 continue
+            for k in range(6):
+                trial[k, m] = trial[k, j]
             idx[m] = i
             m += 1
         _fast._fast_block(m, S, W, flags, cst)
