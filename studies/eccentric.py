@@ -475,6 +475,7 @@ def face_profiles(row, stage: str) -> dict:
     it); ``discharge_windows``: the largest of the windows' largest and the smallest of their
     smallest (the mean NaN), from the discharge envelope's largest without window records."""
     from fipy_hopper.io import read_csv
+    from fipy_hopper.space.pictures import faces_of
 
     t = read_csv(Path(row["run_dir"]) / "wall_pressure.csv")
     stages = np.asarray(t["stage"])
@@ -488,24 +489,18 @@ def face_profiles(row, stage: str) -> dict:
         on = stages == stage
     if not on.any():
         return {}
-    wall = np.asarray(t["wall"])[on]
-    z = np.asarray(t["z_m"], float)[on]
-    u = np.asarray(t["u"], float)[on]
     p = np.asarray(t["p_n_Pa"], float)[on]
+    hi, lo = (windows[1], windows[0]) if windows is not None else (p, p)
+    windowed = stage == "discharge_windows"
     out = {}
-    for face in dict.fromkeys(wall):
-        if face == "floor":
-            continue
-        sel = wall == face
-        n = len(np.unique(u[sel]))
-        hi = (windows[1] if windows is not None else p)[sel].reshape(-1, n)
-        lo = (windows[0] if windows is not None else p)[sel].reshape(-1, n)
-        windowed = stage == "discharge_windows"
-        out[face] = {"z": z[sel][::n],
-                     "mean": np.full(len(hi), np.nan) if windowed else np.nanmean(hi, axis=1),
-                     "max": np.nanmax(hi, axis=1),
-                     "min": np.full(len(hi), np.nan) if windowed and windows is None
-                     else np.nanmin(lo, axis=1)}
+    for face, (z, _, high, low) in faces_of(np.asarray(t["wall"])[on],
+                                            np.asarray(t["z_m"], float)[on],
+                                            np.asarray(t["u"], float)[on], hi, lo).items():
+        out[face] = {"z": z,
+                     "mean": np.full(len(z), np.nan) if windowed else np.nanmean(high, axis=1),
+                     "max": np.nanmax(high, axis=1),
+                     "min": np.full(len(z), np.nan) if windowed and windows is None
+                     else np.nanmin(low, axis=1)}
     return out
 
 

@@ -8,10 +8,10 @@ off-centre outlet.
 """
 
 import csv
-import importlib.util
 import json
 import math
 import pathlib
+import sys
 
 import numpy as np
 import pytest
@@ -19,20 +19,8 @@ import pytest
 from fipy_hopper import plotting, theory
 from fipy_hopper.space import pictures
 
-STUDIES = pathlib.Path(__file__).resolve().parents[1] / "studies"
-PNG = b"\x89PNG\r\n\x1a\n"
-
-
-def load(name):
-    spec = importlib.util.spec_from_file_location(f"{name}_study", STUDIES / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-def rows_of(path):
-    with open(path, newline="") as fh:
-        return list(csv.DictReader(fh))
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+from study_files import PNG, load, rows_of  # noqa: E402
 
 
 @pytest.fixture(scope="module")

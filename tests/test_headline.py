@@ -9,7 +9,6 @@ generator makes from what is committed (a hand edit, or a report regenerated wit
 (change one in the report and the table changes) and names what it cannot find.
 """
 
-import importlib.util
 import json
 import pathlib
 import re
@@ -18,18 +17,8 @@ import sys
 import pytest
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
-STUDIES = ROOT / "studies"
-
-
-def load(name):
-    if str(STUDIES) not in sys.path:
-        sys.path.insert(0, str(STUDIES))
-    spec = importlib.util.spec_from_file_location(f"{name}_under_test", STUDIES / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module           # dataclasses look their module up there
-    spec.loader.exec_module(module)
-    return module
-
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+from study_files import load  # noqa: E402
 
 headline = load("headline")
 REPORT_TEXT = headline.REPORT.read_text(encoding="utf-8")

@@ -6,41 +6,18 @@ is generated from the outputs of all of them.
 """
 
 import argparse
-import csv
-import importlib.util
 import json
 import math
 import os
 import pathlib
 import shutil
+import sys
 
 import numpy as np
 import pytest
 
-STUDIES = pathlib.Path(__file__).resolve().parents[1] / "studies"
-PNG = b"\x89PNG\r\n\x1a\n"
-
-
-def load(name):
-    spec = importlib.util.spec_from_file_location(f"{name}_study", STUDIES / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-def rows_of(path):
-    with open(path, newline="") as fh:
-        return list(csv.DictReader(fh))
-
-
-def study_json(folder):
-    with open(folder / "study.json") as fh:
-        return json.load(fh)
-
-
-def assert_png(path):
-    assert path.is_file(), path
-    assert path.read_bytes()[:8] == PNG, path
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+from study_files import STUDIES, assert_png, load, rows_of, study_json  # noqa: E402
 
 
 @pytest.fixture(scope="module")

@@ -7,28 +7,21 @@ The quick setting: a 0.3 m bin, 20 deg cone, 1 cm cells, two cohesions, the E ch
 """
 
 import csv
-import importlib.util
 import json
 import math
 import pathlib
+import sys
 
 import pytest
 
-STUDIES = pathlib.Path(__file__).resolve().parents[1] / "studies"
-PNG = b"\x89PNG\r\n\x1a\n"
-
-
-def load():
-    spec = importlib.util.spec_from_file_location("arching_study", STUDIES / "arching.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+from study_files import PNG, load  # noqa: E402
 
 
 @pytest.fixture(scope="module")
 def quick(tmp_path_factory):
     out = tmp_path_factory.mktemp("arching")
-    assert load().main(["--quick", "--serial", "--out", str(out)]) == 0
+    assert load("arching").main(["--quick", "--serial", "--out", str(out)]) == 0
     return out
 
 
@@ -80,6 +73,6 @@ def test_study_json_figures_and_numbers(quick):
 
 
 def test_a_rerun_reads_the_finished_runs(quick):
-    assert load().main(["--quick", "--serial", "--out", str(quick)]) == 0
+    assert load("arching").main(["--quick", "--serial", "--out", str(quick)]) == 0
     numbers = read_json(quick / "study.json")["numbers"]
     assert numbers["runs"] > 0 and numbers["runs_new"] == 0

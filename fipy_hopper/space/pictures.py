@@ -261,10 +261,15 @@ def face_tables(csv_path, stage) -> dict:
     rectangular plan's ``wall_pressure.csv`` (the floor left out), bins up each face."""
     t = read_csv(csv_path)
     on = np.asarray(t["stage"]) == stage
-    wall = np.asarray(t["wall"])[on]
-    z = np.asarray(t["z_m"], float)[on]
-    u = np.asarray(t["u"], float)[on]
-    p = np.asarray(t["p_n_Pa"], float)[on]
+    return faces_of(np.asarray(t["wall"])[on], np.asarray(t["z_m"], float)[on],
+                    np.asarray(t["u"], float)[on], np.asarray(t["p_n_Pa"], float)[on])
+
+
+def faces_of(wall, z, u, *values) -> dict:
+    """``{face: (z (n_bins,), u (n_sectors,), *v (n_bins, n_sectors))}`` of one stage's rows
+    of a rectangular plan's ``wall_pressure.csv`` (their ``wall``, ``z_m`` and ``u`` columns
+    and any per-row ``values``, e.g. ``p_n_Pa``), the floor left out: each face's rows are
+    its height bins, each with its sectors in order."""
     out = {}
     for face in dict.fromkeys(wall):
         if face == "floor":
@@ -272,7 +277,8 @@ def face_tables(csv_path, stage) -> dict:
         sel = wall == face
         sectors = np.unique(u[sel])
         n = len(sectors)
-        out[face] = (z[sel][::n], sectors, p[sel].reshape(-1, n))
+        out[face] = (z[sel][::n], sectors) + tuple(np.asarray(v)[sel].reshape(-1, n)
+                                                   for v in values)
     return out
 
 
