@@ -87,15 +87,15 @@ the centred, the corners), ``circumference_e<e/R>.png`` per off-centre circular 
 ``study.json`` and ``cases/<name>/`` (the circular ones in ``--runs-from``'s, if given).
 
 **Cost of the default** (``python studies/eccentric.py --estimate`` prints it from the
-settings, nothing run; :func:`three_d.estimate`: :mod:`fipy_hopper.space.estimate` at its 1.4 us
+settings, nothing run; :func:`three_d.estimate`: :mod:`fipy_hopper.space.estimate` at its 1.0 us
 a loaded cell and step, one thread, the fill 1.2 gravity ramps and the discharge with all its
-loaded cells): the circular silo centred (a quarter, 18 x 18 x 74 cubes, 13,568 loaded) 1,420 s
-and off centre (a half, 36 x 18 x 74, 27,136 loaded) 2,840 s each, 7.5 s of discharge, 74,800
-steps: 9,950 s for the four, what ``three_d.py``'s flat family takes (nothing when read from its
-runs); the square silo centred (a quarter, 14 x 14 x 74 cubes, 8,076 loaded) 440 s and off
-centre (a half, 28 x 14 x 74, 16,179 loaded) 890 s, 3.5 s of discharge, 39,200 steps: 1,330 s
-for the two.  In all 11,300 s (3.1 hours) on one thread, about 1.6 hours on two cores kept
-busy (the longest case, 2,840 s, a quarter of the total); 1,330 s with the circular runs read
+loaded cells): the circular silo centred (a quarter, 18 x 18 x 74 cubes, 13,568 loaded) 1,015 s
+and off centre (a half, 36 x 18 x 74, 27,136 loaded) 2,031 s each, 7.5 s of discharge, 74,800
+steps: 7,110 s for the four, what ``three_d.py``'s flat family takes (nothing when read from its
+runs); the square silo centred (a quarter, 14 x 14 x 74 cubes, 8,076 loaded) 317 s and off
+centre (a half, 28 x 14 x 74, 16,179 loaded) 635 s, 3.5 s of discharge, 39,200 steps: 951 s
+for the two.  In all 8,060 s (2.2 hours) on one thread, about 1.1 hours on two cores kept
+busy (the longest case, 2,031 s, a quarter of the total); 951 s with the circular runs read
 from ``three_d.py``'s; 0.42 GB a worker at most.  An estimate from the settings, not a
 measurement of this study.
 

@@ -63,16 +63,17 @@ Measured per case:
 
 **Cost of the default** (``python studies/three_d.py --estimate`` prints it from the settings,
 nothing run): :func:`fipy_hopper.space.estimate.time_estimate` per 3D case, one thread at its
-``COST_PER_LOADED_CELL_STEP`` (1.4 us a loaded cell and step, measured on the busy shared
-machine; 0.97 us at a quieter time), the fill 1.2 gravity ramps, the reference's discharge
-Beverloo's time to empty (14.4 s) with its loaded cells falling steadily, each family's
-discharge with all its loaded cells: the reference in 3D 1,560 s (17 x 17 x 75 cubes,
-8,198 loaded, 264,000 steps); the flat silo centred (a quarter, 13,568 loaded) 1,420 s and
-off centre (a half, 27,136 loaded) 2,840 s each, 7.5 s of discharge, 74,800 steps; the
-eccentric cone centred (10,822 loaded) 800 s and off centre (21,650 loaded) 1,600 s each,
-5.0 s of discharge, 52,600 steps: 15,500 s for the eight, 17,100 s (4.7 hours) with the
-reference, so about 2.4 hours on two cores kept busy (the longest case, 2,840 s, is a sixth
-of the total: the two workers share it evenly), 1.7 hours at the quieter cost.  The section
+``COST_PER_LOADED_CELL_STEP`` (1.0 us a loaded cell and step: the figure that gives the
+3D reference's measured end-to-end time; its compiled steps alone 0.56 us), the fill 1.2
+gravity ramps, the reference's discharge Beverloo's time to empty (14.4 s) with its loaded
+cells falling steadily, each family's discharge with all its loaded cells: the reference in
+3D 1,115 s (17 x 17 x 75 cubes, 8,198 loaded, 264,000 steps; measured end to end 1,107 s);
+the flat silo centred (a quarter, 13,568 loaded) 1,015 s and off centre (a half, 27,136
+loaded) 2,031 s each, 7.5 s of discharge, 74,800 steps; the eccentric cone centred (10,822
+loaded) 569 s and off centre (21,650 loaded) 1,139 s each, 5.0 s of discharge, 52,600 steps:
+11,100 s for the eight, 12,200 s (3.4 hours) with the reference, so about 1.7 hours on two
+cores kept busy (the longest case, 2,031 s, a sixth of the total: the two workers share it
+evenly).  The section
 at 1 cm (2D, 1,275 cells) about a minute by the demo's cost per cell and step
 (``docs/performance.md``): an order of magnitude.  Memory 0.42 GB a worker at most
 (``space.estimate.memory_estimate``).  An estimate from the settings, not a measurement of

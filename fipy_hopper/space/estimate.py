@@ -28,11 +28,15 @@ MEMORY_PER_CELL = 3.5e3
 #: bytes on top on small grids (the cut cells' sub-samples, sampled in chunks of 1,024
 #: cells, and the contact tables): measured 29 MB at 3,800 cells, 20 MB at 7,344
 MEMORY_TRANSIENT = 5.0e7
-#: seconds a loaded cell costs a step, transports included, one thread (measured on the
-#: reference hopper at 1 cm, a quarter, 8,200 loaded cells: 1.35 us filling, 1.43 us in
-#: discharge; 1.8 us on the small silo's 395 loaded cells; a machine shared with other work,
-#: so an indication)
-COST_PER_LOADED_CELL_STEP = 1.4e-6
+#: seconds a loaded cell costs a step, transports included, one thread: an indication.  With
+#: the block eigen-solve of the law's update the compiled steps of the reference hopper at 1 cm
+#: (a quarter) took 0.57 us a loaded cell filling (8,200 loaded) and 0.56 us in discharge
+#: (8,326), alone on an AMD EPYC, 2026-12-07; the whole run end to end (``fipy-hopper run``,
+#: its outputs included, docs/performance.md) took 1,107 s, which this figure gives for it
+#: (the loaded cells of :func:`time_estimate` fall steadily in discharge, the run's do not).
+#: A busy machine adds up to half (point by point, the eigen-solve took 1.35-1.43 us busy,
+#: 0.86-0.97 us quieter).
+COST_PER_LOADED_CELL_STEP = 1.0e-6
 #: the fill comes to rest by the loop's rule about this many gravity ramps after its start
 #: (measured 1.08 on the small conical silo, 1.13 in a flat-bottomed bin)
 FILL_RAMPS = 1.2
