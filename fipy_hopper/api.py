@@ -202,9 +202,6 @@ def run(config_or_path, out, force: bool = False, resume: bool = False, quiet: b
     if lagrangian and profile:
         raise ConfigError('profile: the phases are those of the Eulerian model\'s compiled '
                           'step; numerics.formulation = "lagrangian" has none to time')
-    if cfg.hopper.dimensions == 3 and profile:
-        raise ConfigError("profile: the phases timed are those of the sections' compiled "
-                          "step; the 3D model's (hopper.dimensions = 3) are not timed yet")
     if lagrangian:
         checkpoint_interval = 0
     # every refusal before anything is built or written

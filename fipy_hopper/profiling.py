@@ -4,8 +4,9 @@ A :class:`PhaseProfile` attached to a model (``model.profile``) collects, while 
 on and without changing any number of it:
 
 * the phases of the compiled material steps (:data:`fipy_hopper.stepping.PHASES`: the step
-  set-up of each call, forces, nodes, stress update, faces), counted in processor cycles inside
-  the compiled loop (:func:`fipy_hopper.stepping.read_cycles`, about 10 ns a reading) and
+  set-up of each call, forces, nodes, stress update, faces; the 3D model's
+  :func:`fipy_hopper.space.stepping.material_steps` under the same names, its set-up the lists
+  made in Python before each call), counted in processor cycles inside the compiled loop (:func:`fipy_hopper.stepping.read_cycles`, about 10 ns a reading) and
   converted to seconds with the counter's rate measured against ``time.perf_counter`` over the
   run;
 * the parts of each transport (advection of the cell fields, redistribution, fields and

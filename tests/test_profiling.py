@@ -7,6 +7,7 @@
   ``time.perf_counter`` around the compiled calls (two independent clocks).
 * The command line writes ``profile.json`` and prints it; ``--force`` removes an old one;
   the Lagrangian formulation, which has no compiled step, is refused before anything runs.
+* The same for the 3D model (a small silo on 2 cm cubes): the same phases, its own kernels.
 """
 
 import json
@@ -22,19 +23,25 @@ from fipy_hopper.config import HopperConfig
 from fipy_hopper.model import HopperModel
 from fipy_hopper.profiling import PhaseProfile
 from fipy_hopper.simulation import Simulation
+from fipy_hopper.space.model import SpaceModel
 
 SMALL = {"hopper": {"bin_diameter": 0.2, "outlet_diameter": 0.06, "bin_height": 0.25,
                     "fill_height": 0.15},
          "numerics": {"cell_size": 0.01, "gravity_ramp_time": 0.05},
          "run": {"end_time": 0.1, "output_interval": 0.02, "field_interval": 0.05}}
+#: a small 3D silo (a quarter, 2 cm cubes: 3 across the outlet's radius)
+SMALL_3D = {"hopper": {"bin_diameter": 0.24, "outlet_diameter": 0.12, "bin_height": 0.12,
+                       "fill_height": 0.08, "half_angle_deg": 30.0, "dimensions": 3},
+            "numerics": {"cell_size": 0.02, "gravity_ramp_time": 0.05},
+            "run": {"end_time": 0.1, "output_interval": 0.02, "field_interval": 0.05}}
 COUNTER = pytest.mark.skipif(not stepping.HAS_CYCLE_COUNTER,
                              reason="no cycle counter that user code may read on this processor")
 
 
-def small_config() -> HopperConfig:
+def small_config(settings=SMALL) -> HopperConfig:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")       # 3 cells across the outlet radius: coarse, fast
-        return HopperConfig.from_dict(SMALL)
+        return HopperConfig.from_dict(settings)
 
 
 @pytest.fixture(scope="module")
@@ -157,3 +164,67 @@ def test_profile_of_the_lagrangian_formulation_is_refused_before_anything_runs(t
     with pytest.raises(api.ConfigError, match="lagrangian"):
         api.run(cfg, tmp_path / "run", profile=True)
     assert not (tmp_path / "run").exists()
+
+
+# ---------------------------------------------------------------- the 3D model
+@pytest.fixture(scope="module")
+def discharging_3d():
+    """The small 3D silo filled and 0.05 s into its discharge."""
+    model = SpaceModel(small_config(SMALL_3D))
+    sim = Simulation(model, progress=False, end_time=0.05)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        sim.run()
+    return model, sim.state
+
+
+def test_a_profile_changes_no_number_of_a_3d_run(discharging_3d):
+    model, state = discharging_3d
+    plain = advance(model, state.copy(), 300)
+    model.profile = profile = PhaseProfile()
+    try:
+        timed = advance(model, state.copy(), 300)
+    finally:
+        model.profile = None
+    for name in ("v", "sigma", "alpha", "eps_p", "loose", "flowing", "flux_z", "wall_impulse",
+                 "plate_impulse", "momentum_budget"):
+        assert np.array_equal(getattr(timed, name), getattr(plain, name)), name
+    assert (timed.t, timed.step, timed.discharged) == (plain.t, plain.step, plain.discharged)
+    assert profile.steps == 300 and profile.transports > 5
+    assert profile.loaded_cell_steps > 0 and profile.compiled_seconds > 0.0
+    for part in ("transport: advection", "transport: redistribution",
+                 "transport: fields and momentum"):
+        assert profile.seconds[part] > 0.0, part
+
+
+@COUNTER
+def test_the_3d_compiled_phases_agree_with_the_clock_around_the_compiled_calls(discharging_3d):
+    model, state = discharging_3d
+    model.profile = profile = PhaseProfile()
+    try:
+        advance(model, state.copy(), 600)
+    finally:
+        model.profile = None
+    report = profile.report()
+    assert all(profile.cycles > 0)
+    # the cycles in the compiled loop (forces, nodes, stress update, faces) are the clock's
+    # time of the calls less the cost of calling them; "step setup" is the lists made in
+    # Python before each call, outside the calls
+    inside = sum(report["phases_s"][f"step: {name}"] for name in stepping.PHASES[1:])
+    assert 0.7 * report["compiled_calls_s"] < inside <= report["compiled_calls_s"]
+    assert report["phases_s"]["step: step setup"] > 0.0
+    assert sum(report["phases_s"].values()) == pytest.approx(report["wall_time_s"], rel=1e-9)
+
+
+def test_run_profile_of_a_3d_run(tmp_path, capsys):
+    config = tmp_path / "small_3d.toml"
+    config.write_text(small_config(SMALL_3D).to_toml())
+    out = tmp_path / "run"
+    assert main(["run", str(config), "--out", str(out), "--profile"]) == 0
+    report = json.loads((out / "profile.json").read_text())
+    assert "stress update" in capsys.readouterr().out
+    phases = report["phases_s"]
+    assert phases["pictures"] > 0.0 and phases["snapshots and checkpoints"] > 0.0
+    assert phases["transport: advection"] > 0.0
+    assert sum(phases.values()) == pytest.approx(report["wall_time_s"], rel=1e-9)
+    assert report["steps"] == json.loads((out / "summary.json").read_text())["steps"]

@@ -30,12 +30,14 @@ yet: markers, layers, the opening iris (the plate goes at once).
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass
 
 import numba
 import numpy as np
 
 from .. import resources
+from ..stepping import read_cycles
 from ..material import principal3d as p3
 from ..material.mohr_coulomb import APEX, ELASTIC
 from ..transport import material_rows
@@ -168,6 +170,10 @@ class SpaceModel:
                       np.empty((n, 6)), np.empty((n, 6)), np.empty(n, np.int8))
         self._node_budget = np.zeros(((g.nz + 1) * (g.ny + 1) * (g.nx + 1), 3))
         self._plane_top = np.zeros(g.nz + 1)
+        #: a :class:`fipy_hopper.profiling.PhaseProfile` that the steps add their time to, or
+        #: None (the default: nothing is timed)
+        self.profile = None
+        self._no_cycles = np.zeros(0, np.int64)
 
     # ------------------------------------------------------------------ the protocol's sizes
     @property
@@ -397,6 +403,8 @@ class SpaceModel:
                     return n + 1
             return max_steps
         g, num = self.grid, self.cfg.numerics
+        profile = self.profile
+        setup_started = read_cycles() if profile is not None else 0
         if numba.get_num_threads() != self.threads:
             numba.set_num_threads(self.threads)
         mass = self.node_mass(state)
@@ -422,6 +430,11 @@ class SpaceModel:
         filling = state.stage == "filling"
         clock = np.array([state.t, float(state.step), state.flux_time])
         _, _, normal, mu, kind, entry = self.contacts[:6]
+        cycles = self._no_cycles
+        if profile is not None:
+            cycles = profile.cycles
+            cycles[0] += read_cycles() - setup_started     # "step setup": the lists above
+            started = time.perf_counter()
         done, due = stepping.material_steps(
             int(max_steps), clock, state.v, mass, state.alpha, state.sigma, state.loose,
             state.eps_p, state.flowing, state.flux_z, state.flux_y, state.flux_x, carry,
@@ -433,7 +446,11 @@ class SpaceModel:
             num.max_transport_interval, normal, mu, kind, entry, state.plate_closed,
             g.mirror_x, g.mirror_y, state.wall_impulse, state.plate_impulse,
             state.momentum_budget, contrib, *self._work[1:], self._node_budget[:len(nodes)],
-            self._plane_top, self._rate, self.threads)
+            self._plane_top, self._rate, cycles, self.threads)
+        if profile is not None:
+            profile.compiled_seconds += time.perf_counter() - started
+            profile.steps += int(done)
+            profile.loaded_cell_steps += int(done) * len(loaded)
         state.t, state.step, state.flux_time = float(clock[0]), state.step + int(done), \
             float(clock[2])
         if due:
@@ -527,10 +544,12 @@ class SpaceModel:
 
     # ------------------------------------------------------------------ transport
     def transport_step(self, state: SpaceState) -> None:
-        """Carry the cell fields and the nodal momentum with the mean face velocities."""
+        """Carry the cell fields and the nodal momentum with the mean face velocities (its
+        three parts timed into the run's profile, if any)."""
         g = self.grid
         if state.flux_time <= 0.0:
             return
+        started = time.perf_counter()
         dt_T = state.flux_time
         u_n = np.concatenate([state.flux_z.ravel(), state.flux_y.ravel(),
                               state.flux_x.ravel()]) / dt_T * self.face_sign
@@ -545,12 +564,14 @@ class SpaceModel:
             rows = material_rows(a.reshape(g.nz, -1))
         new, face_flux = transport.step_stacked(stacked, u_n, dt_T, rows=rows)
         new = np.ascontiguousarray(new)
+        advected = time.perf_counter()
         moved = transport.redistribute_fields(new, room_min=REDISTRIBUTION_ROOM_MIN)
         alpha_flux = face_flux[0] + (moved.face_flux if moved.face_flux is not None else 0.0)
         if moved.residual_excess > 0.0 or moved.residual_deficit > 0.0:
             more = transport.redistribute_fields(new, room_min=REDISTRIBUTION_ROOM_MIN_FALLBACK)
             if more.face_flux is not None:
                 alpha_flux = alpha_flux + more.face_flux
+        redistributed = time.perf_counter()
         shape = a.shape
         new_alpha = new[0].reshape(shape)
         present = new_alpha >= 1e-12
@@ -589,6 +610,12 @@ class SpaceModel:
         state.flux_y[:] = 0.0
         state.flux_x[:] = 0.0
         state.flux_time = 0.0
+        if self.profile is not None:
+            seconds = self.profile.seconds
+            seconds["transport: advection"] += advected - started
+            seconds["transport: redistribution"] += redistributed - advected
+            seconds["transport: fields and momentum"] += time.perf_counter() - redistributed
+            self.profile.transports += 1
 
 
 def dual_momentum_transport(v, mass_old, mass_new, flux_z, flux_y, flux_x, rho, light_mass):

@@ -45,6 +45,7 @@ from ..material import principal3d as p3
 from ..material import return_fast as _fast
 from ..material.mohr_coulomb import APEX, ELASTIC
 from ..material.rate import overstress_factor
+from ..stepping import read_cycles
 from .rate3d import deviatoric_rate6
 
 #: points per block of the law's update (the threads take whole blocks)
@@ -492,24 +493,37 @@ def material_steps(max_steps, clock, v, mass, alpha, sigma, loose, eps_p, flowin
                    alpha_min, bulk_viscosity, transport_cfl, max_transport_interval, normal,
                    mu, kind, entry, plate_closed, mirror_x, mirror_y, wall_impulse,
                    plate_impulse, budget, contrib, sig_in, dep_in, sig_out, dep_out, status,
-                   node_budget, plane_top, rate, threads=1):
+                   node_budget, plane_top, rate, phase_cycles, threads=1):
     """Up to ``max_steps`` material steps in place (module docstring).  ``clock = [t, step,
     flux_time]``; gravity ``g_full`` ramped over ``ramp_time`` (0: none).  ``carry``/``loaded``
     (n, 3) cell lists, ``nodes`` (n, 5) node list with its contact constraints, ``k0 <= k <
-    k1`` the node planes whose faces move.  Returns ``(steps done, transport due)``."""
+    k1`` the node planes whose faces move.  ``phase_cycles``: empty, or counters of the phases
+    ``fipy_hopper.stepping.PHASES`` (the sections' names) to which the cycles of forces, nodes,
+    stress update and faces are added (:func:`fipy_hopper.stepping.read_cycles`; nothing else
+    changes).  Returns ``(steps done, transport due)``."""
+    timed = phase_cycles.size > 0
     for n in range(max_steps):
         t = clock[0]
         gravity = g_full * min(1.0, t / ramp_time) if ramp_time > 0.0 else g_full
+        c0 = read_cycles() if timed else 0
         cell_forces(carry, n_carry, alpha, sigma, v, open_volume, h, hg_base, alpha_min,
                     bulk_viscosity, contrib, flowing, rate, threads)
+        c1 = read_cycles() if timed else 0
         node_update(nodes, n_nodes, v, mass, contrib, gravity, dt, damping, light_mass, normal,
                     mu, kind, entry, plate_closed, mirror_x, mirror_y, wall_impulse,
                     plate_impulse, budget, node_budget, threads)
+        c2 = read_cycles() if timed else 0
         stress_update(loaded, n_loaded, v, sigma, loose, eps_p, flowing, kappa, aperture_z,
                       aperture_y, aperture_x, h, dt, prm, sig_in, dep_in, sig_out, dep_out,
                       status, threads)
+        c3 = read_cycles() if timed else 0
         speed = faces(k0, k1, v, dt, open_z, open_y, open_x, flux_z, flux_y, flux_x,
                       plane_top, threads)
+        if timed:
+            phase_cycles[1] += c1 - c0
+            phase_cycles[2] += c2 - c1
+            phase_cycles[3] += c3 - c2
+            phase_cycles[4] += read_cycles() - c3
         clock[2] += dt
         clock[0] += dt
         clock[1] += 1.0
