@@ -60,28 +60,27 @@ def advance(model, state, steps):
     return state
 
 
+def profiled(model, state, steps):
+    """``steps`` steps of a copy of ``state`` with a fresh profile attached to ``model`` (and
+    detached after): ``(the copy after them, the profile)``."""
+    model.profile = profile = PhaseProfile()
+    try:
+        return advance(model, state.copy(), steps), profile
+    finally:
+        model.profile = None
+
+
 def test_a_profile_changes_no_number_of_the_run(discharging):
     model, state = discharging
     plain = advance(model, state.copy(), 600)
-    model.profile = PhaseProfile()
-    try:
-        timed = advance(model, state.copy(), 600)
-        profile = model.profile
-    finally:
-        model.profile = None
+    timed, profile = profiled(model, state, 600)
     for name in ("v", "sigma", "alpha", "eps_p", "loose", "layer", "face_flux_sum",
                  "wall_impulse", "plate_impulse", "momentum_budget", "markers"):
         assert np.array_equal(getattr(timed, name), getattr(plain, name)), name
     assert (timed.t, timed.step, timed.discharged) == (plain.t, plain.step, plain.discharged)
     assert profile.steps == 600
     # the loaded cells are counted per step: one step's count is the state's
-    one = PhaseProfile()
-    model.profile = one
-    try:
-        before = state.copy()
-        model.advance(before, 1)
-    finally:
-        model.profile = None
+    _, one = profiled(model, state, 1)
     assert one.loaded_cell_steps == np.count_nonzero(state.alpha >= model.cfg.numerics.alpha_min)
     assert profile.transports > 10          # about one transport in 15-40 steps here
     assert profile.compiled_seconds > 0.0
@@ -106,11 +105,7 @@ def test_the_cycle_counter_rises_at_a_constant_rate():
 @COUNTER
 def test_the_compiled_phases_agree_with_the_clock_around_the_compiled_calls(discharging):
     model, state = discharging
-    model.profile = profile = PhaseProfile()
-    try:
-        advance(model, state.copy(), 1500)
-    finally:
-        model.profile = None
+    _, profile = profiled(model, state, 1500)
     report = profile.report()
     compiled = sum(v for k, v in report["phases_s"].items() if k.startswith("step: "))
     assert all(profile.cycles > 0)
@@ -181,11 +176,7 @@ def discharging_3d():
 def test_a_profile_changes_no_number_of_a_3d_run(discharging_3d):
     model, state = discharging_3d
     plain = advance(model, state.copy(), 300)
-    model.profile = profile = PhaseProfile()
-    try:
-        timed = advance(model, state.copy(), 300)
-    finally:
-        model.profile = None
+    timed, profile = profiled(model, state, 300)
     for name in ("v", "sigma", "alpha", "eps_p", "loose", "flowing", "flux_z", "wall_impulse",
                  "plate_impulse", "momentum_budget"):
         assert np.array_equal(getattr(timed, name), getattr(plain, name)), name
@@ -200,11 +191,7 @@ def test_a_profile_changes_no_number_of_a_3d_run(discharging_3d):
 @COUNTER
 def test_the_3d_compiled_phases_agree_with_the_clock_around_the_compiled_calls(discharging_3d):
     model, state = discharging_3d
-    model.profile = profile = PhaseProfile()
-    try:
-        advance(model, state.copy(), 600)
-    finally:
-        model.profile = None
+    _, profile = profiled(model, state, 600)
     report = profile.report()
     assert all(profile.cycles > 0)
     # the cycles in the compiled loop (forces, nodes, stress update, faces) are the clock's
