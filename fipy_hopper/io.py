@@ -1264,7 +1264,7 @@ _WALL_ARRAY = re.compile(r"wall__(?P<stage>[A-Za-z_]\w*?)__(?P<k>[0-5])")
 CHECKPOINT_AUXILIARY = (r"wall__\w+?__[0-5]", r"wallstress__\w+?__[01]",
                         r"wallraw__\w+?__[01]", r"wallforces__\w+?__[0-2]",
                         r"reading__\w+?__(wall|plate|budget)", r"stresssum__\w+?__[0-2]",
-                        r"envelope", r"envelope_raw")
+                        r"envelope", r"envelope_raw", r"window_low", r"window_high")
 _META_KEYS = ("state", "record", "wall_times", "t_open", "next_sample", "schedules")
 
 

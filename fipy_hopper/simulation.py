@@ -319,6 +319,9 @@ class Simulation:
         self._stress_sums: dict = {}     # stage -> [sum p_n, sum tau, count] of the window
         self.envelope = None             # largest windowed p_n per bin in discharge
         self.envelope_raw = None         # the same of the plain binning (for checking)
+        #: the smallest and the largest windowed p_n of every wall bin in discharge, a bin's
+        #: unmeasured windows (NaN) left out: ``(low, high)`` arrays, None before a window
+        self.window_extremes = None
         self.wall_schedules: list[WallTimeSchedule] = []   # e.g. checkpoints
         #: the discharge's stop rules, in order (:class:`StopRule`; a custom rule, e.g. a
         #: discharged mass, is inserted or appended here)
@@ -637,6 +640,8 @@ class Simulation:
                 self.record.insert_force_max[name] = max(
                     self.record.insert_force_max.get(name, -math.inf), load)
             self.envelope = p_n if self.envelope is None else np.maximum(self.envelope, p_n)
+            low, high = self.window_extremes or (p_n, p_n)
+            self.window_extremes = (np.fmin(low, p_n), np.fmax(high, p_n))
             self.envelope_raw = (raw if self.envelope_raw is None
                                  else np.maximum(self.envelope_raw, raw))
             self.record.envelope_windows += 1
@@ -745,6 +750,8 @@ class Simulation:
             arrays["envelope"] = self.envelope
         if self.envelope_raw is not None:
             arrays["envelope_raw"] = self.envelope_raw
+        if self.window_extremes is not None:
+            arrays["window_low"], arrays["window_high"] = self.window_extremes
         meta = {"fingerprint": self.fingerprint(), "state": scalars, "record": rec,
                 "wall_times": {stage: values[0] for stage, values in wall.items()},
                 "t_open": self.t_open, "next_sample": self.next_sample,
@@ -808,6 +815,8 @@ class Simulation:
                                          for k in range(3)] if present else None)
         self.envelope = arrays.pop("envelope", None)
         self.envelope_raw = arrays.pop("envelope_raw", None)
+        low, high = arrays.pop("window_low", None), arrays.pop("window_high", None)
+        self.window_extremes = None if low is None or high is None else (low, high)
         self.state = type(self.state)(**meta["state"], **arrays)
         self.record = RunRecord(**meta["record"], wall=wall, wall_stress=wall_stress,
                                 wall_forces=wall_forces, wall_raw=wall_raw)
@@ -921,6 +930,7 @@ class Simulation:
         shapes.update({f"stresssum__{stage}__{k}": (n_bins,) for stage, present in sums.items()
                        if present for k in range(3)})
         shapes["envelope"] = shapes["envelope_raw"] = (n_bins,)
+        shapes["window_low"] = shapes["window_high"] = (n_bins,)
         state_arrays = set(vars(self.state))
         for key, value in vars(self.state).items():
             if isinstance(value, np.ndarray) and key not in arrays:

@@ -191,44 +191,30 @@ class _AlphaBounds:
 
 class _WallWindows:
     """The smallest and the largest wall pressure of every wall bin (a 3D run's patch) over
-    consecutive windows of the run's ``load_window`` through the discharge (the loop's own
-    envelope keeps only the largest), from the loads recovered from the wall's reaction
-    (:meth:`fipy_hopper.simulation.Simulation` ``wall_loads.profile``), written to
-    ``wall_windows.json`` in the run directory (``p_min_Pa``, ``p_max_Pa`` per bin in the
-    order of ``wall_pressure.csv``'s rows of a stage, ``windows``); a resumed run carries
-    them on."""
+    the discharge's windows of the run's ``load_window`` (kept by the loop,
+    :attr:`fipy_hopper.simulation.Simulation.window_extremes`, from the loads recovered from
+    the wall's reaction, and checkpointed with it: a resumed run carries them on exactly),
+    written to ``wall_windows.json`` in the run directory (``p_min_Pa``, ``p_max_Pa`` per bin
+    in the order of ``wall_pressure.csv``'s rows of a stage, ``windows``) every 30 s of wall
+    time and when the run ends."""
 
-    def __init__(self, path: Path, resume: bool):
+    def __init__(self, path: Path):
         self.path = path
-        saved = _read_json(path) if resume else None
-        self.low = saved["p_min_Pa"] if saved else None
-        self.high = saved["p_max_Pa"] if saved else None
-        self.windows = saved["windows"] if saved else 0
-        self.previous = None
+        self.sim = None
 
     def attach(self, sim) -> None:
-        sim.add_callback(self.window, sim.load_window, stages=("discharge",))
+        self.sim = sim
         sim.add_wall_time_callback(lambda sim_, state: self.write(), 30.0)
-
-    def window(self, sim, state) -> None:
-        import numpy as np
-
-        now = sim.wall_loads.reading(sim.model, state)
-        if self.previous is not None and now["t"] > self.previous["t"]:
-            p = np.asarray(sim.wall_loads.profile(self.previous, now)[3], float)
-            if self.low is None:
-                self.low, self.high = p.tolist(), p.tolist()
-            else:
-                self.low = np.fmin(self.low, p).tolist()
-                self.high = np.fmax(self.high, p).tolist()
-            self.windows += 1
-        self.previous = now
 
     def write(self) -> None:
         from fipy_hopper.io import write_json
 
-        write_json(self.path, {"p_min_Pa": self.low, "p_max_Pa": self.high,
-                               "windows": self.windows})
+        if self.sim is None:
+            return
+        extremes = self.sim.window_extremes
+        low, high = (None, None) if extremes is None else (a.tolist() for a in extremes)
+        write_json(self.path, {"p_min_Pa": low, "p_max_Pa": high,
+                               "windows": self.sim.record.envelope_windows})
 
 
 def run_case(case: dict, root, force: bool = False, threads: int | None = 1) -> dict:
@@ -251,8 +237,7 @@ def run_case(case: dict, root, force: bool = False, threads: int | None = 1) -> 
                 "error": f"{path} holds a different configuration"}
     resume = status == "resume"
     tracker = _AlphaBounds(path / ALPHA_BOUNDS, resume) if case.get("track_alpha") else None
-    windows = (_WallWindows(path / WALL_WINDOWS, resume) if case.get("track_wall_windows")
-               else None)
+    windows = _WallWindows(path / WALL_WINDOWS) if case.get("track_wall_windows") else None
     setups = [t.attach for t in (tracker, windows) if t is not None]
 
     def setup(sim):

@@ -118,6 +118,39 @@ def test_resume_during_discharge_equals_uninterrupted(setup_dirs):
     assert_same_outputs(out, reference)
 
 
+def test_the_window_extremes_resume_exactly(setup_dirs):
+    """The smallest and the largest windowed wall pressure of every bin (the loop's
+    ``window_extremes``, what the studies' envelopes read) of a run interrupted in discharge and
+    resumed equal the uninterrupted run's bit for bit, over the same number of windows (at
+    least three, so that the checkpoint lies between windows and the extremes differ)."""
+    folder, _, _ = setup_dirs
+    config = folder / "windows.toml"
+    config.write_text(CONFIG + "load_window = 0.02\n")
+    runs = {}
+
+    def keep(name):
+        return lambda sim: runs.__setitem__(name, sim)
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        api.run(config, folder / "windows_whole", setup=keep("whole"), plots=False,
+                quiet=True)
+        out = folder / "windows_resumed"
+        with pytest.raises(KeyboardInterrupt):
+            api.run(config, out, plots=False, setup=interrupt_when(
+                lambda sim, st: st.stage == "discharge" and st.t - sim.t_open >= 0.061, out))
+        api.run(config, out, resume=True, setup=keep("resumed"), plots=False, quiet=True)
+    whole, resumed = runs["whole"], runs["resumed"]
+    assert whole.record.envelope_windows == resumed.record.envelope_windows >= 3
+    for a, b in zip(whole.window_extremes, resumed.window_extremes):
+        np.testing.assert_array_equal(a, b)
+    low, high = whole.window_extremes
+    measured = np.isfinite(low)
+    assert measured.sum() >= 10 and np.all(low[measured] <= high[measured])
+    assert np.any(low[measured] < high[measured])
+    np.testing.assert_array_equal(high[measured], whole.envelope[measured])
+
+
 def test_resume_during_filling_equals_uninterrupted(setup_dirs):
     folder, config, reference = setup_dirs
     out = interrupt_and_resume(folder, config, "filling",

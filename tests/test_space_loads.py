@@ -133,3 +133,39 @@ def test_off_centre_outlet_discharge_is_unsymmetric(eccentric_flat):
     assert abs(model.mass_in_hopper(state) + state.discharged - rec.initial_mass) \
         <= 1e-9 * rec.initial_mass
     assert state.discharged > 0.1 * rec.initial_mass
+
+
+def test_a_flat_floor_beside_an_off_centre_hole_is_measured_against_the_hole():
+    """A flat floor whose outlet lies wholly off the silo's axis (e = 0.06 m > the hole's
+    radius 0.04 m): a constructed flow falling at U = 1 m/s through the hole's column, the
+    floor's nodes creeping towards the hole at 0.1 U, the floor's contacts loaded: the floor's slip
+    ratio is 0.1 in every sector that has floor contacts (each contact's slip over the speed in
+    the hole at its height) and the call is funnel.  Measured against the silo's axis instead
+    (a node of the floor, at rest in the vertical) no contact has a moving axis and the ratio
+    is NaN, or it divides by the floor's own creep."""
+    geom = HopperGeometry(shape="profile", wall=((0.04, 0.0), (0.14, 0.0), (0.14, 0.3)),
+                          fill_level=0.2)
+    model = SpaceModel(small_silo(outlet_offset=0.06).with_(hopper=geom), threads=1)
+    state = model.initial_state()
+    g, W = model.grid, model.wall_loads
+    Z, Y, X = np.meshgrid(g.z_nodes, g.y_nodes, g.x_nodes, indexing="ij")
+    dx, dy = X - 0.06, Y
+    rho = np.hypot(dx, dy)
+    in_hole = rho < 0.04
+    state.v[:] = 0.0
+    state.v[2][in_hole] = -1.0
+    floor = (Z == 0.0) & ~in_hole
+    safe = np.where(rho > 0, rho, 1.0)
+    state.v[0][floor] = -0.1 * (dx / safe)[floor]
+    state.v[1][floor] = -0.1 * (dy / safe)[floor]
+    k, j, i = W.entry_node.T
+    on_floor = floor[k, j, i] & (rho[k, j, i] > 0.04 + 1e-9)
+    state.wall_impulse[:] = np.where(on_floor[:, None], -W.entry_normal.T, 0.0)
+    hop = flow.hopper_stretches(W.patches)
+    assert len(hop) == 1
+    ratio = flow.wall_slip_by_sector(model, state)[0]
+    measured = np.isfinite(ratio)
+    assert measured.sum() >= W.patches.n_sectors // 2
+    assert np.allclose(ratio[measured], 0.1, rtol=1e-9)
+    _, calls = flow.flow_mode_by_sector([[ratio.tolist()]], n_sectors=W.patches.n_sectors)
+    assert set(c for c in calls if c != "unknown") == {"funnel"}

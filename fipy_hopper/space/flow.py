@@ -8,8 +8,9 @@ The sections' rules (:class:`fipy_hopper.diagnostics.FlowModeRule`,
 
 * **wall slip per sector**: for every loaded contact entry on a hopper stretch (not vertical),
   its slip speed down the meridian ``u_e = -v . t`` over the downward speed ``U_e`` at the
-  axis of its section at its node's height (the silo's axis, or the eccentric cone's section
-  centre ``(c(z), 0)``: the grid's node nearest to it in the plane ``y = 0``), weighted by its
+  axis of its section at its node's height (the silo's axis, the eccentric cone's section
+  centre ``(c(z), 0)``, or a flat floor's hole's centre ``(e, 0)``: the grid's node nearest
+  to it in the plane ``y = 0``), weighted by its
   compressive normal impulse since the previous sample: the sections' wall slip ratio, per
   sector around the circumference (:func:`fipy_hopper.diagnostics.wall_slip` with the sector
   as the label) and per hopper stretch; a sector is ``"mass"`` when every hopper stretch slides
@@ -42,15 +43,15 @@ from .. import diagnostics
 
 def _axis_column(model) -> np.ndarray:
     """Per node row, the node column (index into ``x_nodes``) nearest to the section's axis
-    ``c(z)`` in the plane ``y = 0`` (a rectangular plan: nearest the centre of its section at
-    that height)."""
+    ``c(z)`` in the plane ``y = 0``: the axis of the part that holds the outlet (the eccentric
+    cone's ``c(z)``; a flat floor's hole, ``c = e`` at every height, so that a floor's contacts
+    are measured against the speed in its hole, never against a node of the floor); a
+    rectangular plan: nearest the centre of its section at that height."""
     g = model.grid
     if model.boundary.plan == "rectangular":
         c = model.boundary.section_centre(g.z_nodes)[0]
         return np.argmin(np.abs(g.x_nodes[None, :] - c[:, None]), axis=1)
-    part = model.boundary.parts[0] if len(model.boundary.parts) == 1 else \
-        model.boundary.parts[1]
-    c = part.centre(g.z_nodes)
+    c = model.boundary.parts[0].centre(g.z_nodes)
     return np.argmin(np.abs(g.x_nodes[None, :] - c[:, None]), axis=1)
 
 
