@@ -425,7 +425,8 @@ class HopperGeometry:
 
     def _check_three_d(self) -> None:
         """A 3D silo is a circular one: the conical shorthand or an axisymmetric profile
-        revolved about its axis, without inserts, its outlet inside the floor or the hopper
+        revolved about its axis (inserts with a centred outlet only), its outlet inside the
+        floor or the hopper
         (:func:`fipy_hopper.space.boundary.outlet_offset_error`); or a rectangular plan, its
         outlet inside the floor or the hopper's foot
         (:func:`fipy_hopper.space.rectangular.outlet_offset_error`)."""
@@ -447,11 +448,12 @@ class HopperGeometry:
             raise ConfigError(f"hopper.dimensions = 3 computes a circular silo (the conical "
                               f"shorthand or an axisymmetric profile revolved about its axis), "
                               f"not {what}; a plane silo runs with dimensions = 2")
-        if self.inserts:
+        if self.inserts and self.outlet_offset:
             raise ConfigError(f"hopper.inserts: {len(self.inserts)} insert"
-                              f"{'s' * (len(self.inserts) > 1)} given; hopper.dimensions = 3 "
-                              "has no inserts yet (a silo with inserts runs with dimensions "
-                              "= 2)")
+                              f"{'s' * (len(self.inserts) > 1)} given with hopper.outlet_offset"
+                              f" = {self.outlet_offset:g} m; inserts in 3D (bodies of "
+                              "revolution about the silo's axis) need a centred outlet "
+                              "(outlet_offset = 0)")
         from .space.boundary import outlet_offset_error
         error = outlet_offset_error(self.wall_points, self.outlet_offset)
         if error:

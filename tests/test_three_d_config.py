@@ -99,5 +99,9 @@ def test_shapes_3d_does_not_compute_are_refused():
         HopperConfig.from_dict({"hopper": plane, "numerics": {"cell_size": 0.02}})
     insert = dict(SMALL["hopper"], inserts=[{"outline": [[0.0, 0.15], [0.05, 0.15],
                                                          [0.0, 0.2]]}])
-    with pytest.raises(ConfigError, match="has no inserts yet"):
-        HopperConfig.from_dict({"hopper": insert, "numerics": {"cell_size": 0.02}})
+    assert HopperConfig.from_dict({"hopper": insert, "numerics": {"cell_size": 0.02}}
+                                  ).hopper.inserts                  # centred: a 3D insert
+    off_centre = dict(insert, outlet_offset=0.03)
+    with pytest.raises(ConfigError, match="hopper.inserts: 1 insert given with "
+                       "hopper.outlet_offset = 0.03 m; inserts in 3D .* need a centred"):
+        HopperConfig.from_dict({"hopper": off_centre, "numerics": {"cell_size": 0.02}})

@@ -33,7 +33,8 @@ Contact entries (:meth:`SiloBoundary.contacts`) follow the sections' rule segmen
 (:meth:`fipy_hopper.boundary.Boundary.segment_contacts`): a node is held by a wall segment's
 surface of revolution when its projection in its meridian plane falls on the segment
 (extended by ``reach`` past a concave corner) and it lies less than ``reach`` in front of it
-(3D distance) or anywhere behind it, with that surface's normal at the node; a node within
+(3D distance) or anywhere behind it (an insert's face: behind it only inside the insert, past
+which lies material again), with that surface's normal at the node; a node within
 ``reach`` of the wall that no segment holds (round a convex corner, the outlet lip) is held
 by the normal towards its nearest wall point.  A tube (the free fall below the outlet) holds
 only nodes below the outlet plane: the plane itself is the floor's or the plate's (with the
@@ -42,7 +43,12 @@ it, a frictionless wall with a normal about the outlet's centre, which took a sh
 bin wall's reaction at the floor's corner: 10 % of the lowest bin's pressure on the near side
 of an off-centre outlet at rest, none on the far side).  Each entry carries the wall friction
 of its segment (tubes frictionless) and the profile's segment index (-1 a tube, -2 a convex
-corner).
+corner, ``-3 - i`` the ``i``-th insert).
+
+**Inserts** (``[[hopper.inserts]]``, a centred outlet only): each insert's outline in the
+section revolved about the silo's axis, a body of revolution (a cone or a disc on the axis, a
+ring off it) that is part of the section's boundary (:func:`fipy_hopper.boundary.build`), with
+its own friction; the material region is the revolved section's.
 """
 
 from __future__ import annotations
@@ -52,11 +58,20 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..boundary import Boundary, build
+from ..boundary import Boundary, build, inside_polygon
 
 #: how far below the outlet plane the bin cylinder of a flat-floored silo's second part
 #: starts (m, any depth below the grid)
 _DEEP = 100.0
+
+
+#: the contact ``segment`` code of the first insert's entries (the ``i``-th: ``INSERT - i``)
+INSERT = -3
+
+
+def insert_code(index: int) -> int:
+    """The contact entries' ``segment`` code of insert ``index`` (0-based)."""
+    return INSERT - int(index)
 
 
 def outlet_offset_error(wall, outlet_offset) -> str:
@@ -165,21 +180,29 @@ class SiloBoundary:
     outlet_radius: float
     fill_level: float
     segment_friction_deg: tuple = field(default=())
+    n_inserts: int = 0
 
     plan = "circular"
 
     @classmethod
     def from_profile(cls, wall, fill_level: float, outlet_offset: float = 0.0,
-                     friction_deg: float = 15.0, segment_friction_deg=None) -> "SiloBoundary":
+                     friction_deg: float = 15.0, segment_friction_deg=None,
+                     inserts=()) -> "SiloBoundary":
         """The silo of a profile ``wall`` ``[(r, z), ...]`` (m; the lip on ``z = 0``, never
         descending, the top a vertical stretch), filled to ``fill_level`` (m), with the outlet
         ``outlet_offset`` (m) off the axis along ``+x``; wall friction ``friction_deg`` or one
-        angle per segment (deg).  Refuses an offset that puts the outlet outside the floor or
-        the hopper (``e + R_0 >= R``)."""
+        angle per segment (deg); ``inserts`` ``[(outline, friction_deg or None), ...]`` revolved
+        about the axis (module docstring; a centred outlet only).  Refuses an offset that puts
+        the outlet outside the floor or the hopper (``e + R_0 >= R``), and inserts beside an
+        off-centre outlet."""
         wall = tuple((float(r), float(z)) for r, z in wall)
         error = outlet_offset_error(wall, outlet_offset)
         if error:
             raise ValueError(error)
+        inserts = tuple(inserts)
+        if inserts and outlet_offset != 0.0:
+            raise ValueError(f"outlet_offset = {outlet_offset:g} m with {len(inserts)} "
+                             "insert(s): inserts in 3D need a centred outlet (offset 0)")
         e = float(outlet_offset)
         r0 = wall[0][0]
         radius = max(r for r, _ in wall)
@@ -189,12 +212,15 @@ class SiloBoundary:
         if len(fr) != n_seg:
             raise ValueError(f"segment_friction_deg has {len(fr)} values for {n_seg} segments")
 
-        def part(points, seg_of, friction, offset, z_shear):
-            b = build(points, symmetry="axisymmetric", fill_level=fill_level).with_friction(
-                friction[0], friction)
+        def part(points, seg_of, friction, offset, z_shear, inserts=()):
+            b = build(points, symmetry="axisymmetric", fill_level=fill_level,
+                      inserts=inserts).with_friction(float(friction_deg), friction)
             tab = b.table
-            segment = tuple(-1 if tab.tube[k] else seg_of[tab.segment[k]]
-                            for k in range(len(tab)))
+            insert_of = {ci: i for i, ci in enumerate(
+                ci for ci, c in enumerate(b.chains) if c.kind == "insert")}
+            segment = tuple(-1 if tab.tube[k] else
+                            insert_code(insert_of[tab.chain[k]]) if tab.chain[k] in insert_of
+                            else seg_of[tab.segment[k]] for k in range(len(tab)))
             return Part(b, offset, z_shear, segment)
 
         top = wall[-1][1]
@@ -209,18 +235,19 @@ class SiloBoundary:
             parts = (floor, bin_wall)
         else:
             z_b = _bin_foot(wall)
-            parts = (part(wall, tuple(range(n_seg)), fr, e, z_b),)
-        return cls(parts, wall, e, r0, float(fill_level), fr)
+            parts = (part(wall, tuple(range(n_seg)), fr, e, z_b, inserts),)
+        return cls(parts, wall, e, r0, float(fill_level), fr, len(inserts))
 
     @classmethod
     def from_geometry(cls, geom, outlet_offset: float = 0.0, friction_deg: float = 15.0,
                       segment_friction_deg=None) -> "SiloBoundary":
-        """The silo of a :class:`fipy_hopper.config.HopperGeometry` (axisymmetric, without
-        inserts): its wall points and fill level."""
-        if not geom.axisymmetric or geom.inserts:
-            raise ValueError("the 3D silo is an axisymmetric profile without inserts")
+        """The silo of a :class:`fipy_hopper.config.HopperGeometry` (axisymmetric): its wall
+        points, inserts and fill level."""
+        if not geom.axisymmetric:
+            raise ValueError("the 3D silo is an axisymmetric profile")
         return cls.from_profile(geom.wall_points, geom.fill_level, outlet_offset, friction_deg,
-                                segment_friction_deg)
+                                segment_friction_deg,
+                                [(i.outline, i.friction_angle_deg) for i in geom.inserts])
 
     # ------------------------------------------------------------------ sizes
     @property
@@ -311,6 +338,12 @@ class SiloBoundary:
                 if tab.tube[k]:             # the outlet plane is the floor's or the plate's
                     hi -= 1e-9
                 mask = cand & (t >= lo - 1e-12) & (t <= hi + 1e-12) & (front < reach)
+                chain = p.boundary.chains[tab.chain[k]]
+                if chain.kind == "insert":        # behind an insert's face: only inside it
+                    far_behind = mask & (front <= -reach)
+                    if far_behind.any():
+                        mask &= ~far_behind | inside_polygon(
+                            rho, z, np.asarray(chain.polygon, float))
                 if not mask.any():
                     continue
                 mu = 0.0 if tab.tube[k] else math.tan(math.radians(tab.friction_deg[k]))

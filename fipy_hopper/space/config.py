@@ -21,7 +21,7 @@ DEFAULT_BULK_VISCOSITY = 0.06
 @dataclass(frozen=True)
 class SpaceConfig:
     """A 3D run: the silo ``hopper`` (an axisymmetric :class:`HopperGeometry`, the conical
-    shorthand or a profile, without inserts; or a rectangular plan,
+    shorthand or a profile, inserts with a centred outlet; or a rectangular plan,
     :mod:`fipy_hopper.space.rectangular`), ``material``, ``wall``, ``numerics`` (its
     ``cell_size`` is the cube's side; the sections' ``3 cells across the outlet radius`` is
     not required here), the outlet's offset from the silo's axis along ``+x``

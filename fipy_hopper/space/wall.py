@@ -63,6 +63,7 @@ import numpy as np
 
 from ..diagnostics import KNOT_CELLS
 from ..wall_traction import bin_edges
+from .boundary import INSERT
 
 
 
@@ -424,8 +425,8 @@ def locate(boundary, stretches, x, y, z, segment=None):
             rho, _, _ = p.local(x[on], y[on], z[on])
             rows = p.boundary.load_row(rho, z[on])
             seg[on] = np.asarray(p.segment)[rows]
-    if segment is not None:                  # a tube's entries stay off the wall
-        seg[np.asarray(segment) == -1] = -1
+    if segment is not None:                  # a tube's and the inserts' entries stay off
+        seg[(np.asarray(segment) == -1) | (np.asarray(segment) <= INSERT)] = -1   # the wall
     by_segment = {st3.stretch.segment: k for k, st3 in enumerate(stretches)}
     top = len(stretches) - 1
     stretch = np.array([by_segment.get(int(k), top if k > stretches[top].stretch.segment
@@ -447,6 +448,25 @@ def locate(boundary, stretches, x, y, z, segment=None):
         _, normal[:, on], tangent[:, on], hoop[:, on], _ = _surface(boundary, st3, s[on],
                                                                     theta[on])
     return stretch, s, theta, normal, tangent, hoop
+
+
+def entry_inserts(boundary, x, y, z, segment) -> np.ndarray:
+    """The insert (0-based; -1 none) whose surface each contact entry at ``(x, y, z)`` (m)
+    holds: from its ``segment`` code (:func:`fipy_hopper.space.boundary.insert_code`), and for
+    a convex corner's entry (-2) the insert of its nearest segment (the load row of
+    :meth:`fipy_hopper.boundary.Boundary.load_row`) if that is an insert's."""
+    segment = np.asarray(segment, np.int64)
+    out = np.full(len(segment), -1, np.int64)
+    if not getattr(boundary, "n_inserts", 0):
+        return out
+    out = np.where(segment <= INSERT, INSERT - segment, -1)
+    corner = np.flatnonzero(segment == -2)
+    if corner.size:
+        p = boundary.parts[0]
+        rho, _, _ = p.local(x[corner], y[corner], z[corner])
+        code = np.asarray(p.segment)[p.boundary.load_row(rho, z[corner])]
+        out[corner] = np.where(code <= INSERT, INSERT - code, -1)
+    return out
 
 
 def images(mirror_x: bool, mirror_y: bool) -> list:
@@ -770,6 +790,9 @@ class SpaceWallLoads:
             where = locate(model.boundary, P.stretches, x, y, z, segment)
         (self.entry_stretch, self.entry_s, self.entry_theta, self.entry_normal,
          self.entry_tangent, self.entry_hoop) = where
+        #: the insert whose surface each wall entry holds (0-based; -1 none)
+        self.entry_insert = (np.full(len(x), -1, np.int64) if self.faces else
+                             entry_inserts(model.boundary, x, y, z, segment))
         segment_of = np.array([st.stretch.segment for st in P.stretches] + [-1])
         #: the profile segment whose load each entry is (-1: the tube's, not a load)
         self.entry_segment = segment_of[self.entry_stretch]
@@ -932,7 +955,8 @@ class SpaceWallLoads:
         positive), the sections' :meth:`~fipy_hopper.diagnostics.WallLoads.balance`:
         ``weight``, ``wall``, ``outlet`` (the plate), ``damping``, ``stopped``, ``outflow``,
         ``momentum_rate`` and the ``residual`` of ``dP/dt = wall + outlet + damping + stopped
-        + outflow - weight`` (``relative_residual``: over the weight)."""
+        + outflow - weight`` (``relative_residual``: over the weight); each insert's push up
+        on the material (``insert_1``, ...: its share of ``wall``)."""
         duration = end["t"] - start["t"]
         if not duration > 0:
             raise ValueError("a load window needs a positive duration")
@@ -945,18 +969,32 @@ class SpaceWallLoads:
                "momentum_rate": (end["momentum"] - start["momentum"]) * to_n}
         out["residual"] = (out["wall"] + out["outlet"] + out["damping"] + out["stopped"]
                            + out["outflow"] - out["weight"] - out["momentum_rate"])
+        for i, f in self.insert_forces(start, end).items():   # the inserts' share of "wall"
+            out[f"insert_{i + 1}"] = f[2]
         out["relative_residual"] = (abs(out["residual"]) / out["weight"]
                                     if out["weight"] > 0 else math.nan)
         return out
 
     def segment_forces(self, start: dict, end: dict) -> dict:
         """The mean force of each wall segment of the profile on the material over a window,
-        ``{segment: (F_x, F_y, F_z)}`` (N, whole silo: every image; the tube's left out)."""
+        ``{segment: (F_x, F_y, F_z)}`` (N, whole silo: every image; the tube's and the
+        inserts' left out)."""
+        return self._grouped_forces(self.entry_segment, start, end)
+
+    def insert_forces(self, start: dict, end: dict) -> dict:
+        """The mean force of each insert on the material over a window, ``{insert: (F_x,
+        F_y, F_z)}`` (N, whole silo; insert 0-based; ``F_z`` its push up on the material,
+        the load on it)."""
+        return self._grouped_forces(self.entry_insert, start, end)
+
+    def _grouped_forces(self, label, start: dict, end: dict) -> dict:
+        """``{label: (F_x, F_y, F_z)}``: the summed mean force of the entries of each label
+        ``>= 0`` over a window, every mirror image added (N, whole silo)."""
         duration = end["t"] - start["t"]
         force = (end["wall"] - start["wall"]) / duration
         out = {}
-        for k in sorted(set(int(v) for v in self.entry_segment[self._on])):
-            on = self.entry_segment == k
+        for k in sorted(set(int(v) for v in label[label >= 0])):
+            on = label == k
             total = np.zeros(3)
             for _, _, sign in self.images:
                 total += sign * force[on].sum(axis=0)
@@ -1051,7 +1089,10 @@ class PatchLoads:
         """``{"wall": [F_x, F_z]}``: the wall's mean force on the material over a window (N,
         whole silo; ``F_x`` towards the outlet's offset, the tube left out)."""
         forces = self.space.segment_forces(start, end).values()
-        return {"wall": [float(sum(f[0] for f in forces)), float(sum(f[2] for f in forces))]}
+        out = {"wall": [float(sum(f[0] for f in forces)), float(sum(f[2] for f in forces))]}
+        for i, f in self.space.insert_forces(start, end).items():
+            out[f"insert_{i + 1}"] = [f[0], f[2]]
+        return out
 
     def corner_forces(self, p_n, tau) -> list:
         return []
