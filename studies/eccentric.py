@@ -1003,11 +1003,7 @@ def main(argv=None) -> int:
     study = setup(quick=args.quick, **options)
     if args.estimate:
         rows = three_d.estimate(study)
-        for r in rows:
-            print(f"{r['case']}: {r['grid']} cubes ({r['cells']:,}), {r['loaded_cells']:,} "
-                  f"loaded, {r['discharge_s']:.3g} s of discharge, {r['steps']:,} steps, "
-                  f"{r['memory_GB']:.2f} GB, about {r['seconds']:,.0f} s on one thread")
-        total = sum(r["seconds"] for r in rows)
+        total = three_d.print_estimate(rows)
         square = sum(r["seconds"] for r, c in zip(rows, study["cases"])
                      if c["params"]["family"] != FAMILY)
         print(f"all: about {total:,.0f} s on one thread ({total / 3600:.1f} h; "

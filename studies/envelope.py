@@ -43,6 +43,7 @@ Usage::
     python studies/envelope.py [--out DIR] [--quick] [--serial | --scheduler ADDRESS]
                                [--config SILO.toml] [--offset-fractions 0 0.4 0.8]
                                [--a-phi 1.3] [--a-k 1.5] [--a-mu 1.4] [--end-time 1.0]
+                               [--estimate]
 """
 
 from __future__ import annotations
@@ -362,6 +363,8 @@ def main(argv=None) -> int:
     parser.add_argument("--a-k", dest="a_K", type=float)
     parser.add_argument("--a-mu", dest="a_mu", type=float)
     parser.add_argument("--end-time", dest="end_time", type=float)
+    parser.add_argument("--estimate", action="store_true",
+                        help="print each case's grid, memory and time estimate and stop")
     args = parser.parse_args(argv)
     options = _sweep.study_options(args, ("offset_fractions", "a_phi", "a_K", "a_mu",
                                           "end_time"))
@@ -375,6 +378,12 @@ def main(argv=None) -> int:
     if "offset_fractions" in options:
         options["offset_fractions"] = tuple(options["offset_fractions"])
     study = setup(quick=args.quick, **options)
+    if args.estimate:
+        import three_d
+        total = three_d.print_estimate(three_d.estimate(study))
+        print(f"all: about {total:,.0f} s on one thread ({total / 3600:.1f} h; "
+              f"{total / 7200:.1f} h on two cores kept busy)")
+        return 0
     rows = _sweep.run_study(NAME, study, args)
     table = envelope(rows)
     numbers = analyse(rows, table, study["values"])

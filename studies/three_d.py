@@ -296,6 +296,20 @@ def estimate(study) -> list:
     return rows
 
 
+def print_estimate(rows) -> float:
+    """Print a line per case of :func:`estimate`'s ``rows``; returns the 3D cases' summed
+    time on one thread (s)."""
+    for r in rows:
+        if r["dimensions"] == 2:
+            print(f"{r['case']}: a section, {r['cells']:,} cells")
+        else:
+            print(f"{r['case']}: {r['grid']} cubes ({r['cells']:,}), {r['loaded_cells']:,} "
+                  f"loaded, {r['discharge_s']:.3g} s of discharge"
+                  f"{' (to empty)' if r['emptied'] else ''}, {r['steps']:,} steps, "
+                  f"{r['memory_GB']:.2f} GB, about {r['seconds']:,.0f} s on one thread")
+    return float(sum(r.get("seconds", 0.0) for r in rows))
+
+
 # ---------------------------------------------------------------- reading a run
 def _config_of(row):
     import warnings
@@ -1179,16 +1193,7 @@ def main(argv=None) -> int:
     options = _sweep.study_options(args, ("cell_size", "reference_cell_size", "end_time"))
     study = setup(quick=args.quick, **options)
     if args.estimate:
-        rows = estimate(study)
-        for r in rows:
-            if r["dimensions"] == 2:
-                print(f"{r['case']}: a section, {r['cells']:,} cells")
-            else:
-                print(f"{r['case']}: {r['grid']} cubes ({r['cells']:,}), {r['loaded_cells']:,} "
-                      f"loaded, {r['discharge_s']:.3g} s of discharge"
-                      f"{' (to empty)' if r['emptied'] else ''}, {r['steps']:,} steps, "
-                      f"{r['memory_GB']:.2f} GB, about {r['seconds']:,.0f} s on one thread")
-        total = sum(r.get("seconds", 0.0) for r in rows)
+        total = print_estimate(estimate(study))
         print(f"3D cases: about {total:,.0f} s on one thread ({total / 3600:.1f} h; "
               f"{total / 7200:.1f} h on two cores kept busy)")
         return 0

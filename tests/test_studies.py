@@ -719,6 +719,22 @@ def test_three_d_study_estimates_its_default_from_the_settings():
     assert 2.0 <= opts["fill_level"] / opts["bin_diameter"] <= 3.0
 
 
+def test_envelope_estimates_its_default_from_the_settings(capsys):
+    """``envelope.py --estimate`` (nothing run): a line per case of the default's twelve
+    (three offsets, mu_w and phi each at both extremes) with its grid, memory and time, and the
+    total (estimated 552 s on one thread); a centred case (a quarter) has half the cells of an
+    off-centre one (a half)."""
+    study = load("envelope")
+    assert study.main(["--estimate"]) == 0
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert len(lines) == 13 and lines[-1].startswith("all: about ")
+    assert all(" cubes (" in line and " s on one thread" in line for line in lines[:-1])
+    rows = load("three_d").estimate(study.setup())
+    total = sum(r["seconds"] for r in rows)
+    assert 60 < total < 3600
+    assert rows[0]["cells"] * 2 == rows[-1]["cells"]
+
+
 def test_envelope_runs_offsets_and_material_extremes(root):
     """``envelope.py --quick``: a flat-bottomed square bin (2 cm) with its outlet centred and
     half-way to its wall, each with mu_w and phi both at their lower and both at their upper
