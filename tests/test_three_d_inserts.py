@@ -126,8 +126,11 @@ def test_the_silo_empties_past_the_insert():
     """Discharged for 0.4 s (2 cm cubes): the material flows round the insert (more than a
     tenth of the fill out, measured 30 %; the top of the material on the axis, above the
     cone's apex, sinks by more than a cell: measured 0.239 to 0.19 m), the mass balance holds
-    to 1e-9 and the insert carries a load in discharge
-    (``insert_1_vertical_force_discharge_max_N`` positive)."""
+    to 1e-9, the insert carries a load in discharge
+    (``insert_1_vertical_force_discharge_max_N`` positive), and the cone's wall slides: mass
+    flow with a slip ratio between 0.2 and 1 (measured 0.57; the section's, 0.3 s, 0.46),
+    its axis speed beside the insert where the axis runs through it (the sections' rule; the
+    axis node inside the cone gave 14.7)."""
     model = SpaceModel(silo(0.02), threads=1)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -137,7 +140,9 @@ def test_the_silo_empties_past_the_insert():
     assert abs(model.mass_in_hopper(st) + st.discharged - rec.initial_mass) \
         <= 1e-9 * rec.initial_mass
     assert st.discharged > 0.1 * rec.initial_mass
-    assert sim.summary()["insert_1_vertical_force_discharge_max_N"] > 0.0
+    summary = sim.summary()
+    assert summary["insert_1_vertical_force_discharge_max_N"] > 0.0
+    assert summary["flow_mode"] == "mass" and 0.2 < summary["wall_slip_ratio"] < 1.0
     g = model.grid
     axis = (np.abs(g.centres(1)) < g.h)[None, :, None] & \
         (np.abs(g.centres(0)) < g.h)[None, None, :]
