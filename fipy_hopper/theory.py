@@ -153,6 +153,7 @@ __all__ = [
     "en1991_eccentric_pressures",
     "EccentricPattern",
     "en1991_eccentric_wall_pressure",
+    "en1991_large_eccentricity",
     "AS3774Eccentricity",
     "as3774_eccentricity",
     "as3774_eccentric_increment",
@@ -1658,6 +1659,32 @@ class EccentricPattern(NamedTuple):
     p_h: np.ndarray
     p_w: np.ndarray
     zone: np.ndarray
+
+
+#: EN 1991-4's critical eccentricities of the outlet and of the filling over the silo's
+#: diameter, ``e_o,cr / d_c = e_f,cr / d_c`` [M].
+EN1991_CRITICAL_ECCENTRICITY = 0.25
+
+
+def en1991_large_eccentricity(e_o, d_c, e_f=0.0):
+    """Whether EN 1991-4 calls for its large-eccentricity procedures (the eccentric flow
+    channel of :func:`en1991_eccentric_channel` for discharge): the outlet's eccentricity
+    ``e_o`` or the filling's ``e_f`` (m, >= 0) above ``0.25 d_c`` (``d_c`` the silo's diameter,
+    m, > 0), :data:`EN1991_CRITICAL_ECCENTRICITY`.  Below it, the standard's symmetrical loads
+    with their patch loads cover the eccentricity.  Returns a boolean array (numpy scalar).
+
+    Source: EN 1991-4:2006 §5.2.4.1 (the critical eccentricities ``e_o,cr = e_f,cr =
+    0.25 d_c`` for slender silos).  Tag: **[M]** the threshold as recalled, the standard's text
+    not read; consistent with ENV 1991-4's scope, whose rules stop at ``e_o < 0.25 d_c``
+    [V: as quoted on eurocode.us], and with EN 1991-4's Action Assessment Class 3 for an
+    eccentric discharge beyond 25 % of the diameter [V: as tabulated by J. Carson and D.
+    Craig (2015), Procedia Engineering 102, 647-656, Table 1]; which silos (slender, which
+    classes) the procedure is required for is not encoded here.
+    """
+    d_c = _positive("d_c", d_c, " m")
+    e_o, e_f = _nonneg("e_o", e_o, " m"), _nonneg("e_f", e_f, " m")
+    limit = EN1991_CRITICAL_ECCENTRICITY * d_c
+    return _out((e_o > limit) | (e_f > limit))
 
 
 def en1991_eccentric_wall_pressure(theta_deg, z, gamma, r, G, K, mu, phi_i, p_hf=None,

@@ -56,8 +56,10 @@ Measured per case:
   (:func:`fipy_hopper.theory.as3774_eccentric_increment`, ``h`` the height above the outlet)
   on its symmetric flow pressure ``p_nf``, taken as the centred case's mean around at that
   height in the same stage (at rest its filling pressure), as a factor over the same ``p_hf``.
-  EN's pattern is evaluated at every offset: from which offset the standard requires its
-  large-eccentricity case was not read and is not applied here.  The codes' coefficients are
+  EN's pattern is evaluated at every offset; the findings say at which the standard calls for
+  its large-eccentricity case (above ``e_o = 0.25 d_c``,
+  :func:`fipy_hopper.theory.en1991_large_eccentricity`, as recalled [M]) and at which it is
+  drawn for comparison only.  The codes' coefficients are
   as coded in :mod:`fipy_hopper.theory` (``docs/correlations.md`` section e: not checked
   against the standards' texts).
 
@@ -464,7 +466,9 @@ def circular_numbers(rows, options) -> tuple:
             "windows": stages[row["case"]].get("discharge_windows", {}).get("source"),
             "wall_time_s": _r(row.get("wall_time_s"), 1), "reused": row.get("reused"),
             "channel": {k: v for k, v in channel.items() if k != "history"},
-            "G_measured": _r(G_m, 3), "factors": per_stage}
+            "G_measured": _r(G_m, 3), "factors": per_stage,
+            "en1991_large_eccentricity": bool(theory.en1991_large_eccentricity(
+                float(row.get("outlet_offset_m") or 0.0), 2.0 * R))}
     return numbers, circ, theta_rows, chan
 
 
@@ -857,6 +861,15 @@ def circular_findings(numbers, options) -> list:
         f" kg/s at e/R = {', '.join(f'{e:g}' for e, _, _ in cases)}; the flow channel in the "
         f"bin's middle half at the last snapshot (medians): " + "; ".join(parts)
         + f". EN 1991-4: {en_text}.")
+    large = [f"{e:g}" for e, _, n in cases if n.get("en1991_large_eccentricity")]
+    small = [f"{e:g}" for e, _, n in cases if not n.get("en1991_large_eccentricity") and e > 0]
+    out.append(
+        "EN 1991-4 calls for its large-eccentricity case above e_o = 0.25 d_c (e/R = 0.5; "
+        "theory.en1991_large_eccentricity, as recalled [M]): at e/R = "
+        + (", ".join(large) if large else "none of these offsets")
+        + (f"; at e/R = {', '.join(small)} its pattern is drawn for comparison only (the "
+           "standard covers those offsets with its symmetrical and patch loads)" if small
+           else "") + ".")
     for stage in ("filling", "early_discharge", "discharge_windows"):
         parts = []
         for e, _, n in cases:

@@ -47,6 +47,12 @@ def test_quick_study_writes_its_outputs_and_measures_the_factors(quick):
         assert r["error"] == "" and abs(float(r["mass_balance_error"])) < 1e-9, r["case"]
     circ = data["numbers"]["circular"]
     assert sorted(circ) == ["flat_e0", "flat_e0p5"]
+    # e/R = 0.5 is e_o = 0.25 d_c: at EN 1991-4's threshold, not above it
+    assert [circ[c]["en1991_large_eccentricity"] for c in sorted(circ)] == [False, False]
+    assert any("EN 1991-4 calls for its large-eccentricity case above e_o = 0.25 d_c (e/R = "
+               "0.5; theory.en1991_large_eccentricity, as recalled [M]): at e/R = none of "
+               "these offsets; at e/R = 0.5 its pattern is drawn for comparison only" in f
+               for f in data["findings"])
     for case, n in circ.items():
         assert n["windows"] == "windows" and n["base"] == "centred"
         for stage in ("filling", "early_discharge", "discharge_windows"):

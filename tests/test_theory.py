@@ -1151,3 +1151,21 @@ def test_as3774_near_side_forms_agree():
 def test_validation(call, name):
     with pytest.raises(ValueError, match=rf"\b{name}\b"):
         call()
+
+
+def test_en1991_large_eccentricity_threshold():
+    """EN 1991-4's large-eccentricity procedures above e_o or e_f = 0.25 d_c (as recalled,
+    [M]): a 0.64 m silo's outlet at e/R = 0.25, 0.5 (exactly 0.25 d_c) and 0.75 of its radius:
+    only 0.75 calls for them; a filling eccentricity alone does too; arrays broadcast; a
+    negative eccentricity or a diameter of 0 refused naming the parameter."""
+    d_c = 0.64
+    e = np.array([0.0, 0.25, 0.5, 0.75]) * 0.5 * d_c
+    np.testing.assert_array_equal(th.en1991_large_eccentricity(e, d_c),
+                                  [False, False, False, True])
+    assert th.en1991_large_eccentricity(0.0, d_c, e_f=0.17)
+    assert not th.en1991_large_eccentricity(0.16, d_c, e_f=0.16)
+    assert th.EN1991_CRITICAL_ECCENTRICITY == 0.25
+    with pytest.raises(ValueError, match="e_o must lie in"):
+        th.en1991_large_eccentricity(-0.01, d_c)
+    with pytest.raises(ValueError, match="d_c must lie in"):
+        th.en1991_large_eccentricity(0.1, 0.0)
