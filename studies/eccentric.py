@@ -1019,9 +1019,8 @@ def main(argv=None) -> int:
         total = three_d.print_estimate(rows)
         square = sum(r["seconds"] for r, c in zip(rows, study["cases"])
                      if c["params"]["family"] != FAMILY)
-        print(f"all: about {total:,.0f} s on one thread ({total / 3600:.1f} h; "
-              f"{total / 7200:.1f} h on two cores kept busy); the square silo alone "
-              f"{square:,.0f} s (the circular cases read from three_d.py's runs)")
+        print(f"all: {three_d.cost_text(total)}; the square silo alone {square:,.0f} s (the "
+              "circular cases read from three_d.py's runs)")
         return 0
     rows = run(study, args)
     numbers, tables = analyse(rows, study["options"])

@@ -381,8 +381,7 @@ def main(argv=None) -> int:
     if args.estimate:
         import three_d
         total = three_d.print_estimate(three_d.estimate(study))
-        print(f"all: about {total:,.0f} s on one thread ({total / 3600:.1f} h; "
-              f"{total / 7200:.1f} h on two cores kept busy)")
+        print(f"all: {three_d.cost_text(total)}")
         return 0
     rows = _sweep.run_study(NAME, study, args)
     table = envelope(rows)

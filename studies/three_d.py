@@ -310,6 +310,12 @@ def print_estimate(rows) -> float:
     return float(sum(r.get("seconds", 0.0) for r in rows))
 
 
+def cost_text(seconds: float) -> str:
+    """``about N s on one thread (h; h on two cores kept busy)`` of an estimate's total."""
+    return (f"about {seconds:,.0f} s on one thread ({seconds / 3600:.1f} h; "
+            f"{seconds / 7200:.1f} h on two cores kept busy)")
+
+
 # ---------------------------------------------------------------- reading a run
 def _config_of(row):
     import warnings
@@ -1194,8 +1200,7 @@ def main(argv=None) -> int:
     study = setup(quick=args.quick, **options)
     if args.estimate:
         total = print_estimate(estimate(study))
-        print(f"3D cases: about {total:,.0f} s on one thread ({total / 3600:.1f} h; "
-              f"{total / 7200:.1f} h on two cores kept busy)")
+        print(f"3D cases: {cost_text(total)}")
         return 0
     rows = _sweep.run_study(NAME, study, args)
     numbers, tables = analyse(rows, study["options"])

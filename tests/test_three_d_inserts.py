@@ -24,11 +24,19 @@ def silo(cell_size):
     return cfg.with_(hopper=replace(cfg.hopper, inserts=(InsertConfig(outline=CONE),)))
 
 
-def filled(model):
-    """The model filled to rest by the shared loop (no discharge)."""
+def section_of(cfg):
+    """The axisymmetric section of a 3D silo's configuration at its cell size."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        sim = Simulation(model, end_time=0.0, progress=False)
+        return HopperModel(HopperConfig(hopper=cfg.hopper, numerics=NumericsConfig(
+            cell_size=cfg.numerics.cell_size)), threads=1)
+
+
+def run(model, end_time=0.0):
+    """The model filled to rest by the shared loop and discharged for ``end_time`` s."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        sim = Simulation(model, end_time=end_time, progress=False)
         sim.run()
     return sim
 
@@ -39,12 +47,7 @@ def runs():
     out = {}
     for h in (0.02, 0.01):
         cfg = silo(h)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            section = HopperModel(HopperConfig(hopper=cfg.hopper,
-                                               numerics=NumericsConfig(cell_size=h)),
-                                  threads=1)
-        out[h] = filled(SpaceModel(cfg, threads=1)), filled(section)
+        out[h] = run(SpaceModel(cfg, threads=1)), run(section_of(cfg))
     return out
 
 
@@ -53,10 +56,7 @@ def test_the_fill_leaves_the_insert_out():
     0.016 %) and the exact volume of the silo less the insert's cone times the density within
     0.1 %; the cone's volume (1.2 % of the fill) is not in it."""
     cfg = silo(0.02)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        section = HopperModel(HopperConfig(hopper=cfg.hopper,
-                                           numerics=NumericsConfig(cell_size=0.02)), threads=1)
+    section = section_of(cfg)
     model = SpaceModel(cfg, threads=1)
     m3 = model.total_mass(model.initial_state())
     m2 = section.total_mass(section.initial_state())
@@ -132,10 +132,7 @@ def test_the_silo_empties_past_the_insert():
     its axis speed beside the insert where the axis runs through it (the sections' rule; the
     axis node inside the cone gave 14.7)."""
     model = SpaceModel(silo(0.02), threads=1)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        sim = Simulation(model, end_time=0.4, progress=False)
-        sim.run()
+    sim = run(model, 0.4)
     rec, st = sim.record, sim.state
     assert abs(model.mass_in_hopper(st) + st.discharged - rec.initial_mass) \
         <= 1e-9 * rec.initial_mass

@@ -46,28 +46,30 @@ def _axis_column(model) -> np.ndarray:
     ``c(z)`` in the plane ``y = 0``: the axis of the part that holds the outlet (the eccentric
     cone's ``c(z)``; a flat floor's hole, ``c = e`` at every height, so that a floor's contacts
     are measured against the speed in its hole, never against a node of the floor), or where
-    that node lies in an insert or within half a cell of it the row's node nearest the axis
-    at least half a cell from every wall and insert (the sections' rule,
+    that node lies in the solid or within half a cell of it (an insert on the axis) the row's
+    node nearest the axis at least half a cell from every wall and insert (the sections' rule,
     :func:`fipy_hopper.diagnostics.axis_columns`); a rectangular plan: nearest the centre of
-    its section at that height."""
+    its section at that height.  Computed once per model (a function of its geometry)."""
+    cached = getattr(model, "_axis_columns", None)
+    if cached is not None:
+        return cached
     g = model.grid
     if model.boundary.plan == "rectangular":
         c = model.boundary.section_centre(g.z_nodes)[0]
-        return np.argmin(np.abs(g.x_nodes[None, :] - c[:, None]), axis=1)
-    c = model.boundary.parts[0].centre(g.z_nodes)
-    offset = np.abs(g.x_nodes[None, :] - c[:, None])
-    centre = np.argmin(offset, axis=1)
-    if not getattr(model.boundary, "n_inserts", 0):
-        return centre
-    # beside an insert on the axis, the sections' rule (diagnostics.axis_columns): the node
-    # of the row nearest the axis at least half a cell from every wall and insert
-    Z, X = np.meshgrid(g.z_nodes, g.x_nodes, indexing="ij")
-    clear = model.boundary.distance_normal(X, np.zeros_like(X), Z)[0] >= 0.5 * g.h
-    ranked = np.where(clear, offset, np.inf)
-    nearest = np.argmin(ranked, axis=1)
-    rows = np.arange(len(centre))
-    keep = clear[rows, centre] | ~np.isfinite(ranked[rows, nearest])
-    return np.where(keep, centre, nearest)
+        columns = np.argmin(np.abs(g.x_nodes[None, :] - c[:, None]), axis=1)
+    else:
+        c = model.boundary.parts[0].centre(g.z_nodes)
+        offset = np.abs(g.x_nodes[None, :] - c[:, None])
+        centre = np.argmin(offset, axis=1)
+        Z, X = np.meshgrid(g.z_nodes, g.x_nodes, indexing="ij")
+        clear = model.boundary.distance_normal(X, np.zeros_like(X), Z)[0] >= 0.5 * g.h
+        ranked = np.where(clear, offset, np.inf)
+        nearest = np.argmin(ranked, axis=1)
+        rows = np.arange(len(centre))
+        keep = clear[rows, centre] | ~np.isfinite(ranked[rows, nearest])
+        columns = np.where(keep, centre, nearest)
+    model._axis_columns = columns
+    return columns
 
 
 def _axis_row(model) -> np.ndarray:
