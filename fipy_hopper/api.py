@@ -516,6 +516,8 @@ def _write_tables(rundir, record, axisymmetric: bool = True) -> None:
     fio.write_wall_pressure(rundir / rundir.WALL_PRESSURE, record)
     if record.wall_theta:                        # 3D: the extremes around the circumference
         fio.write_wall_extremes(rundir / rundir.WALL_EXTREMES, record)
+    if record.channel_windows:                   # 3D, a circular plan: the channel per window
+        fio.write_channel_windows(rundir / rundir.CHANNEL_WINDOWS, record)
     fio.write_loads(rundir / rundir.LOADS, record, axisymmetric)
     fio.write_wall_slip(rundir / rundir.WALL_SLIP, record, FlowModeRule().slip_ratio)
 

@@ -11,6 +11,7 @@ A run directory describes itself::
     wall_pressure.csv    stage, t_s, s_m, r_m, z_m, p_n_Pa, tau_Pa, ..., hoop and meridional forces
                          (3D: theta_deg, segment, tau_theta_Pa, no forces; one row per patch)
     wall_extremes.csv    3D: the largest and smallest pressure around the circumference
+    channel_windows.csv  3D, a circular plan: the flow channel per window of the discharge
     fields/fields.pvd    the field snapshots over time for ParaView (a VTU series)
     fields/fields_NNNN.vtu, fields/snapshots.csv
     fields/markers_NNNN.vtu   the passive layer markers of snapshot NNNN (when the run has them)
@@ -100,6 +101,17 @@ WALL_EXTREMES_COLUMNS = ("stage", "s_m", "z_m", "p_max_Pa", "theta_max_deg", "p_
 #: their ratio
 WALL_EXTREMES_COLUMNS_FACES = ("stage", "wall", "s_m", "z_m", "p_max_Pa", "u_max", "p_min_Pa",
                                "u_min", "max_over_min")
+#: Columns of ``channel_windows.csv`` (3D, a circular plan): per window of the discharge
+#: (``window``, its number among the load windows; its start and end, s since the outlet
+#: opened; the checks its mean fields average) and node plane of the bin the flow channel of
+#: the window's mean velocity (:func:`fipy_hopper.space.channel.field_channel`): its area,
+#: equivalent radius and centroid, its contact half-angle with the wall and the contact's
+#: middle, EN 1991-4's ``r_c`` and ``e_c`` of it, the fitted circle's RMS and the speed that
+#: bounds it
+CHANNEL_WINDOWS_COLUMNS = ("window", "t_start_s", "t_end_s", "checks", "z_m", "area_m2",
+                           "r_eq_m", "centroid_x_m", "centroid_y_m", "theta_c_deg",
+                           "contact_angle_deg", "r_c_m", "e_c_m", "fit_rms_m",
+                           "threshold_m_s")
 #: Columns of ``wall_slip.csv``: the loaded contacts of the hopper wall at the last sample of
 #: the flow-mode window (:class:`fipy_hopper.diagnostics.FlowModeRule`).
 WALL_SLIP_COLUMNS = ("s_m", "r_m", "z_m", "slip_ratio", "sliding")
@@ -422,6 +434,14 @@ def write_wall_slip(path: PathLike, record, slip_ratio: float) -> None:
     _write_csv(path, WALL_SLIP_COLUMNS, rows)
 
 
+def write_channel_windows(path: PathLike, record) -> None:
+    """``channel_windows.csv`` (:data:`CHANNEL_WINDOWS_COLUMNS`) from
+    ``record.channel_windows``."""
+    rows = ([_num(row.get(name, math.nan)) for name in CHANNEL_WINDOWS_COLUMNS]
+            for row in record.channel_windows)
+    _write_csv(path, CHANNEL_WINDOWS_COLUMNS, rows)
+
+
 def write_loads(path: PathLike, record, axisymmetric: bool = True) -> None:
     """``loads.csv``: the vertical momentum balance of the grid over each output interval
     (:meth:`fipy_hopper.diagnostics.WallLoads.balance`), filling and discharge; ``t_s`` the
@@ -472,6 +492,7 @@ class RunDirectory:
     LOADS = "loads.csv"
     WALL_SLIP = "wall_slip.csv"
     WALL_EXTREMES = "wall_extremes.csv"
+    CHANNEL_WINDOWS = "channel_windows.csv"
     CHECKPOINT = "checkpoint.npz"
     FIELDS = "fields"
     ERROR_LOG = "error.log"
@@ -713,7 +734,7 @@ class RunDirectory:
 
     #: every file a run writes at the top of its directory, besides the pictures
     OUTPUTS = (CONFIG, MANIFEST, SUMMARY, SUMMARY_TEXT, PROFILE, TIMESERIES, WALL_PRESSURE,
-               LOADS, WALL_SLIP, WALL_EXTREMES, CHECKPOINT, ERROR_LOG)
+               LOADS, WALL_SLIP, WALL_EXTREMES, CHANNEL_WINDOWS, CHECKPOINT, ERROR_LOG)
 
     @classmethod
     def output_names(cls) -> tuple:
@@ -1264,7 +1285,8 @@ _WALL_ARRAY = re.compile(r"wall__(?P<stage>[A-Za-z_]\w*?)__(?P<k>[0-5])")
 CHECKPOINT_AUXILIARY = (r"wall__\w+?__[0-5]", r"wallstress__\w+?__[01]",
                         r"wallraw__\w+?__[01]", r"wallforces__\w+?__[0-2]",
                         r"reading__\w+?__(wall|plate|budget)", r"stresssum__\w+?__[0-2]",
-                        r"envelope", r"envelope_raw", r"window_low", r"window_high")
+                        r"envelope", r"envelope_raw", r"window_low", r"window_high",
+                        r"channelsum__\d")
 _META_KEYS = ("state", "record", "wall_times", "t_open", "next_sample", "schedules")
 
 

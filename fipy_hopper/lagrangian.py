@@ -949,6 +949,14 @@ class LagrangianModel(SectionMeasures):
         slow = down[cone] < rule.stagnant_speed * max(mean_down, 1e-12)
         return index, float(np.sum(w[slow]) / np.sum(w))
 
+    def channel_fields(self, state) -> tuple:
+        """None: a section has no eccentric flow channel to measure per window."""
+        return ()
+
+    def channel_measures(self, means: tuple) -> list:
+        """None (:meth:`channel_fields`)."""
+        return []
+
     def empty_channel(self, state: LagrangianState, rule) -> tuple:
         """Not measured: the mesh stops by distortion long before a channel could form."""
         return math.nan, math.nan

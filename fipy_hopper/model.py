@@ -531,6 +531,14 @@ class HopperModel(SectionMeasures):
         from . import diagnostics
         return diagnostics.flow_mode_measures(self, state, rule)
 
+    def channel_fields(self, state) -> tuple:
+        """None: a section has no eccentric flow channel to measure per window."""
+        return ()
+
+    def channel_measures(self, means: tuple) -> list:
+        """None (:meth:`channel_fields`)."""
+        return []
+
     def empty_channel(self, state: State, rule) -> tuple:
         from . import diagnostics
         return diagnostics.empty_channel(self, state, rule)

@@ -101,6 +101,14 @@ class HopperModelProtocol(Protocol):
         """``(diameter, height)`` (m) of an empty channel through the material
         (:class:`~fipy_hopper.diagnostics.OutcomeRule`), NaN if none."""
 
+    def channel_fields(self, state) -> tuple:
+        """The arrays the loop averages over each window of the discharge (at its checks) for
+        :meth:`channel_measures`; ``()`` for a model that measures no flow channel."""
+
+    def channel_measures(self, means: tuple) -> list:
+        """The flow channel of a window's mean fields (:meth:`channel_fields`'s, in its
+        order): rows (dicts of floats, one per height), ``[]`` for none."""
+
     def contact_slip(self, state) -> tuple:
         """``(slip, axis_speed)`` (m/s) of every wall entry: its slip speed down the wall and
         the downward speed at the axis at its height (the flow-mode rule's ratio)."""

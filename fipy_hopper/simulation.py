@@ -266,6 +266,10 @@ class RunRecord:
     loads: list = field(default_factory=list)            # rows of loads.csv (dicts)
     rest_balance: dict = field(default_factory=dict)     # the balance over the rest window
     envelope_windows: int = 0
+    # the flow channel per window of the discharge (the envelope's windows), measured on the
+    # window's mean fields (HopperModelProtocol.channel_measures): one dict per window and
+    # height, with the window's start and end (s since the outlet opened); none for a section
+    channel_windows: list = field(default_factory=list)
     wall_k: float = math.nan                             # p_n / (-sigma_zz) at the bin wall, at rest
     fill_time: float = math.nan
     fill_at_rest: bool = False
@@ -322,6 +326,10 @@ class Simulation:
         #: the smallest and the largest windowed p_n of every wall bin in discharge, a bin's
         #: unmeasured windows (NaN) left out: ``(low, high)`` arrays, None before a window
         self.window_extremes = None
+        #: the sums over the current discharge window's checks of the model's channel fields
+        #: (``HopperModelProtocol.channel_fields``) and how many checks they hold
+        self._channel_sums = None
+        self._channel_count = 0
         self.wall_schedules: list[WallTimeSchedule] = []   # e.g. checkpoints
         #: the discharge's stop rules, in order (:class:`StopRule`; a custom rule, e.g. a
         #: discharged mass, is inserted or appended here)
@@ -630,6 +638,7 @@ class Simulation:
                 if st.t - self._readings[stage]["t"] >= self.load_window - 1e-12:
                     self._wall_stage(stage, self._readings.pop(stage),
                                      loads.reading(m, st))
+        self._add_channel_fields()
         if st.t >= self.next_envelope - 1e-12:
             current = loads.reading(m, st)
             p_n = loads.profile(self._readings["envelope"], current)[3]
@@ -645,8 +654,33 @@ class Simulation:
             self.envelope_raw = (raw if self.envelope_raw is None
                                  else np.maximum(self.envelope_raw, raw))
             self.record.envelope_windows += 1
+            self._measure_channel(self._readings["envelope"]["t"], current["t"])
             self._readings["envelope"] = current
             self.next_envelope = st.t + self.load_window
+
+    def _add_channel_fields(self):
+        """Add the model's channel fields now to the current window's sums."""
+        fields = self.model.channel_fields(self.state)
+        if not len(fields):
+            return
+        if self._channel_sums is None:
+            self._channel_sums = [np.array(f, float) for f in fields]
+        else:
+            for total, f in zip(self._channel_sums, fields):
+                total += f
+        self._channel_count += 1
+
+    def _measure_channel(self, t_start: float, t_end: float):
+        """The channel of the window ``t_start``-``t_end`` (s, run time) on its mean fields,
+        into ``record.channel_windows``; the sums start again."""
+        if self._channel_sums is not None and self._channel_count > 0:
+            means = tuple(total / self._channel_count for total in self._channel_sums)
+            window = {"window": self.record.envelope_windows,
+                      "t_start_s": t_start - self.t_open, "t_end_s": t_end - self.t_open,
+                      "checks": self._channel_count}
+            self.record.channel_windows.extend(
+                {**window, **row} for row in self.model.channel_measures(means))
+        self._channel_sums, self._channel_count = None, 0
 
     def _add_stress(self, stage: str):
         p, tau = self._stress_profile()
@@ -752,12 +786,15 @@ class Simulation:
             arrays["envelope_raw"] = self.envelope_raw
         if self.window_extremes is not None:
             arrays["window_low"], arrays["window_high"] = self.window_extremes
+        for k, total in enumerate(self._channel_sums or ()):
+            arrays[f"channelsum__{k}"] = total
         meta = {"fingerprint": self.fingerprint(), "state": scalars, "record": rec,
                 "wall_times": {stage: values[0] for stage, values in wall.items()},
                 "t_open": self.t_open, "next_sample": self.next_sample,
                 "next_load_sample": self.next_load_sample,
                 "next_envelope": self.next_envelope, "readings": readings,
                 "stress_sums": {k: v is not None for k, v in self._stress_sums.items()},
+                "channel_count": self._channel_count,
                 "mass_books": self.stability.books,
                 "schedules": [s.next_time for s in self.schedules]}
         path = os.fspath(path)
@@ -817,6 +854,10 @@ class Simulation:
         self.envelope_raw = arrays.pop("envelope_raw", None)
         low, high = arrays.pop("window_low", None), arrays.pop("window_high", None)
         self.window_extremes = None if low is None or high is None else (low, high)
+        n_fields = len([k for k in arrays if k.startswith("channelsum__")])
+        self._channel_sums = ([arrays.pop(f"channelsum__{k}") for k in range(n_fields)]
+                              if n_fields else None)
+        self._channel_count = int(meta.get("channel_count", 0))
         self.state = type(self.state)(**meta["state"], **arrays)
         self.record = RunRecord(**meta["record"], wall=wall, wall_stress=wall_stress,
                                 wall_forces=wall_forces, wall_raw=wall_raw)
@@ -853,7 +894,7 @@ class Simulation:
                  "run again")
         known = {"fingerprint", "state", "record", "wall_times", "t_open", "next_sample",
                  "next_load_sample", "next_envelope", "readings", "stress_sums", "mass_books",
-                 "schedules"}
+                 "schedules", "channel_count"}
         for key in meta:
             if key not in known:
                 fail(f"its metadata holds an unknown entry {str(key)[:40]!r}")
@@ -870,7 +911,7 @@ class Simulation:
                 fail(f"its record holds an unknown field {str(key)[:40]!r}")
             if isinstance(like, list) and key in series:
                 ok = isinstance(value, list) and all(is_number(v) for v in value)
-            elif key in ("loads", "wall_names"):
+            elif key in ("loads", "wall_names", "channel_windows"):
                 ok = isinstance(value, list) and all(
                     isinstance(row, str) if key == "wall_names" else isinstance(row, dict)
                     and all(isinstance(v, str) or is_number(v) for v in row.values())
@@ -931,6 +972,15 @@ class Simulation:
                        if present for k in range(3)})
         shapes["envelope"] = shapes["envelope_raw"] = (n_bins,)
         shapes["window_low"] = shapes["window_high"] = (n_bins,)
+        fields = self.model.channel_fields(self.state)
+        shapes.update({f"channelsum__{k}": np.shape(f) for k, f in enumerate(fields)})
+        count = meta.get("channel_count", 0)
+        if not (isinstance(count, int) and not isinstance(count, bool) and count >= 0):
+            fail(f"its metadata's channel_count = {str(count)[:40]} is not a count")
+        present = sum(1 for k in arrays if k.startswith("channelsum__"))
+        if present not in (0, len(fields)) or (count > 0) != (present > 0):
+            fail(f"its channel sums ({present} arrays, {count} checks) are not this run's "
+                 f"({len(fields)} fields)")
         state_arrays = set(vars(self.state))
         for key, value in vars(self.state).items():
             if isinstance(value, np.ndarray) and key not in arrays:

@@ -38,6 +38,8 @@ def call(member, state):
             args.append(5)
         elif name == "previous_impulse":
             args.append(None)
+        elif name == "means":
+            args.append(member.__self__.channel_fields(state))
         elif name in ("limit", "full"):
             break
     return member(*args)
@@ -99,6 +101,11 @@ def test_every_model_implements_the_protocol(kind):
     measures = model.wall_slip_measures(state, first["wall"], FlowModeRule())
     assert len(measures) == 6 and (measures[5] is None) == (d == 2)
     assert math.isfinite(model.material_speed(state))
+    fields = model.channel_fields(state)          # the channel per window: 3D only
+    assert (len(fields) == 2) == (d == 3)
+    rows = model.channel_measures(fields)
+    assert (len(rows) > 0) == (d == 3)
+    assert all(set(row) == set(rows[0]) for row in rows)
     # the wall loads over a window, per bin (3D: per patch)
     last = loads.reading(model, state)
     nb = len(sampler.centres)

@@ -83,7 +83,7 @@ def test_the_api_run_writes_every_3d_output(centred):
     folder, config, out, summary = centred
     for name in ("config.toml", "manifest.json", "summary.json", "timeseries.csv",
                  "wall_pressure.csv", "wall_extremes.csv", "loads.csv", "wall_slip.csv",
-                 "fields/fields.pvd", "fields/snapshots.csv") + PICTURES:
+                 "channel_windows.csv", "fields/fields.pvd", "fields/snapshots.csv") + PICTURES:
         assert (out / name).is_file(), name
     for name in ("wall_pressure.png", "wall_forces.png", "flow_pattern.png",
                  "stress_pattern.png", "discharge.gif", "checkpoint.npz"):
@@ -166,6 +166,57 @@ def test_the_snapshots_are_hexahedra_of_the_whole_silo(centred):
     assert mass == pytest.approx(summary["initial_mass_kg"], rel=1e-9)
     results = fh.read_results(out)
     assert results.finished and len(results.field(-1).cells_dict["hexahedron"]) == len(hexes)
+
+
+def test_the_channel_per_window_is_the_channel_of_the_windows_mean_field(tmp_path):
+    """``channel_windows.csv`` of the off-centre silo discharged in windows of 0.04 s: each
+    window's rows are the flow channel (``space.channel.field_channel``) of the mean over the
+    window's checks of the fields the model gives the loop (its nodes' v_z, its cells' alpha),
+    held here to a plain numpy mean of those fields as the loop saw them; a row per node plane
+    of the bin with material, every window of the discharge, windows as long as the load
+    window."""
+    from fipy_hopper.space.channel import field_channel, profile_rows
+
+    config = write_config(tmp_path, 0.04, **{"end_time = 0.12": "end_time = 0.12\n"
+                                              "load_window = 0.04"})
+    seen, sims = [], []
+
+    def setup(sim):
+        sims.append(sim)
+        model = sim.model
+        fields_of = model.channel_fields
+
+        def recording(state):
+            fields = fields_of(state)
+            seen.append((state.t - sim.t_open, [np.array(f) for f in fields]))
+            return fields
+        model.channel_fields = recording
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        api.run(config, tmp_path / "run", setup=setup, plots=False, quiet=True, threads=1)
+    sim = sims[0]
+    rows = sim.record.channel_windows
+    table = read_csv(tmp_path / "run" / "channel_windows.csv")
+    assert len(table["z_m"]) == len(rows) > 0
+    windows = sorted({row["window"] for row in rows})
+    assert windows == list(range(1, sim.record.envelope_windows + 1)) and len(windows) >= 2
+    for w in windows:
+        mine = [row for row in rows if row["window"] == w]
+        t0, t1 = mine[0]["t_start_s"], mine[0]["t_end_s"]
+        assert t1 - t0 == pytest.approx(0.04, abs=0.003)
+        checks = [f for t, f in seen if t0 + 1e-12 < t <= t1 + 1e-12]
+        assert mine[0]["checks"] == len(checks) >= 10
+        means = tuple(np.mean([f[k] for f in checks], axis=0) for k in range(2))
+        expected = profile_rows(field_channel(sim.model, *means))
+        assert len(expected) == len(mine)
+        for got, want in zip(mine, expected):
+            for key, value in want.items():
+                assert got[key] == pytest.approx(value, rel=1e-9, abs=1e-12, nan_ok=True), key
+        z_b = sim.model.boundary.bin_foot
+        assert all(row["z_m"] >= z_b - 1e-12 for row in mine)
+        np.testing.assert_allclose(table["area_m2"][table["window"] == w],
+                                   [row["area_m2"] for row in mine], rtol=1e-15)
 
 
 def test_the_command_line_runs_plots_and_validates_an_off_centre_silo(off_centre, capsys):
@@ -256,7 +307,7 @@ def assert_same_outputs(resumed, reference):
     a.pop("wall_time_s"), b.pop("wall_time_s")
     assert a == b                                     # every number, bitwise (JSON repr)
     for name in ("timeseries.csv", "wall_pressure.csv", "wall_extremes.csv", "loads.csv",
-                 "wall_slip.csv", "fields/snapshots.csv", "fields/fields.pvd", "config.toml"):
+                 "wall_slip.csv", "channel_windows.csv", "fields/snapshots.csv", "fields/fields.pvd", "config.toml"):
         assert (resumed / name).read_text() == (reference / name).read_text(), name
     for entry in read_snapshot_index(reference / "fields"):
         m_a = meshio.read(resumed / "fields" / entry["file"])

@@ -373,18 +373,44 @@ def node_material(alpha, kappa) -> np.ndarray:
 def model_channel(model, state, fraction: float = DEFAULT_FRACTION,
                   wall_inset: float = 0.0, full: float = 0.5) -> ChannelProfile:
     """The channel at every node plane of a 3D model's bin (``z >= bin_foot``, above the
-    outlet plane) in a state: the nodes' downward speed ``-v_z``, NaN at nodes whose open cells
-    hold less than ``full`` material (:func:`node_material`), unfolded across the grid's
-    mirror planes (:func:`unfold`); the section the bin's circle about the silo's axis.  Planes
-    without material are left out.  Reads ``model.grid``, ``model.boundary``, ``state.v`` and
-    ``state.alpha``; changes nothing.  EN 1991-4's model concerns the vertical walls, hence the
-    bin only."""
+    outlet plane) in a state: :func:`field_channel` of the nodes' vertical velocity
+    ``state.v[2]`` and the cells' material fraction ``state.alpha``.  Changes nothing."""
+    return field_channel(model, state.v[2], state.alpha, fraction, wall_inset, full)
+
+
+def field_channel(model, v_z, alpha, fraction: float = DEFAULT_FRACTION,
+                  wall_inset: float = 0.0, full: float = 0.5) -> ChannelProfile:
+    """The channel at every node plane of a 3D model's bin (``z >= bin_foot``, above the
+    outlet plane) in a field: the nodes' downward speed ``-v_z`` (m/s, (nz + 1, ny + 1,
+    nx + 1)), NaN at nodes whose open cells hold less than ``full`` material of ``alpha``
+    ((nz, ny, nx), :func:`node_material`), unfolded across the grid's mirror planes
+    (:func:`unfold`); the section the bin's circle about the silo's axis.  Planes without
+    material are left out.  A state's field or a mean over a window of the discharge
+    (:meth:`fipy_hopper.space.model.SpaceModel.channel_measures`).  Reads ``model.grid`` and
+    ``model.boundary``.  EN 1991-4's model concerns the vertical walls, hence the bin only."""
     g = model.grid
     R = float(model.boundary.radius)
     z_b = float(model.boundary.bin_foot)
-    material = node_material(state.alpha, g.kappa)
-    down = np.where(material >= full, -np.asarray(state.v[2], float), np.nan)
+    material = node_material(alpha, g.kappa)
+    down = np.where(material >= full, -np.asarray(v_z, float), np.nan)
     x, y, down = unfold(g.x_nodes, g.y_nodes, down, g.mirror_x, g.mirror_y)
     keep = (g.z_nodes > 0.0) & (g.z_nodes >= z_b - 1e-12) & np.isfinite(down).any(axis=(1, 2))
     return channel_profile(x, y, g.z_nodes[keep], down[keep], R, (0.0, 0.0), fraction,
                            wall_inset)
+
+
+#: the measures of a channel profile, per height, in a window's rows
+#: (:func:`profile_rows`, ``channel_windows.csv``) and their profile attributes
+PROFILE_COLUMNS = (("z_m", "z"), ("area_m2", "area"), ("r_eq_m", "r_eq"),
+                   ("centroid_x_m", "centroid_x"), ("centroid_y_m", "centroid_y"),
+                   ("theta_c_deg", "theta_c"), ("contact_angle_deg", "contact_angle"),
+                   ("r_c_m", "r_c"), ("e_c_m", "e_c"), ("fit_rms_m", "fit_rms"),
+                   ("threshold_m_s", "threshold"))
+
+
+def profile_rows(profile: ChannelProfile) -> list:
+    """One dict per height of a channel profile (:data:`PROFILE_COLUMNS`), plain floats."""
+    columns = [(name, np.asarray(getattr(profile, attr), float))
+               for name, attr in PROFILE_COLUMNS]
+    return [{name: float(values[k]) for name, values in columns}
+            for k in range(len(profile.z))]

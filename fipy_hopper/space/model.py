@@ -330,6 +330,24 @@ class SpaceModel:
         from .flow import empty_channel
         return empty_channel(self, state, rule)
 
+    def channel_fields(self, state) -> tuple:
+        """The fields the loop averages over each window of the discharge for
+        :meth:`channel_measures`: the nodes' vertical velocity (m/s) and the cells' material
+        fraction (copies); none for a rectangular plan (EN 1991-4's channel is a circular
+        silo's)."""
+        if self.boundary.plan == "rectangular":
+            return ()
+        return state.v[2].copy(), state.alpha.copy()
+
+    def channel_measures(self, means: tuple) -> list:
+        """The flow channel of a window's mean fields (:meth:`channel_fields`) at every node
+        plane of the bin, one dict per height (:func:`fipy_hopper.space.channel.field_channel`,
+        :data:`fipy_hopper.space.channel.PROFILE_COLUMNS`)."""
+        from .channel import field_channel, profile_rows
+        if not means:
+            return []
+        return profile_rows(field_channel(self, *means))
+
     def bin_lateral_stress_ratio(self, state) -> float:
         """:func:`fipy_hopper.space.flow.bin_lateral_stress_ratio`."""
         from .flow import bin_lateral_stress_ratio
