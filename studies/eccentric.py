@@ -25,9 +25,11 @@ and no smallest.
 
 Measured per case:
 
-* the flow channel (:func:`three_d.channel_rows`: r_c, theta_c, e_c per node plane of the bin
-  in each discharge snapshot; the medians over the middle half of the bin's fill at the last
-  snapshot) beside EN 1991-4's channels for G = 0.25, 0.4, 0.6 (:func:`three_d.en_channels`);
+* the flow channel per window of the discharge (:func:`three_d.channel_rows`: r_c, theta_c,
+  e_c per node plane of the bin of each load window's mean field, ``channel_windows.csv`` of
+  the run; the medians over the middle half of the bin's fill of every window, pooled over the
+  windows, and the range of the windows' own medians) beside EN 1991-4's channels for
+  G = 0.25, 0.4, 0.6 (:func:`three_d.en_channels`);
 * the wall pressure around the circumference (``wall_pressure.csv``, 12 sectors, theta 0 on
   the outlet's side) at three heights of the bin wall, the bins nearest ``height_fractions``
   (a quarter, a half and three quarters) of the fill's height above the floor, per stage: at
@@ -851,7 +853,8 @@ def circular_findings(numbers, options) -> list:
     en_text = ", ".join(f"r_c/R {c['G']:g}: theta_c {c['theta_c_deg']:.1f} deg" for c in en)
     parts = [f"e/R {e:g}: theta_c {num(n['channel'].get('theta_c_deg'), '.1f')} deg, r_c/R "
              f"{num(n['channel'].get('r_c_over_R'), '.2f')}, e_c/R "
-             f"{num(n['channel'].get('e_c_over_R'), '.2f')}" for e, _, n in cases]
+             f"{num(n['channel'].get('e_c_over_R'), '.2f')}"
+             f"{three_d.window_spread(n['channel'])}" for e, _, n in cases]
     reused = sum(1 for _, _, n in cases if n.get("reused"))
     out.append(
         f"The circular silo ({options['bin_diameter']:g} m bin on a flat floor, "
@@ -859,7 +862,7 @@ def circular_findings(numbers, options) -> list:
         f"{1000 * options['cell_size']:g} mm cubes; {reused} of {len(cases)} runs read, not "
         f"rerun): steady rate {', '.join(num(n['steady_rate'], '.2f') for _, _, n in cases)}"
         f" kg/s at e/R = {', '.join(f'{e:g}' for e, _, _ in cases)}; the flow channel in the "
-        f"bin's middle half at the last snapshot (medians): " + "; ".join(parts)
+        f"bin's middle half {three_d.channel_when(cases[0][2]['channel'])}: " + "; ".join(parts)
         + f". EN 1991-4: {en_text}.")
     large = [f"{e:g}" for e, _, n in cases if n.get("en1991_large_eccentricity")]
     small = [f"{e:g}" for e, _, n in cases if not n.get("en1991_large_eccentricity") and e > 0]

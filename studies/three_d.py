@@ -49,14 +49,17 @@ Measured per case:
   the outlet's offset) and their ratio; the largest ratio over the bin wall and over the
   cone, over the bins whose mean pressure is at least ``loaded_fraction`` (5 %) of the
   stage's largest;
-* the flow channel per discharge snapshot (``fields/fields_NNNN.vtu``: the nodes' downward
-  speed, left out where their open cells hold less than half material), at every node plane
-  of the bin, by :func:`fipy_hopper.space.channel.channel_profile` (what
-  :func:`~fipy_hopper.space.channel.model_channel` does to a model's state; the edge at
-  ``channel_fraction``, 1/10, of each plane's largest downward speed): theta_c, r_c, e_c,
-  the contact's angle and the channel's area per height; summarised at the last snapshot by
-  the median over the middle half of the bin's fill (from a quarter to three quarters of the
-  height between the bin wall's foot and the material's surface) against EN 1991-4's channel
+* the flow channel per window of the discharge (the run's ``channel_windows.csv``: the loop
+  measures it on each load window's mean field, the nodes' downward speed left out where
+  their open cells hold less than half material, at every node plane of the bin, by
+  :func:`fipy_hopper.space.channel.field_channel`; the edge at 1/10 of each plane's largest
+  downward speed): theta_c, r_c, e_c, the contact's angle and the channel's area per
+  height; summarised by the median over the middle half of the bin's fill (from a quarter to
+  three quarters of the height between the bin wall's foot and the material's surface) of
+  every window, pooled, with the range of the windows' own medians.  A run made before the
+  loop measured windows (or a ``channel_fraction`` other than 1/10) is measured on its
+  discharge snapshots instead (``fields/fields_NNNN.vtu``, instantaneous fields), summarised
+  at the last one; ``channel.csv``'s ``source`` says which.  Against EN 1991-4's channel
   (:func:`fipy_hopper.theory.en1991_eccentric_channel`, G = 0.25, 0.4, 0.6, mu = tan phi_w,
   phi_i = phi);
 * the flow mode (per sector), the mass balance and the fill's equilibrium residual.
@@ -106,6 +109,7 @@ import argparse
 import math
 import shutil
 import sys
+from types import SimpleNamespace
 from pathlib import Path
 
 import numpy as np
@@ -148,6 +152,11 @@ def num(value, spec: str = ".3g") -> str:
 
 def _nums(values, spec: str = ".2f") -> str:
     return ", ".join(num(v, spec) for v in values)
+
+
+def _span(pair, spec: str = ".2f") -> str:
+    """``lo-hi`` of a pair, or n/a."""
+    return f"{num(pair[0], spec)}-{num(pair[1], spec)}" if pair else "n/a"
 
 
 # ---------------------------------------------------------------- the cases
@@ -644,43 +653,102 @@ def circumference_rows(row, loaded_fraction: float = 0.05) -> tuple:
     return rows, out
 
 
-def channel_rows(row, options) -> tuple:
-    """The channel per discharge snapshot and height of a 3D case; ``(rows, summary)``: the
-    last snapshot's medians over :func:`channel_band` and their quartiles, and each
-    snapshot's medians."""
-    from fipy_hopper.io import RunDirectory
+def window_channels(run_dir) -> list:
+    """A run's flow channel per window of the discharge (``channel_windows.csv``: the
+    channel of each load window's mean field, measured by the loop): ``[(t_start, t_end,
+    profile)]``, ``profile`` the window's heights as arrays named as
+    :class:`fipy_hopper.space.channel.ChannelProfile`'s; ``[]`` for a run without the file
+    (made before the loop measured it)."""
+    from fipy_hopper.io import RunDirectory, read_csv
+    from fipy_hopper.space.channel import PROFILE_COLUMNS
 
+    path = Path(run_dir) / RunDirectory.CHANNEL_WINDOWS
+    if not path.is_file():
+        return []
+    table = read_csv(path)
+    windows = np.asarray(table["window"], float)
+    out = []
+    for w in np.unique(windows):
+        on = windows == w
+        prof = SimpleNamespace(**{attr: np.asarray(table[name], float)[on]
+                                  for name, attr in PROFILE_COLUMNS})
+        out.append((float(np.asarray(table["t_start_s"], float)[on][0]),
+                    float(np.asarray(table["t_end_s"], float)[on][0]), prof))
+    return out
+
+
+def _channel_source(row, options) -> tuple:
+    """``(source, [(t_start, t, profile)])``: the run's windows (:func:`window_channels`)
+    when it has them and the study's edge is the loop's (``channel_fraction`` =
+    :data:`fipy_hopper.space.channel.DEFAULT_FRACTION`); else each discharge snapshot
+    (:func:`snapshot_channel`, an instantaneous field, ``t_start = t``)."""
+    from fipy_hopper.io import RunDirectory
+    from fipy_hopper.space.channel import DEFAULT_FRACTION
+
+    if options["channel_fraction"] == DEFAULT_FRACTION:
+        windows = window_channels(row["run_dir"])
+        if windows:
+            return "windows", windows
     cfg = _config_of(row)
     R = 0.5 * cfg.hopper.bin_diameter
     z_b = max(cfg.boundary.transition_height("wall"), 0.0)
-    rows, history, last = [], [], None
+    out = []
     for entry in discharge_snapshots(row["run_dir"]):
-        prof = snapshot_channel(Path(row["run_dir"]) / RunDirectory.FIELDS / entry["file"],
-                                R, z_b, options["channel_fraction"])
         t = float(entry["discharge_time_s"])
+        if t > 0:
+            out.append((t, t, snapshot_channel(
+                Path(row["run_dir"]) / RunDirectory.FIELDS / entry["file"], R, z_b,
+                options["channel_fraction"])))
+    return "snapshots", out
+
+
+def channel_rows(row, options) -> tuple:
+    """The channel per window of the discharge (or, for a run without windows, per
+    discharge snapshot: :func:`_channel_source`) and height of a 3D case; ``(rows,
+    summary)``.  The summary: over the windows, the medians and quartiles of every height in
+    :func:`channel_band` of every window (the whole discharge's channel), the range of the
+    windows' own medians and each window's medians (``history``); over snapshots, the last
+    snapshot's medians and quartiles, and each snapshot's medians."""
+    cfg = _config_of(row)
+    R = 0.5 * cfg.hopper.bin_diameter
+    z_b = max(cfg.boundary.transition_height("wall"), 0.0)
+    source, profiles = _channel_source(row, options)
+    rows, history, pooled = [], [], {key: [] for key in ("theta_c", "r_c", "e_c",
+                                                         "contact_angle")}
+    heights = []
+    for t0, t, prof in profiles:
         band = channel_band(prof, z_b)
         for k in range(len(prof.z)):
             rows.append({"case": row["case"], "family": row["family"],
-                         "e_over_R": row["e_over_R"], "t_s": t, "z_m": prof.z[k],
-                         "in_band": bool(band[k]), "area_m2": prof.area[k],
-                         "theta_c_deg": prof.theta_c[k],
+                         "e_over_R": row["e_over_R"], "source": source, "t_start_s": t0,
+                         "t_s": t, "z_m": prof.z[k], "in_band": bool(band[k]),
+                         "area_m2": prof.area[k], "theta_c_deg": prof.theta_c[k],
                          "contact_angle_deg": prof.contact_angle[k],
                          "r_c_m": prof.r_c[k], "e_c_m": prof.e_c[k], "r_eq_m": prof.r_eq[k],
                          "centroid_x_m": prof.centroid_x[k], "fit_rms_m": prof.fit_rms[k]})
-        if t > 0:
-            history.append({"t_s": _r(t, 3),
-                            "theta_c_deg": _r(_median(prof.theta_c[band]), 2),
-                            "r_c_over_R": _r(_median(prof.r_c[band]) / R, 3),
-                            "e_c_over_R": _r(_median(prof.e_c[band]) / R, 3)})
-            last = (t, prof, band)
-    if last is None:
+        if not band.any():
+            continue
+        history.append({"t_start_s": _r(t0, 3), "t_s": _r(t, 3),
+                        "theta_c_deg": _r(_median(prof.theta_c[band]), 2),
+                        "r_c_over_R": _r(_median(prof.r_c[band]) / R, 3),
+                        "e_c_over_R": _r(_median(prof.e_c[band]) / R, 3)})
+        if source == "snapshots":
+            pooled = {key: [] for key in pooled}
+            heights = []
+        for key in pooled:
+            pooled[key].append(np.asarray(getattr(prof, key), float)[band])
+        heights.append(prof.z[band])
+    if not history:
         return rows, {}
-    t, prof, band = last
-    theta, r_c, e_c = prof.theta_c[band], prof.r_c[band], prof.e_c[band]
-    return rows, {
-        "snapshot_s": _r(t, 3), "heights": int(band.sum()),
-        "band_m": [_r(float(prof.z[band].min()), 3), _r(float(prof.z[band].max()), 3)]
-        if band.any() else None,
+    theta, r_c, e_c, angle = (np.concatenate(pooled[k]) for k in
+                              ("theta_c", "r_c", "e_c", "contact_angle"))
+    z = np.concatenate(heights)
+    summary = {
+        "source": source, "windows": len(history) if source == "windows" else None,
+        "window_s": _r(_median([h["t_s"] - h["t_start_s"] for h in history]), 3)
+        if source == "windows" else None,
+        "snapshot_s": history[-1]["t_s"], "heights": int(len(z)),
+        "band_m": [_r(float(z.min()), 3), _r(float(z.max()), 3)],
         "touching": int(np.sum((theta > 0) & (theta < 180))),
         "whole_wall": int(np.sum(theta >= 180)),
         "theta_c_deg": _r(_median(theta), 2),
@@ -689,8 +757,31 @@ def channel_rows(row, options) -> tuple:
         "r_c_quartiles": [_r(q / R, 3) for q in _quartiles(r_c)],
         "e_c_over_R": _r(_median(e_c) / R, 3),
         "e_c_quartiles": [_r(q / R, 3) for q in _quartiles(e_c)],
-        "contact_angle_deg": _r(_median(prof.contact_angle[band]), 1),
+        "contact_angle_deg": _r(_median(angle), 1),
         "history": history}
+    if source == "windows":
+        for key in ("theta_c_deg", "r_c_over_R", "e_c_over_R"):
+            values = [h[key] for h in history if _sweep.finite(h[key])]
+            summary[f"{key}_window_range"] = ([min(values), max(values)] if values
+                                              else None)
+    return rows, summary
+
+
+def channel_when(summary) -> str:
+    """Words for what a channel summary (:func:`channel_rows`) is taken over."""
+    if summary.get("source") == "windows":
+        return (f"over the discharge's {summary['windows']} windows of "
+                f"{num(summary['window_s'], 'g')} s (the channel of each window's mean field; "
+                f"medians over the heights and the windows)")
+    return (f"at the last snapshot, {num(summary.get('snapshot_s'), 'g')} s (medians over "
+            f"the heights)")
+
+
+def window_spread(summary) -> str:
+    """``; the windows' theta_c lo-hi deg``: the range of the windows' own medians of a
+    channel summary over windows (nothing for a snapshot's)."""
+    pair = summary.get("theta_c_deg_window_range")
+    return f"; the windows' theta_c {_span(pair, '.0f')} deg" if pair else ""
 
 
 def en_channels(cfg) -> list:
@@ -1053,12 +1144,14 @@ def family_findings(numbers, options) -> list:
         if any(ch):
             parts = [f"e/R {e:g}: theta_c {num(c.get('theta_c_deg'), '.1f')} deg, r_c/R "
                      f"{num(c.get('r_c_over_R'), '.2f')}, e_c/R {num(c.get('e_c_over_R'), '.2f')}"
-                     f" ({c.get('touching', 0)} of {c.get('heights', 0)} planes touching the "
-                     f"wall in part, {c.get('whole_wall', 0)} all round; "
-                     f"{num(c.get('snapshot_s'), 'g')} s)"
+                     f" ({c.get('touching', 0)} of {c.get('heights', 0)} "
+                     f"{'window heights' if c.get('source') == 'windows' else 'planes'} "
+                     f"touching the wall in part, {c.get('whole_wall', 0)} all round"
+                     f"{window_spread(c)})"
                      for (e, _, _), c in zip(cases, ch) if c]
+            first = next(c for c in ch if c)
             out.append(f"The {FAMILY_TITLES[family]}, the flow channel in the bin's middle half "
-                       "at the last snapshot (medians over the heights): " + "; ".join(parts)
+                       f"{channel_when(first)}: " + "; ".join(parts)
                        + f". EN 1991-4 (mu = tan phi_w, phi_i = phi) takes theta_c = {en_text}.")
     return out
 

@@ -71,6 +71,22 @@ def test_quick_study_writes_its_outputs_and_measures_the_factors(quick):
                 assert all(v is not None for v in e["as3774"]), (stage, e)
                 if stage != "filling":
                     assert e["over"] > 1.0 > e["under"], (stage, e)
+    # the channel per window of the discharge (each load window's mean field): centred no
+    # contact and no offset; at e/R = 0.5 against the wall on the outlet's side (measured
+    # theta_c 49.5 deg, e_c/R 0.53, contact at 0 deg, over 3 windows)
+    for case, n in circ.items():
+        ch = n["channel"]
+        assert ch["source"] == "windows" and ch["windows"] >= 3, case
+        assert ch["window_s"] == pytest.approx(0.1, abs=0.005)
+        if n["e_over_R"] == 0.0:
+            assert ch["theta_c_deg"] == 0.0 and abs(ch["e_c_over_R"]) < 1e-9
+        else:
+            assert 0.0 < ch["theta_c_deg"] < 180.0 and ch["e_c_over_R"] > 0.25
+            assert abs(ch["contact_angle_deg"]) < 10.0
+            assert ch["theta_c_deg_window_range"][1] - ch["theta_c_deg_window_range"][0] < 20.0
+    chan = rows_of(quick / "channel.csv")
+    assert {r["source"] for r in chan} == {"windows"}
+    assert all(float(r["t_start_s"]) < float(r["t_s"]) for r in chan)
     rows = rows_of(quick / "circumference.csv")
     assert len(rows) == 2 * 3 * 3          # cases x stages x heights
     assert all(math.isfinite(float(r["over"])) for r in rows)
