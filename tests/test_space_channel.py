@@ -228,3 +228,21 @@ def test_the_3d_models_grid_and_state():
     m = ch.node_material(alpha, g.kappa)
     assert m.shape == tuple(n + 1 for n in alpha.shape)
     assert np.nanmax(m) == 1.0 and np.isnan(m).any()
+
+
+def test_the_window_table_has_every_measure_of_a_profile():
+    """``channel_windows.csv``'s columns (``io.CHANNEL_WINDOWS_COLUMNS``) are the window's
+    own and then every measure a profile row has (``channel.PROFILE_COLUMNS``), in order; a
+    profile's rows carry them all, one row per height."""
+    from fipy_hopper import io as fio
+
+    names = tuple(name for name, _ in ch.PROFILE_COLUMNS)
+    assert fio.CHANNEL_WINDOWS_COLUMNS == ("window", "t_start_s", "t_end_s", "checks") + names
+    x = np.linspace(-R, R, 41)
+    X, Y = np.meshgrid(x, x)
+    down = np.where(np.hypot(X, Y) < 0.5 * R, 1.0, 0.0)
+    p = ch.channel_profile(x, x, [0.1, 0.2], np.stack([down, down]), R)
+    rows = ch.profile_rows(p)
+    assert [tuple(row) for row in rows] == [names, names]
+    assert [row["z_m"] for row in rows] == [0.1, 0.2]
+    assert rows[1]["r_eq_m"] == pytest.approx(0.5 * R, rel=0.05)
