@@ -17,7 +17,9 @@ size (``reference_section``), both filled to rest and emptied (``reference_end_t
   3D mean around the circumference (the sectors of a centred silo have equal areas) against
   the section's, the RMS of their relative differences over the bins above the lip's bin
   and the lip's bin apart (where the plate meets the cone: ``docs/three_d.md``); around the
-  circumference the largest over the smallest pressure of each bin;
+  circumference the largest over the smallest pressure of each bin; both over the bins whose
+  section pressure is at least ``loaded_fraction`` (5 %) of the stage's largest (in
+  discharge the bins at the fill's sinking surface carry next to nothing);
 * the flow pattern: the flow mode, the wall slip ratio (3D: per sector), the mass-flow index
   and the stagnant fraction of the summaries; the downward speed in the plane through the axis
   (the 3D cells next to ``y = 0``, ``x > 0``; the section's cells) at the heights
@@ -476,9 +478,13 @@ def section_stage(wall: dict, stage: str):
             np.asarray(wall["p_n_Pa"], float)[on])
 
 
-def reference_bins(row3, row2) -> tuple:
+def reference_bins(row3, row2, loaded_fraction: float = 0.05) -> tuple:
     """Per stage and height bin: the section's pressure, the 3D mean around the
-    circumference, their difference and the 3D extremes around it; ``(rows, numbers)``."""
+    circumference, their difference and the 3D extremes around it; ``(rows, numbers)``.  The
+    numbers (the RMS difference above the lip's bin, the largest ratio around) over the bins
+    whose section pressure is at least ``loaded_fraction`` of the stage's largest (a bin at
+    the fill's surface carries next to nothing, and any difference or ratio there is noise:
+    relative differences of 10^5 % at 50 % left)."""
     w3, w2 = _wall(row3), _wall(row2)
     rows, numbers = [], {}
     for stage in STAGES:
@@ -491,20 +497,23 @@ def reference_bins(row3, row2) -> tuple:
         sec = p2 if same else np.interp(b3["s"], s2, p2)
         rel = 100.0 * (mean3 / sec - 1.0)
         ext = extremes(b3)
+        loaded = sec >= loaded_fraction * np.nanmax(sec)
         for k in range(len(mean3)):
             rows.append({"stage": stage, "bin": k, "s_m": b3["s"][k], "z_m": b3["z"][k],
                          "section_Pa": sec[k], "three_d_mean_Pa": mean3[k],
                          "diff_pct": rel[k], "three_d_max_Pa": ext["max"][k],
-                         "three_d_min_Pa": ext["min"][k], "max_over_min": ext["ratio"][k]})
-        above = rel[1:][np.isfinite(rel[1:])]
+                         "three_d_min_Pa": ext["min"][k], "max_over_min": ext["ratio"][k],
+                         "loaded": bool(loaded[k])})
+        above = rel[1:][np.isfinite(rel[1:]) & loaded[1:]]
+        ratio = np.where(loaded, ext["ratio"], np.nan)
         numbers[stage] = {
-            "bins_interpolated": not same,
+            "bins_interpolated": not same, "loaded_bins": int(loaded.sum()),
             "rms_above_lip_pct": _r(float(np.sqrt(np.mean(above ** 2))), 2) if above.size
             else None,
             "lip_pct": _r(float(rel[0]), 2), "diff_pct": [_r(v, 2) for v in rel],
             "max_over_min": [_r(v, 4) for v in ext["ratio"]],
-            "max_over_min_largest": _r(float(np.nanmax(ext["ratio"])), 4)
-            if np.isfinite(ext["ratio"]).any() else None}
+            "max_over_min_largest": _r(float(np.nanmax(ratio)), 4)
+            if np.isfinite(ratio).any() else None}
     return rows, numbers
 
 
@@ -587,9 +596,10 @@ def reference_profiles(row3, row2, options) -> tuple:
 
 
 def reference_numbers(row3, row2, options) -> tuple:
-    bins, loads = reference_bins(row3, row2)
+    bins, loads = reference_bins(row3, row2, options["loaded_fraction"])
     prof_rows, prof = reference_profiles(row3, row2, options)
     numbers = {"cell_size_m": _config_of(row3).numerics.cell_size,
+               "loaded_fraction": options["loaded_fraction"],
                "mirror_factor": row3.get("mirror_factor"), "loads": loads, "plane": prof}
     for key, row in (("three_d", row3), ("section", row2)):
         numbers[key] = {k: (_r(row.get(k), 5) if isinstance(row.get(k), float) else row.get(k))
@@ -1071,7 +1081,9 @@ def reference_findings(ref) -> list:
                      f"around {num(n['max_over_min_largest'], '.3f')}")
     if parts:
         out.append("Reference, wall pressure per height bin, the 3D mean around the "
-                   "circumference against the section's: " + "; ".join(parts) + ".")
+                   "circumference against the section's (over the bins carrying at least "
+                   f"{100 * ref['loaded_fraction']:g} % of the stage's largest pressure): "
+                   + "; ".join(parts) + ".")
     plane = ref.get("plane", {}).get("heights", [])
     if plane:
         parts = [f"z = {p['z_m']:.3g} m: RMS {num(p['rms_difference'], '.3f')}, wall / axis "
