@@ -1162,8 +1162,12 @@ def family_findings(numbers, options) -> list:
                      f"{window_spread(c)})"
                      for (e, _, _), c in zip(cases, ch) if c]
             first = next(c for c in ch if c)
+            no_circle = any(c and c.get("r_c_over_R") is None for c in ch)
             out.append(f"The {FAMILY_TITLES[family]}, the flow channel in the bin's middle half "
                        f"{channel_when(first)}: " + "; ".join(parts)
+                       + (" (r_c n/a: at most heights the channel flows all round or its area "
+                          "is more than any circle through its contact's ends gives: it fills "
+                          "the section)" if no_circle else "")
                        + f". EN 1991-4 (mu = tan phi_w, phi_i = phi) takes theta_c = {en_text}.")
     return out
 
