@@ -106,12 +106,12 @@ WALL_EXTREMES_COLUMNS_FACES = ("stage", "wall", "s_m", "z_m", "p_max_Pa", "u_max
 #: opened; the checks its mean fields average) and node plane of the bin the flow channel of
 #: the window's mean velocity (:func:`fipy_hopper.space.channel.field_channel`): its area,
 #: equivalent radius and centroid, its contact half-angle with the wall and the contact's
-#: middle, EN 1991-4's ``r_c`` and ``e_c`` of it, the fitted circle's RMS and the speed that
-#: bounds it
+#: middle, EN 1991-4's ``r_c`` and ``e_c`` of it, the fitted circle's RMS, the speed that
+#: bounds it and its outline's extent (how far it reaches across the section each way)
 CHANNEL_WINDOWS_COLUMNS = ("window", "t_start_s", "t_end_s", "checks", "z_m", "area_m2",
                            "r_eq_m", "centroid_x_m", "centroid_y_m", "theta_c_deg",
                            "contact_angle_deg", "r_c_m", "e_c_m", "fit_rms_m",
-                           "threshold_m_s")
+                           "threshold_m_s", "x_min_m", "x_max_m", "y_min_m", "y_max_m")
 #: Columns of ``wall_slip.csv``: the loaded contacts of the hopper wall at the last sample of
 #: the flow-mode window (:class:`fipy_hopper.diagnostics.FlowModeRule`).
 WALL_SLIP_COLUMNS = ("s_m", "r_m", "z_m", "slip_ratio", "sliding")

@@ -65,6 +65,14 @@ def test_circular_channel_recovers_r_c_e_c_theta_c(G, angle):
     assert g.A_c == pytest.approx(s.area, rel=1e-9)
     assert s.n_regions == 1
     assert s.r_eq == pytest.approx(math.sqrt(s.area / math.pi))
+    # the outline's extent: the circle's, cut by the wall (its far side inside, within a
+    # cell), and never beyond the section
+    x_min, x_max, y_min, y_max = s.extent
+    cx, cy = en.e_c * math.cos(a), en.e_c * math.sin(a)
+    if angle == 0.0:
+        assert abs(x_min - (cx - G * R)) < H and x_max <= R + 1e-12
+        assert abs(y_max - min(G * R, R)) < H and abs(y_min + y_max) < H
+    assert R * -1 - 1e-12 <= x_min < x_max <= R + 1e-12
 
 
 def test_centred_channel_has_no_contact():

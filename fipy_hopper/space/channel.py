@@ -84,6 +84,15 @@ class SliceChannel:
     outline: np.ndarray = field(repr=False)
 
     @property
+    def extent(self) -> tuple:
+        """The outline's extent ``(x_min, x_max, y_min, y_max)`` (m): how far the channel
+        reaches across the section each way; NaN without a channel."""
+        if not len(self.outline):
+            return (math.nan,) * 4
+        return (float(self.outline[:, 0].min()), float(self.outline[:, 0].max()),
+                float(self.outline[:, 1].min()), float(self.outline[:, 1].max()))
+
+    @property
     def touches_wall(self) -> bool:
         return self.theta_c > 0.0
 
@@ -316,6 +325,10 @@ class ChannelProfile:
     fit_rms: np.ndarray
     threshold: np.ndarray
     radius: np.ndarray
+    x_min: np.ndarray
+    x_max: np.ndarray
+    y_min: np.ndarray
+    y_max: np.ndarray
     outlines: list = field(repr=False)
 
     def G(self) -> np.ndarray:
@@ -348,7 +361,9 @@ def channel_profile(x, y, z, down, radius, centre=(0.0, 0.0),
         theta_c=col(lambda s: s.theta_c), contact_angle=col(lambda s: s.contact_angle),
         r_c=col(lambda s: s.r_c), e_c=col(lambda s: s.e_c), fit_r=col(lambda s: s.fit_r),
         fit_rms=col(lambda s: s.fit_rms), threshold=np.array([s.threshold for s in rows]),
-        radius=np.array(radii, float), outlines=[s.outline for s in rows])
+        radius=np.array(radii, float), x_min=col(lambda s: s.extent[0]),
+        x_max=col(lambda s: s.extent[1]), y_min=col(lambda s: s.extent[2]),
+        y_max=col(lambda s: s.extent[3]), outlines=[s.outline for s in rows])
 
 
 def node_material(alpha, kappa) -> np.ndarray:
@@ -405,7 +420,8 @@ PROFILE_COLUMNS = (("z_m", "z"), ("area_m2", "area"), ("r_eq_m", "r_eq"),
                    ("centroid_x_m", "centroid_x"), ("centroid_y_m", "centroid_y"),
                    ("theta_c_deg", "theta_c"), ("contact_angle_deg", "contact_angle"),
                    ("r_c_m", "r_c"), ("e_c_m", "e_c"), ("fit_rms_m", "fit_rms"),
-                   ("threshold_m_s", "threshold"))
+                   ("threshold_m_s", "threshold"), ("x_min_m", "x_min"),
+                   ("x_max_m", "x_max"), ("y_min_m", "y_min"), ("y_max_m", "y_max"))
 
 
 def profile_rows(profile: ChannelProfile) -> list:
