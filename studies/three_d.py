@@ -680,7 +680,9 @@ def window_channels(run_dir) -> list:
     out = []
     for w in np.unique(windows):
         on = windows == w
-        prof = SimpleNamespace(**{attr: np.asarray(table[name], float)[on]
+        # a measure the run's version did not write yet (the outline's extent): NaN
+        prof = SimpleNamespace(**{attr: np.asarray(table[name], float)[on] if name in table
+                                  else np.full(int(on.sum()), np.nan)
                                   for name, attr in PROFILE_COLUMNS})
         out.append((float(np.asarray(table["t_start_s"], float)[on][0]),
                     float(np.asarray(table["t_end_s"], float)[on][0]), prof))

@@ -695,6 +695,29 @@ def test_three_d_reference_compares_the_loaded_bins_only(tmp_path):
     assert rows[3]["diff_pct"] == pytest.approx(99900.0)
 
 
+def test_three_d_study_reads_window_tables_of_every_version(tmp_path):
+    """``three_d.window_channels`` reads a run's ``channel_windows.csv`` per window (the rows
+    of each window together, its start and end); a table written before the outline's
+    extent was measured (without ``x_min_m`` ... ``y_max_m``) reads with NaN there."""
+    from fipy_hopper import io as fio
+
+    study = load("three_d")
+    old = [c for c in fio.CHANNEL_WINDOWS_COLUMNS if not c.endswith(("_min_m", "_max_m"))]
+    assert len(old) == len(fio.CHANNEL_WINDOWS_COLUMNS) - 4
+    rows = [[w, 0.1 * (w - 1), 0.1 * w, 50] + [z] + [1.0] * (len(old) - 5)
+            for w in (1, 2) for z in (0.1, 0.2, 0.3)]
+    with open(tmp_path / "channel_windows.csv", "w", newline="") as fh:
+        writer = csv.writer(fh)
+        writer.writerow(old)
+        writer.writerows(rows)
+    windows = study.window_channels(tmp_path)
+    assert [(t0, t1) for t0, t1, _ in windows] == [(0.0, 0.1), (0.1, 0.2)]
+    for _, _, prof in windows:
+        np.testing.assert_array_equal(prof.z, [0.1, 0.2, 0.3])
+        assert np.all(prof.theta_c == 1.0) and np.all(np.isnan(prof.x_min))
+    assert study.window_channels(tmp_path / "nowhere") == []
+
+
 def test_three_d_study_reads_the_channel_of_a_snapshot_as_the_model_does(tmp_path):
     """The study reads a written 3D snapshot (``space.output.SpaceFieldWriter``: the whole
     silo, mirror images included) back to the nodes' downward speed and material and finds
