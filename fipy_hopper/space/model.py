@@ -333,11 +333,11 @@ class SpaceModel:
     def channel_fields(self, state) -> tuple:
         """The fields the loop averages over each window of the discharge for
         :meth:`channel_measures`: the nodes' vertical velocity (m/s) and the cells' material
-        fraction (copies); none for a rectangular plan (EN 1991-4's channel is a circular
-        silo's)."""
+        fraction (views of the state: the loop copies what it keeps); none for a rectangular
+        plan (EN 1991-4's channel is a circular silo's)."""
         if self.boundary.plan == "rectangular":
             return ()
-        return state.v[2].copy(), state.alpha.copy()
+        return state.v[2], state.alpha
 
     def channel_measures(self, means: tuple) -> list:
         """The flow channel of a window's mean fields (:meth:`channel_fields`) at every node
